@@ -1,0 +1,36 @@
+# Two commands on a fresh clone:  `make demo`  and  `make test`.
+# Each creates .venv (Python 3.11, as bpy==5.0.1 requires) and installs what it needs.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: venv test test-all demo bench lint clean
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "bpy==5.0.1 needs Python 3.11; set PYTHON=/path/to/python3.11")'
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e '.[test,blender,build]'
+	touch $@
+
+# CI runs this (via .ci/run): the whole suite except runs marked slow.
+test: $(STAMP)
+	$(PY) -m pytest -q -m "not slow"
+
+test-all: $(STAMP)
+	$(PY) -m pytest -q
+
+lint: $(STAMP)
+	$(PY) -m ruff check moebius_addon tests bench
+
+demo: $(STAMP)
+	$(PY) bench/demo_core.py --out out
+
+bench: $(STAMP)
+	$(PY) bench/core_bench.py
+
+clean:
+	rm -rf $(VENV) out dist build
