@@ -1,0 +1,31 @@
+"""Numerical core of moebius_addon: numpy + numba, never bpy.
+
+The discrete method of Reiter & Schumacher, *Sobolev Gradients for the Möbius Energy*: the
+Möbius energy of polygons and links, the metrics of the paper, the constraints, and the
+projected Sobolev-gradient flow with collision-bounded Armijo steps. See ``docs/api.md``.
+"""
+
+from .collision import max_collision_free_step
+from .constraints import Constraints
+from .energy import moebius_energy, moebius_gradient
+from .flow import IterationState, Relaxation, RelaxResult, relax, sobolev_gradient
+from .metrics import METRICS, gram_matrix
+from .polygon import check_polygon, contact_ratio, resample, suggest_edge_count
+
+__all__ = [
+    "METRICS",
+    "Constraints",
+    "IterationState",
+    "RelaxResult",
+    "Relaxation",
+    "check_polygon",
+    "contact_ratio",
+    "gram_matrix",
+    "max_collision_free_step",
+    "moebius_energy",
+    "moebius_gradient",
+    "relax",
+    "resample",
+    "sobolev_gradient",
+    "suggest_edge_count",
+]

@@ -1,0 +1,212 @@
+"""The saddle-point system of the projected gradient (DESIGN.md, step 2) and the pseudoinverse
+of the back-projection (step 4).
+
+    [[G, Cᵀ], [C, 0]] [u; λ] = [g; r],   G = A ⊗ I₃ (A is N × N, dense, SPD)
+
+Exact solve by the Schur complement: ``A⁻¹`` from a Cholesky factor, then
+``S = C G⁻¹ Cᵀ``. The edge rows of ``C`` are ``diag(t_k) D`` for each coordinate ``k``, so the
+edge block of ``S`` is ``(D A⁻¹ Dᵀ) ∘ (T Tᵀ)``: O(N²) once ``A⁻¹`` is known, instead of the
+3(N+3) triangular solves of a generic ``G⁻¹ Cᵀ``. Cubic cost: Cholesky of ``A`` and of ``S``,
+one triangular inverse each, one ``LᵀL`` product — about 7/3 N³ flops.
+
+``SaddlePointSolver`` reuses that factorization across iterations as a preconditioner for GMRES
+on the current system (the metric and the constraints change little from one iterate to the
+next), and refactors when a solve costs more than the average since the last factorization
+(including it). numpy only: no scipy at run time, so the triangular inverse is a blocked
+recursion on BLAS-3 products.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .constraints import Jacobian
+
+
+def triangular_inverse(L: np.ndarray) -> np.ndarray:
+    """Inverse of a lower-triangular matrix by blocked recursion (BLAS-3, about N³/3 flops)."""
+    n = L.shape[0]
+    if n <= 128:
+        return np.tril(np.linalg.inv(L))
+    h = n // 2
+    X11 = triangular_inverse(L[:h, :h])
+    X22 = triangular_inverse(L[h:, h:])
+    out = np.zeros_like(L)
+    out[:h, :h] = X11
+    out[h:, h:] = X22
+    out[h:, :h] = -(X22 @ (L[h:, :h] @ X11))
+    return out
+
+
+def spd_inverse(A: np.ndarray) -> np.ndarray:
+    """Inverse of a symmetric positive definite matrix via Cholesky (raises LinAlgError)."""
+    Li = triangular_inverse(np.linalg.cholesky(A))
+    return Li.T @ Li  # numpy routes XᵀX to BLAS syrk
+
+
+class Factorization:
+    """Exact solver of the saddle-point system at one iterate (A, C fixed)."""
+
+    def __init__(self, A: np.ndarray, jac: Jacobian):
+        self.jac = jac
+        self.Ainv = spd_inverse(A)
+        lay = jac.con.layout
+        m = jac.con.size
+        S = np.empty((m, m))
+        nb = 3 * lay.k if jac.con.barycenter else 0
+        ne = m - nb
+        if ne:
+            T, inv_l = jac.edge_fields()
+            # Y = D A⁻¹ Dᵀ with (Du)_I = (u[nxt I] − u[I]) / l_I, then S_ee = Y ∘ (T Tᵀ)
+            Y = (self.Ainv[lay.nxt] - self.Ainv) * inv_l[:, None]
+            Y = (Y[:, lay.nxt] - Y) * inv_l[None, :]
+            S[:ne, :ne] = Y * (T @ T.T)
+        if nb:
+            F = jac.barycenter_fields()  # (nb, N, 3)
+            GF = np.einsum("pq,rqk->rpk", self.Ainv, F)
+            cols = np.stack([jac.matvec(GF[r]) for r in range(nb)], axis=1)  # (m, nb)
+            S[:, ne:] = cols
+            S[ne:, :] = cols.T
+        self.Sinv = spd_inverse(S) if m else np.zeros((0, 0))
+
+    def ginv(self, U: np.ndarray) -> np.ndarray:
+        return self.Ainv @ U
+
+    def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``[u; λ]`` with ``G u + Cᵀ λ = g``, ``C u = r``."""
+        z = self.ginv(g)
+        lam = self.Sinv @ (self.jac.matvec(z) - r)
+        return z - self.ginv(self.jac.rmatvec(lam)), lam
+
+
+class SaddlePointSolver:
+    """Solves the saddle-point systems of successive iterates.
+
+    Parameters
+    ----------
+    rtol : float
+        Relative residual of the GMRES solves with a reused factorization.
+    reuse : bool
+        False factors every iterate exactly (the textbook method); True reuses the last
+        factorization as a preconditioner while that pays.
+    factor_cost : float
+        Cost of one factorization in units of one preconditioned Krylov iteration. The rule
+        is deterministic (counts, not clocks), so runs are reproducible: refactor once the last
+        iterate's solves cost more than the average per iterate since the last factorization,
+        that factorization included (the optimal restart rule for costs that only grow).
+    """
+
+    def __init__(self, rtol: float = 1e-10, reuse: bool = True, max_krylov: int = 30,
+                 factor_cost: float = 50.0):
+        self.rtol = rtol
+        self.reuse = reuse
+        self.max_krylov = max_krylov
+        self.factor_cost = factor_cost
+        self.fac: Factorization | None = None
+        self.A: np.ndarray | None = None
+        self.jac: Jacobian | None = None
+        self.fresh = False  # factorization belongs to the current (A, jac)
+        self.spent = 0.0  # Krylov-iteration units since the last factorization
+        self.iterates = 0  # iterates served since the last factorization
+        self.last = 0.0  # units spent on the last iterate
+        self.n_factor = 0
+        self.krylov_its: list[int] = []
+
+    def update(self, A: np.ndarray, jac: Jacobian) -> None:
+        """Move to a new iterate's metric and constraints."""
+        self.A = A
+        self.jac = jac
+        self.fresh = False
+        if (
+            self.fac is None
+            or not self.reuse
+            or (self.iterates and self.last > (self.factor_cost + self.spent) / self.iterates)
+        ):
+            self.refactor()
+        self.iterates += 1
+        self.last = 0.0
+
+    def refactor(self) -> None:
+        self.fac = Factorization(self.A, self.jac)
+        self.fresh = True
+        self.spent = 0.0
+        self.iterates = 0
+        self.n_factor += 1
+
+    def _charge(self, units: float) -> None:
+        self.spent += units
+        self.last += units
+
+    def _apply_K(self, U: np.ndarray, lam: np.ndarray):
+        return self.A @ U + self.jac.rmatvec(lam), self.jac.matvec(U)
+
+    def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Solve ``[[G, Cᵀ], [C, 0]] [u; λ] = [g; r]`` at the current iterate."""
+        if self.fresh:
+            self.krylov_its.append(0)
+            self._charge(1.0)
+            return self.fac.solve(g, r)
+        out, its, ok = self._gmres(g, r)
+        self.krylov_its.append(its)
+        self._charge(its)
+        if not ok:
+            self.refactor()
+            out = self.fac.solve(g, r)
+        return out
+
+    def pseudo_inverse(self, phi: np.ndarray) -> np.ndarray:
+        """``G⁻¹Cᵀ(CG⁻¹Cᵀ)⁻¹ φ`` with the stored factorization (modified Newton, step 4)."""
+        self._charge(0.5)
+        n = self.jac.con.layout.n
+        return self.fac.solve(np.zeros((n, 3)), phi)[0]
+
+    def _gmres(self, g, r):
+        """Right-preconditioned GMRES on the saddle-point system, preconditioner = stored
+        factorization. Returns ((u, λ), iterations, converged)."""
+        n = g.shape[0]
+        m = r.shape[0]
+
+        def pack(U, lam):
+            return np.concatenate([U.ravel(), lam])
+
+        def unpack(x):
+            return x[: 3 * n].reshape(n, 3), x[3 * n :]
+
+        b = pack(g, r)
+        bnorm = np.linalg.norm(b)
+        if bnorm == 0.0:
+            return (np.zeros((n, 3)), np.zeros(m)), 0, True
+        x0 = pack(*self.fac.solve(g, r))
+        res = b - pack(*self._apply_K(*unpack(x0)))
+        beta = np.linalg.norm(res)
+        tol = self.rtol * bnorm
+        if beta <= tol:
+            return unpack(x0), 1, True
+        k_max = self.max_krylov
+        V = np.zeros((k_max + 1, b.size))
+        Z = np.zeros((k_max, b.size))
+        H = np.zeros((k_max + 1, k_max))
+        V[0] = res / beta
+        y = np.zeros(0)
+        for k in range(k_max):
+            Z[k] = pack(*self.fac.solve(*unpack(V[k])))
+            w = pack(*self._apply_K(*unpack(Z[k])))
+            for j in range(k + 1):  # modified Gram–Schmidt, twice for stability
+                h = V[j] @ w
+                H[j, k] += h
+                w -= h * V[j]
+            for j in range(k + 1):
+                h = V[j] @ w
+                H[j, k] += h
+                w -= h * V[j]
+            H[k + 1, k] = np.linalg.norm(w)
+            if H[k + 1, k] > 0:
+                V[k + 1] = w / H[k + 1, k]
+            e1 = np.zeros(k + 2)
+            e1[0] = beta
+            y, *_ = np.linalg.lstsq(H[: k + 2, : k + 1], e1, rcond=None)
+            resid = np.linalg.norm(H[: k + 2, : k + 1] @ y - e1)
+            if resid <= tol or H[k + 1, k] == 0:
+                x = x0 + y @ Z[: k + 1]
+                return unpack(x), k + 2, True
+        return unpack(x0 + y @ Z[:k_max]), k_max + 1, False

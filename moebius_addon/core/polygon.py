@@ -1,0 +1,256 @@
+"""Equilateral resampling and the checks every start must pass (DESIGN.md, "Constraints").
+
+The flow keeps every edge at its target length, so a start has to be an equilateral polygon
+that is fine enough for its own shape: vertices several edges apart along the curve must be
+farther apart in space than about one edge length, or the discrete energy is no barrier there
+(the paper's rule of thumb in "Discrete constraints").
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ._layout import Layout, as_layout
+from .collision import closest_pairs
+
+# Closest pair of vertices at least CONTACT_GAP edges apart, divided by the mean edge length,
+# must reach CONTACT_RATIO. DESIGN.md measured 0.71 for the FHW unknot at 300 edges (a true
+# near-contact: every metric fails) against >= 1.06 at index distance >= 4 for curves that relax.
+CONTACT_GAP = 4
+CONTACT_RATIO = 0.9
+MIN_VERTICES = 4
+
+
+@nb.njit(cache=True)
+def _point_at(P, cum, s):
+    """Point at arc length ``s`` of the polyline with vertices P and cumulative lengths cum,
+    and the index of the segment it lies on."""
+    m = cum.shape[0] - 1
+    k = np.searchsorted(cum, s, side="right") - 1
+    if k < 0:
+        k = 0
+    if k >= m:
+        k = m - 1
+    seg = cum[k + 1] - cum[k]
+    t = (s - cum[k]) / seg if seg > 0 else 0.0
+    return P[k] + t * (P[k + 1] - P[k]), k
+
+
+@nb.njit(cache=True)
+def _march(P, cum, h, count):
+    """From the polyline's start, walk ``count`` chords of length ``h``: each next vertex is the
+    first point further along the polyline at distance ``h`` from the current one. Returns the
+    vertices (count+1, 3) and the arc-length position of the last one (inf if it ran off)."""
+    m = cum.shape[0] - 1
+    out = np.empty((count + 1, 3))
+    out[0] = P[0]
+    k = 0
+    cur = P[0].copy()
+    s_cur = 0.0
+    h2 = h * h
+    for step in range(1, count + 1):
+        found = False
+        while k < m:
+            a = P[k]
+            d = P[k + 1] - a
+            # the chord leaves the ball |x − cur| < h on segment k: solve |a + t d − cur| = h
+            f = a - cur
+            dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+            fd = f[0] * d[0] + f[1] * d[1] + f[2] * d[2]
+            ff = f[0] * f[0] + f[1] * f[1] + f[2] * f[2] - h2
+            t0 = (s_cur - cum[k]) / (cum[k + 1] - cum[k]) if cum[k + 1] > cum[k] else 0.0
+            if dd > 0.0:
+                disc = fd * fd - dd * ff
+                if disc >= 0.0:
+                    t = (-fd + np.sqrt(disc)) / dd
+                    if t >= t0 and t <= 1.0:
+                        cur = a + t * d
+                        s_cur = cum[k] + t * (cum[k + 1] - cum[k])
+                        out[step] = cur
+                        found = True
+                        break
+            k += 1
+        if not found:
+            return out, np.inf
+    return out, s_cur
+
+
+def _resample_one(P: np.ndarray, n: int, closed: bool) -> np.ndarray:
+    if closed:
+        P = np.vstack([P, P[:1]])
+    seg = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    keep = np.concatenate(([True], seg > 0))
+    P = np.ascontiguousarray(P[keep])
+    seg = seg[seg > 0]
+    if len(seg) == 0:
+        raise ValueError("all points coincide: there is no curve to resample")
+    cum = np.concatenate(([0.0], np.cumsum(seg)))
+    total = cum[-1]
+    steps = n if closed else n - 1
+    end = P[-1]
+
+    def closing_error(h):
+        pts, s_last = _march(P, cum, h, steps - 1)
+        if not np.isfinite(s_last):
+            return -1.0, pts
+        # closed: the last chord back to the start must also be h; open: the last vertex
+        # must be the polyline's end. Positive when h is too short.
+        return np.linalg.norm(end - pts[-1]) - h, pts
+
+    # The chord length lies below the mean arc length per edge; bracket and bisect.
+    hi = total / steps
+    lo = 0.0
+    best = None
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        err, pts = closing_error(mid)
+        if err > 0:
+            lo = mid
+            best = pts
+        else:
+            hi = mid
+        if hi - lo <= 4e-16 * hi:
+            break
+    if best is None:
+        raise ValueError("could not resample this curve: it is too short for the edge count")
+    err, pts = closing_error(lo)
+    if closed:
+        return pts
+    return np.vstack([pts, end[None, :]])
+
+
+def resample(points, n, closed: bool = True):
+    """Equilateral polygon through a polyline.
+
+    Parameters
+    ----------
+    points : (M, 3) array or list of arrays
+        Polyline vertices (a link: one array per component).
+    n : int or list of int
+        Vertices of the result (per component for a link).
+    closed : bool
+        The polyline is closed (last point joined to the first). For ``closed=False`` the
+        result starts and ends at the polyline's ends.
+
+    Returns
+    -------
+    (n, 3) array or list of arrays
+        Vertices on the polyline, consecutive ones at equal distance (chords equal to 1e-10
+        relative, the closing chord included when ``closed``), in the polyline's order.
+    """
+    if isinstance(points, (list, tuple)):
+        ns = list(n) if np.ndim(n) else _split_count(points, int(n))
+        return [resample(p, k, closed) for p, k in zip(points, ns, strict=True)]
+    P = np.asarray(points, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise ValueError(f"points must be an (M, 3) array, got shape {P.shape}")
+    if not np.all(np.isfinite(P)):
+        raise ValueError("points contain NaN or infinite coordinates; remove or fix them first")
+    n = int(n)
+    if n < MIN_VERTICES:
+        raise ValueError(f"need at least {MIN_VERTICES} vertices for a closed polygon, got {n}")
+    return _resample_one(P, n, closed)
+
+
+def _split_count(parts, n):
+    """Distribute ``n`` vertices over link components proportionally to their lengths."""
+    lengths = np.array([np.linalg.norm(np.diff(np.vstack([p, p[:1]]), axis=0), axis=1).sum()
+                        for p in map(np.asarray, parts)])
+    ns = np.maximum(MIN_VERTICES, np.round(n * lengths / lengths.sum()).astype(int))
+    return list(ns)
+
+
+def contact_ratio(P, min_gap: int = CONTACT_GAP) -> float:
+    """Closest distance between vertices at least ``min_gap`` edges apart along the curve (or on
+    different components), divided by the mean edge length. The start check wants >= 0.9."""
+    X, layout = as_layout(P)
+    (dv, _), _ = closest_pairs(X, layout, min_gap)
+    return dv / _mean_edge(X, layout)
+
+
+def _mean_edge(X, layout):
+    return float(np.linalg.norm(X[layout.nxt] - X, axis=1).mean())
+
+
+def _where(layout: Layout, v: int) -> str:
+    if layout.k == 1:
+        return f"vertex {v}"
+    c = int(layout.comp[v])
+    return f"vertex {v - layout.starts[c]} of component {c}"
+
+
+def suggest_edge_count(P, max_edges: int = 20000) -> int | None:
+    """Smallest edge count (total over a link) whose equilateral resampling of ``P`` passes the
+    contact check, searched upward in steps of 10%; None if none up to ``max_edges``."""
+    X, layout = as_layout(P)
+    n = layout.n
+    parts = layout.split(X) if layout.is_link else X
+    ratio = contact_ratio(parts)
+    # the ratio grows about linearly with the edge count near a true contact
+    guess = max(n + 1, int(np.ceil(n * CONTACT_RATIO / max(ratio, 1e-9) * 1.05)))
+    k = guess
+    while k <= max_edges:
+        Q = resample(parts, k)
+        if contact_ratio(Q) >= CONTACT_RATIO:
+            return k
+        k = int(np.ceil(k * 1.1))
+    return None
+
+
+def check_polygon(P, *, coarseness: bool = True, name: str = "the curve") -> None:
+    """Raise ``ValueError`` if ``P`` cannot start a flow; the message says what to do.
+
+    Checks, in order: shapes, at least 4 vertices per component, finite coordinates, no
+    repeated consecutive points, no self-intersection (disjoint edges touching, with where),
+    and (``coarseness``) no near-contact closer than the resolution: vertices at least 4 edges
+    apart must be at least 0.9 mean edge lengths apart, else the message names the edge count
+    that works.
+    """
+    X, layout = as_layout(P)
+    for c in range(layout.k):
+        size = int(layout.starts[c + 1] - layout.starts[c])
+        if size < MIN_VERTICES:
+            where = f"component {c} of {name}" if layout.is_link else name
+            raise ValueError(
+                f"{where} has {size} vertices; a closed polygon needs at least {MIN_VERTICES}"
+            )
+    bad = ~np.isfinite(X).all(axis=1)
+    if bad.any():
+        v = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"{name} has NaN or infinite coordinates ({int(bad.sum())} vertices, first at "
+            f"{_where(layout, v)}); fix or delete those points"
+        )
+    edge = np.linalg.norm(X[layout.nxt] - X, axis=1)
+    scale = float(np.abs(X - X.mean(axis=0)).max()) or 1.0
+    rep = edge <= 1e-12 * scale
+    if rep.any():
+        v = int(np.flatnonzero(rep)[0])
+        raise ValueError(
+            f"{name} repeats a point: {_where(layout, v)} and the next vertex coincide "
+            f"({int(rep.sum())} repeated in all); merge duplicates (Blender: Merge by Distance) "
+            f"or resample the curve"
+        )
+    h = float(edge.mean())
+    (dv, (vi, vj)), (de, (ei, ej), (s, t)) = closest_pairs(X, layout, CONTACT_GAP)
+    if de <= 1e-6 * h:
+        point = X[ei] + s * (X[layout.nxt[ei]] - X[ei])
+        raise ValueError(
+            f"{name} intersects itself: the edges after {_where(layout, ei)} and after "
+            f"{_where(layout, ej)} touch near ({point[0]:.6g}, {point[1]:.6g}, {point[2]:.6g}); "
+            f"move the strands apart before relaxing"
+        )
+    if coarseness and dv < CONTACT_RATIO * h:
+        k = suggest_edge_count(layout.split(X) if layout.is_link else X)
+        fix = (
+            f"resample with at least {k} edges"
+            if k is not None
+            else "move the strands apart or use a much finer polygon"
+        )
+        raise ValueError(
+            f"{name} is too coarse for its shape: {_where(layout, vi)} and {_where(layout, vj)} "
+            f"are {dv / h:.2f} edge lengths apart in space but far apart along the curve "
+            f"(need >= {CONTACT_RATIO}); the energy cannot keep the strands apart at this "
+            f"resolution — {fix}"
+        )
