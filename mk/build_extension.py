@@ -1,0 +1,156 @@
+"""Build the Blender extension zips (one per platform) into ``dist/``.
+
+Stages ``blender_manifest.toml``, the ``moebius_addon`` package and the numba/llvmlite wheels into
+``build/extension`` (an extension's ``__init__.py`` must sit at the root of its zip, while the
+repository keeps the package in ``moebius_addon/``), then runs ``blender_ext.py build
+--split-platforms`` and ``validate`` from the installed ``bpy`` wheel.
+
+Usage::
+
+    python mk/build_extension.py                      # every platform in the manifest
+    python mk/build_extension.py --platforms linux-x64 --out build/test-dist
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+MANIFEST = ROOT / "blender_manifest.toml"
+WHEELS = ROOT / "wheels"
+
+# pip's --platform tag for each Blender platform; the wheel file names in the manifest say which
+# tags the published wheels carry (pip accepts wheels for the given manylinux/macOS tag and
+# older ones).
+PIP_PLATFORM = {
+    "linux-x64": "manylinux_2_28_x86_64",
+    "windows-x64": "win_amd64",
+    "macos-arm64": "macosx_12_0_arm64",
+}
+
+
+def bpy_scripts() -> Path:
+    """Return ``bpy/<version>/scripts`` of the installed ``bpy`` wheel."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("bpy")
+    if spec is None or spec.origin is None:
+        sys.exit("the bpy module is not installed in this Python; run `make venv` first")
+    found = sorted(Path(spec.origin).parent.glob("*/scripts/addons_core/bl_pkg/cli/blender_ext.py"))
+    if not found:
+        sys.exit(f"blender_ext.py not found inside {Path(spec.origin).parent}")
+    return found[-1].parents[3]
+
+
+def wheel_platform(name: str) -> str | None:
+    """Blender platform of a wheel file name, e.g. ``win_amd64`` -> ``windows-x64``."""
+    if "manylinux" in name and "x86_64" in name:
+        return "linux-x64"
+    if name.endswith("win_amd64.whl"):
+        return "windows-x64"
+    if "macosx" in name and "arm64" in name:
+        return "macos-arm64"
+    return None
+
+
+def wheel_python(name: str) -> str:
+    """Python version of a wheel file name, e.g. ``cp311`` -> ``3.11``."""
+    tag = name.split("-")[2]
+    return f"{tag[2]}.{tag[3:]}"
+
+
+def download_wheels(wheels: list[str]) -> None:
+    """Fetch the missing wheels named in the manifest into ``wheels/`` with pip."""
+    WHEELS.mkdir(exist_ok=True)
+    for rel in wheels:
+        name = Path(rel).name
+        if (WHEELS / name).exists():
+            continue
+        dist, version = name.split("-")[:2]
+        cmd = [
+            sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
+            "--only-binary", ":all:", "--platform", PIP_PLATFORM[wheel_platform(name)],
+            "--python-version", wheel_python(name), "--dest", str(WHEELS), f"{dist}=={version}",
+        ]
+        print("fetching", name, flush=True)
+        subprocess.run(cmd, check=True)
+        if not (WHEELS / name).exists():
+            sys.exit(f"pip did not produce {name}; check the pinned versions in {MANIFEST.name}")
+
+
+def stage(dest: Path, platforms: list[str], pythons: list[str] | None = None) -> list[str]:
+    """Copy the manifest (restricted to ``platforms`` and ``pythons``), package and wheels."""
+    manifest = tomllib.loads(MANIFEST.read_text())
+    wheels = [w for w in manifest["wheels"] if wheel_platform(Path(w).name) in platforms
+              and (pythons is None or wheel_python(Path(w).name) in pythons)]
+    download_wheels(wheels)
+    if dest.exists():
+        shutil.rmtree(dest)
+    shutil.copytree(
+        ROOT / "moebius_addon", dest,
+        ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "*.nbi", "*.nbc"),
+    )
+    (dest / "wheels").mkdir()
+    for rel in wheels:
+        shutil.copy2(WHEELS / Path(rel).name, dest / "wheels")
+    text = MANIFEST.read_text()
+    listed_platforms = ", ".join(f'"{p}"' for p in platforms)
+    text = re.sub(r"(?ms)^platforms = \[.*?\]$", f"platforms = [{listed_platforms}]", text)
+    listed = "".join(f'  "{w}",\n' for w in wheels)
+    text = re.sub(r"(?ms)^wheels = \[.*?\]$", f"wheels = [\n{listed}]", text)
+    (dest / "blender_manifest.toml").write_text(text)
+    return wheels
+
+
+def build(out: Path, platforms: list[str], pythons: list[str] | None = None) -> list[Path]:
+    """Stage, build with ``blender_ext.py --split-platforms`` and validate; return the zips.
+
+    ``pythons`` (e.g. ``["3.11"]``) limits the wheels to those Python versions (the tests use
+    this to build a smaller zip); by default every wheel of the manifest is shipped.
+    """
+    scripts = bpy_scripts()
+    tool = scripts / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
+    tags = scripts / "modules" / "_bpy_internal" / "extensions" / "tags.py"
+    src = ROOT / "build" / "extension"
+    stage(src, platforms, pythons)
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = tomllib.loads(MANIFEST.read_text())
+    zips = [
+        out / f"{manifest['id']}-{manifest['version']}-{p.replace('-', '_')}.zip" for p in platforms
+    ]
+    for z in zips:
+        z.unlink(missing_ok=True)
+    subprocess.run(
+        [sys.executable, str(tool), "build", "--source-dir", str(src), "--output-dir", str(out),
+         "--split-platforms", "--valid-tags", str(tags)],
+        check=True,
+    )
+    for z in zips:
+        subprocess.run(
+            [sys.executable, str(tool), "validate", "--valid-tags", str(tags), str(z)], check=True
+        )
+    return zips
+
+
+def main(argv: list[str] | None = None) -> int:
+    manifest = tomllib.loads(MANIFEST.read_text())
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--platforms", nargs="+", default=manifest["platforms"],
+                        choices=manifest["platforms"])
+    parser.add_argument("--pythons", nargs="+", default=None,
+                        help="only wheels for these Python versions, e.g. 3.11 (default: all)")
+    parser.add_argument("--out", type=Path, default=ROOT / "dist")
+    args = parser.parse_args(argv)
+    for z in build(args.out, args.platforms, args.pythons):
+        print(f"{z}  {z.stat().st_size / 1e6:.1f} MB")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

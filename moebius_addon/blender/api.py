@@ -1,0 +1,674 @@
+"""Scripting API of the Blender layer: what the buttons do, as plain functions.
+
+Every operator in ``bpy.ops.moebius`` validates its input and calls one of these, so a
+``blender --background --python`` script, the ``blender -c moebius`` command and the tests run
+exactly the code the panel runs. Numerics come from :mod:`moebius_addon.core`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+from .. import core
+from . import geometry, keyframes
+from .keyframes import ENERGY_PROP
+
+#: Above this many edges in total the conversion is refused: each iteration evaluates all
+#: N² edge pairs of the energy and solves an N×N system, so ten times the edges cost about a
+#: hundred times the time per iteration. ``allow_large=True`` lifts the limit for scripts.
+EDGE_LIMIT = 5000
+
+#: Metrics offered for the flow, as ``(core name, label, description)``.
+METRICS = (
+    ("hs", "W^{3/2,2} (geometric)", "Geometric Sobolev metric of the paper: fastest, scale-aware"),
+    ("hs_pure", "W^{3/2,2} (pure)", "Fractional Sobolev metric without the lower-order terms"),
+    ("h2", "H²", "Second-order Sobolev metric (too strong: slow for fine polygons)"),
+    ("h1", "H¹", "First-order Sobolev metric (too weak: step sizes shrink with N)"),
+    ("l2", "L²", "Plain L² gradient descent (needs tiny steps; for comparison only)"),
+)
+
+#: Catalogue entries besides the named knots of ``core.knots.names()``.
+SPECIAL_KNOTS = (
+    ("fhw", "Freedman–He–Wang unknot", "The tangled unknot of Freedman, He and Wang"),
+    ("helix", "Helix unknot", "A coiled unknot"),
+    ("random", "Random unknot", "A seeded random unknot"),
+    ("torus", "Torus knot (p, q)", "The (p, q) torus knot"),
+    ("circle", "Circle", "A regular polygon (the energy minimiser)"),
+    ("figure_eight", "Figure-eight knot", "The 4_1 knot"),
+)
+
+_REST = "moebius_rest"
+_SOURCE = "moebius_source"
+
+
+def _as_input(polygons: Sequence[np.ndarray]):
+    """A single polygon as an array, a link as a list (the core takes both)."""
+    return polygons[0] if len(polygons) == 1 else list(polygons)
+
+
+def _as_link(x) -> list[np.ndarray]:
+    if isinstance(x, np.ndarray) and x.ndim == 2:
+        return [np.array(x, dtype=np.float64)]
+    return [np.array(p, dtype=np.float64) for p in x]
+
+
+def energy(polygons: Sequence[np.ndarray]) -> float:
+    """Möbius energy of one polygon or of a link (summed over components).
+
+    Parameters
+    ----------
+    polygons : sequence of (n_i, 3) arrays
+
+    Returns
+    -------
+    float
+    """
+    e = core.moebius_energy(_as_input(polygons))
+    return float(np.sum(e))
+
+
+def _set_rest(obj: bpy.types.Object, polygons: Sequence[np.ndarray]) -> None:
+    obj.data[_REST] = np.concatenate(polygons).ravel().tolist()
+
+
+def _rest(obj: bpy.types.Object) -> list[np.ndarray] | None:
+    flat = obj.data.get(_REST)
+    if flat is None:
+        return None
+    X = np.asarray(flat, dtype=np.float64).reshape(-1, 3)
+    sizes = np.cumsum([len(s.points) for s in obj.data.splines])[:-1]
+    if sizes.size and sizes[-1] >= len(X):
+        return None
+    return np.split(X, sizes)
+
+
+def _dedupe(points: np.ndarray, closed: bool) -> np.ndarray:
+    """Drop repeated consecutive points (OBJ files and evaluated curves often repeat them)."""
+    scale = max(float(np.ptp(points, axis=0).max()), 1e-300) if len(points) else 1.0
+    keep = np.ones(len(points), bool)
+    keep[1:] = np.linalg.norm(np.diff(points, axis=0), axis=1) > 1e-12 * scale
+    points = points[keep]
+    if closed and len(points) > 1 and np.linalg.norm(points[-1] - points[0]) <= 1e-12 * scale:
+        points = points[:-1]
+    return points
+
+
+def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: float | None = None,
+                       close_open: bool = False, allow_large: bool = False) -> list[np.ndarray]:
+    """Check ``obj`` and compute its equal-edge polygons without touching the scene.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        Curve (poly, Bezier, NURBS) or mesh made of closed edge loops.
+    edges : int
+        Edges per component (at least 4); ignored when ``edge_length`` is given.
+    edge_length : float, optional
+        Target edge length in object units; each component gets ``round(length / edge_length)``
+        edges (at least 4).
+    close_open : bool
+        Join the ends of open splines/chains instead of refusing them.
+    allow_large : bool
+        Accept more than :data:`EDGE_LIMIT` edges in total.
+
+    Returns
+    -------
+    list of (n_i, 3) float64 arrays
+        Equilateral polygons, one per component, in object coordinates.
+
+    Raises
+    ------
+    ValueError
+        With the reason and the fix: unsupported object, open spline, fewer than 4 points,
+        too many edges, a polygon that touches itself.
+    """
+    polylines = geometry.object_polylines(obj)
+    many = len(polylines) > 1
+    cleaned = []
+    for k, (points, closed) in enumerate(polylines):
+        where = f"'{obj.name}'" + (f" (component {k + 1} of {len(polylines)})" if many else "")
+        if not closed and not close_open:
+            raise ValueError(
+                f"{where} is an open curve; close it (Edit Mode: Alt+C, or F on the end "
+                "vertices of a mesh) or enable 'Close open splines'"
+            )
+        points = _dedupe(np.asarray(points, np.float64), closed=True)
+        if len(points) < 4:
+            raise ValueError(
+                f"{where} has only {len(points)} distinct points; a closed curve to relax needs "
+                "at least 4 (subdivide it or draw more points)"
+            )
+        cleaned.append(points)
+    lengths = [float(np.linalg.norm(np.diff(np.vstack([p, p[:1]]), axis=0), axis=1).sum())
+               for p in cleaned]
+    if edge_length is not None:
+        if not edge_length > 0:
+            raise ValueError(f"edge length must be positive, got {edge_length}")
+        counts = [max(4, round(L / edge_length)) for L in lengths]
+    else:
+        if int(edges) < 4:
+            raise ValueError(f"{edges} edges is too few; a closed polygon needs at least 4")
+        counts = [int(edges)] * len(cleaned)
+    total = sum(counts)
+    if total > EDGE_LIMIT and not allow_large:
+        raise ValueError(
+            f"{total} edges is too many: the energy couples every pair of edges, so time and "
+            f"memory per iteration grow as N² (10× the edges ≈ 100× slower). Use at most "
+            f"{EDGE_LIMIT} edges (a few hundred are plenty to untangle a knot)"
+            + (" or a longer edge length" if edge_length is not None else "")
+        )
+    polygons = [core.resample(p, n, closed=True) for p, n in zip(cleaned, counts, strict=True)]
+    try:
+        core.check_polygon(_as_input(polygons))
+    except ValueError as err:
+        raise ValueError(f"'{obj.name}' after resampling to {counts} edges: {err}") from None
+    return polygons
+
+
+def _link_like(new: bpy.types.Object, like: bpy.types.Object | None,
+               context: bpy.types.Context) -> None:
+    collections = list(like.users_collection) if like is not None else []
+    if not collections:
+        collections = [context.collection or context.scene.collection]
+    for coll in collections:
+        coll.objects.link(new)
+
+
+def _deselect_all(context: bpy.types.Context) -> None:
+    for o in context.view_layer.objects:
+        if o is not None and o.select_get():
+            o.select_set(False)
+
+
+def _select_only(context: bpy.types.Context, obj: bpy.types.Object) -> None:
+    _deselect_all(context)
+    obj.select_set(True)
+    context.view_layer.objects.active = obj
+
+
+def make_curve_object(name: str, polygons: Sequence[np.ndarray],
+                      like: bpy.types.Object | None = None,
+                      context: bpy.types.Context | None = None) -> bpy.types.Object:
+    """Create and select a curve object with one cyclic poly spline per polygon.
+
+    Parameters
+    ----------
+    name : str
+    polygons : sequence of (n_i, 3) arrays
+        Vertices in object coordinates.
+    like : bpy.types.Object, optional
+        Object whose transform, collections and (for curves) bevel and materials are copied.
+    context : bpy.types.Context, optional
+        Defaults to ``bpy.context``.
+
+    Returns
+    -------
+    bpy.types.Object
+    """
+    context = context or bpy.context
+    curve = geometry.new_curve(name, polygons)
+    if like is not None and like.type == "CURVE":
+        src = like.data
+        curve.bevel_depth = src.bevel_depth
+        curve.bevel_resolution = src.bevel_resolution
+        curve.use_fill_caps = src.use_fill_caps
+        for mat in src.materials:
+            curve.materials.append(mat)
+    obj = bpy.data.objects.new(name, curve)
+    if like is not None:
+        obj.matrix_world = like.matrix_world
+    _deselect_all(context)
+    _link_like(obj, like, context)
+    _set_rest(obj, polygons)
+    obj[ENERGY_PROP] = energy(polygons)
+    obj.select_set(True)
+    context.view_layer.objects.active = obj
+    return obj
+
+
+def convert_object(obj: bpy.types.Object, edges: int = 100, edge_length: float | None = None,
+                   close_open: bool = False, allow_large: bool = False,
+                   context: bpy.types.Context | None = None) -> bpy.types.Object:
+    """Make an equal-edge poly curve from ``obj``; the original is kept, hidden.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        Curve (poly, Bezier, NURBS) or mesh made of closed edge loops.
+    edges, edge_length, close_open, allow_large
+        See :func:`prepare_conversion`.
+    context : bpy.types.Context, optional
+        Defaults to ``bpy.context``.
+
+    Returns
+    -------
+    bpy.types.Object
+        The new curve object ``"<name>.moebius"`` (same transform and collections), selected
+        and active; ``obj["moebius_source"]`` names the hidden original.
+
+    Raises
+    ------
+    ValueError
+        See :func:`prepare_conversion`; the scene is unchanged then.
+    """
+    polygons = prepare_conversion(obj, edges, edge_length, close_open, allow_large)
+    return apply_conversion(obj, polygons, context)
+
+
+def apply_conversion(obj: bpy.types.Object, polygons: Sequence[np.ndarray],
+                     context: bpy.types.Context | None = None) -> bpy.types.Object:
+    """Create the converted curve from :func:`prepare_conversion`'s polygons; hide ``obj``."""
+    context = context or bpy.context
+    new = make_curve_object(f"{obj.name}.moebius", polygons, like=obj, context=context)
+    new[_SOURCE] = obj.name
+    obj.hide_set(True)
+    obj.hide_render = True
+    return new
+
+
+def relax_settings(settings) -> dict:
+    """Keyword arguments for :func:`relax_object` from the ``scene.moebius`` settings."""
+    kwargs = dict(
+        metric=settings.metric,
+        max_iterations=settings.max_iterations,
+        tolerance=settings.tolerance,
+        frame_start=settings.frame_start,
+        keyframe_stride=settings.keyframe_stride,
+        initial_step=settings.initial_step,
+        armijo=settings.armijo,
+        growth=settings.growth,
+        backproject_iter=settings.backproject_iter,
+        backproject_tol=settings.backproject_tol,
+        edge_lengths=settings.keep_edge_lengths,
+        barycenter=settings.keep_barycenter,
+    )
+    if settings.use_energy_target:
+        kwargs["energy_target"] = settings.energy_target
+    if settings.max_seconds > 0:
+        kwargs["max_seconds"] = settings.max_seconds
+    return kwargs
+
+
+class ObjectRelaxation:
+    """A relaxation of one curve object, stepped by a caller that may stop it at any time.
+
+    The modal operator steps it on a timer; :func:`relax_object` steps it in a loop. The start
+    and every ``keyframe_stride``-th accepted iterate (and always the last) are recorded and
+    keyframed by :meth:`finish`.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        Curve of cyclic poly splines (see :func:`convert_object`); its shape at the current frame
+        is the start. Earlier flow keyframes on it are removed once the run is set up.
+    metric : str
+        ``"hs"``, ``"hs_pure"``, ``"h2"``, ``"h1"`` or ``"l2"``.
+    max_iterations : int
+    tolerance : float
+        Stop once the projected gradient is this small (``tol`` of ``core.relax``).
+    frame_start : int
+        Frame of the start shape.
+    keyframe_stride : int
+        Keyframe every this many iterates (1 = all).
+    **options
+        Passed on to ``core.Relaxation`` (``initial_step``, ``armijo``, ``growth``,
+        ``backproject_iter``, ``backproject_tol``, ``edge_lengths``, ``barycenter``,
+        ``energy_target``, ``ftol``, ``max_seconds``).
+
+    Raises
+    ------
+    ValueError
+        If the curve is not a closed poly curve or the core refuses it (touching itself, ...).
+    """
+
+    def __init__(self, obj: bpy.types.Object, metric: str = "hs", max_iterations: int = 200,
+                 tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
+                 **options) -> None:
+        if keyframe_stride < 1:
+            raise ValueError(f"keyframe_stride must be at least 1, got {keyframe_stride}")
+        polygons = geometry.curve_polygons(obj)
+        total = sum(len(p) for p in polygons)
+        if total > EDGE_LIMIT and not options.pop("allow_large", False):
+            raise ValueError(
+                f"'{obj.name}' has {total} edges; the cost per iteration grows as N², so runs "
+                f"above {EDGE_LIMIT} edges are refused. Convert it again with fewer edges"
+            )
+        options.pop("allow_large", None)
+        try:
+            core.check_polygon(_as_input(polygons))
+        except ValueError as err:
+            raise ValueError(f"'{obj.name}': {err}") from None
+        options.setdefault("target_lengths", "keep")
+        self.obj = obj
+        self.frame_start = int(frame_start)
+        self.stride = int(keyframe_stride)
+        self.run = core.Relaxation(_as_input(polygons), metric=metric, max_iter=max_iterations,
+                                   tol=tolerance, **options)
+        self.start = [p.copy() for p in polygons]
+        self.x = [p.copy() for p in polygons]
+        self.energy = float(np.sum(self.run.energy))
+        self.nit = 0
+        self.iterates = [self.start]
+        self.energies = [self.energy]
+        self._pending = None
+        self.t0 = time.perf_counter()
+        keyframes.remove_flow_keyframes(obj)
+
+    def step(self) -> bool:
+        """Advance by one accepted iterate; False once the run has finished."""
+        before = self.run.nit
+        more = self.run.step()
+        if self.run.nit > before:  # an accepted iterate (the last one may come with False)
+            self.nit += 1
+            x = _as_link(self.run.x)
+            self.x = x
+            self.energy = float(np.sum(self.run.energy))
+            if self.nit % self.stride == 0:
+                self.iterates.append(x)
+                self.energies.append(self.energy)
+                self._pending = None
+            else:
+                self._pending = (x, self.energy)
+        return more
+
+    def stop(self, message: str) -> None:
+        """Stop the run (e.g. the user pressed Esc); :meth:`finish` still keyframes it."""
+        self.run.stop(message)
+
+    def show(self) -> None:
+        """Put the current iterate on the curve (for live display while running)."""
+        geometry.write_polygons(self.obj.data, self.x)
+
+    def finish(self, scene: bpy.types.Scene | None = None):
+        """Keyframe the recorded iterates and return the core's result.
+
+        Sets the scene frame range to the keyed frames, jumps to the last one and stores the
+        statistics in ``scene.moebius`` (when the add-on is registered).
+
+        Returns
+        -------
+        result
+            The object returned by ``core.Relaxation.result()`` (``x``, ``fun``, ``nit``,
+            ``success``, ``message``, ``history``).
+        """
+        scene = scene or bpy.context.scene
+        result = self.run.result()
+        if self._pending is not None:
+            self.iterates.append(self._pending[0])
+            self.energies.append(self._pending[1])
+            self._pending = None
+        _set_rest(self.obj, self.start)
+        geometry.write_polygons(self.obj.data, self.start)
+        frames = keyframes.write_flow_keyframes(self.obj, self.iterates, self.energies,
+                                                self.frame_start)
+        scene.frame_start = frames.start
+        scene.frame_end = max(frames.stop - 1, frames.start + 1)
+        scene.frame_set(frames.stop - 1)
+        stats = getattr(scene, "moebius", None)
+        if stats is not None:
+            stats.store_run(self.obj.name, self.nit, self.energies[0], self.energies[-1],
+                            time.perf_counter() - self.t0, str(result.message), len(frames))
+        return result
+
+
+def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: int = 200,
+                 tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
+                 callback: Callable | None = None, scene: bpy.types.Scene | None = None,
+                 **options):
+    """Relax a converted curve by the Möbius-energy flow and keyframe every iterate.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        Curve of cyclic poly splines (see :func:`convert_object`).
+    metric, max_iterations, tolerance, frame_start, keyframe_stride, **options
+        See :class:`ObjectRelaxation`.
+    callback : callable, optional
+        ``callback(run)`` after every accepted iterate with the :class:`ObjectRelaxation`
+        (``run.nit``, ``run.x``, ``run.energy``); returning True stops the run cleanly.
+    scene : bpy.types.Scene, optional
+        Scene whose frame range is set; defaults to ``bpy.context.scene``.
+
+    Returns
+    -------
+    result
+        The core's result object (``x``, ``fun``, ``nit``, ``success``, ``message``,
+        ``history``).
+
+    Raises
+    ------
+    ValueError
+        If the curve cannot be relaxed; nothing is changed then.
+    """
+    run = ObjectRelaxation(obj, metric=metric, max_iterations=max_iterations, tolerance=tolerance,
+                           frame_start=frame_start, keyframe_stride=keyframe_stride, **options)
+    while run.step():
+        if callback is not None and callback(run):
+            run.stop("stopped by callback")
+            break
+    return run.finish(scene)
+
+
+def clear_animation(obj: bpy.types.Object) -> None:
+    """Remove the flow keyframes of ``obj`` and put the curve back to the start of the last run.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        A curve relaxed by :func:`relax_object`.
+    """
+    keyframes.remove_flow_keyframes(obj)
+    rest = _rest(obj)
+    if rest is not None:
+        geometry.write_polygons(obj.data, rest)
+        obj[ENERGY_PROP] = energy(rest)
+
+
+def apply_frame(obj: bpy.types.Object, frame: int | None = None,
+                scene: bpy.types.Scene | None = None) -> list[np.ndarray]:
+    """Make the shape at ``frame`` (default: the current frame) the curve's new rest shape.
+
+    The flow keyframes are removed; a later relaxation starts from this shape.
+
+    Returns
+    -------
+    list of (n_i, 3) arrays
+        The new rest polygons.
+    """
+    scene = scene or bpy.context.scene
+    if frame is not None:
+        scene.frame_set(frame)
+    polygons = geometry.curve_polygons(obj)
+    keyframes.remove_flow_keyframes(obj)
+    geometry.write_polygons(obj.data, polygons)
+    _set_rest(obj, polygons)
+    obj[ENERGY_PROP] = energy(polygons)
+    return polygons
+
+
+def knot_polygons(kind: str, n: int = 150, p: int = 2, q: int = 3, seed: int = 0) -> list:
+    """Polygons of a catalogue entry, equilateral and ready to relax.
+
+    Parameters
+    ----------
+    kind : str
+        ``"fhw"``, ``"helix"``, ``"random"``, ``"torus"``, ``"circle"``, ``"figure_eight"`` or a
+        name from ``core.knots.names()`` such as ``"7_2"``.
+    n : int
+        Edges (per component).
+    p, q : int
+        Torus knot parameters.
+    seed : int
+        Seed of the random unknot.
+
+    Returns
+    -------
+    list of (n_i, 3) float64 arrays
+    """
+    from ..core import knots
+
+    makers = {
+        "fhw": lambda: knots.freedman_unknot(n),
+        "helix": lambda: knots.helix_unknot(n),
+        "random": lambda: knots.random_unknot(n, seed),
+        "torus": lambda: knots.torus_knot(p, q, n),
+        "circle": lambda: knots.circle(n),
+        "figure_eight": lambda: knots.figure_eight(n),
+    }
+    if kind in makers:
+        link = _as_link(makers[kind]())
+    elif kind in knots.names():
+        link = _as_link(knots.named(kind, n))
+    else:
+        raise ValueError(f"unknown knot '{kind}'; choose one of {sorted(makers)} or "
+                         f"core.knots.names()")
+    out = []
+    for P in link:
+        e = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
+        out.append(P if np.ptp(e) <= 1e-9 * e.mean() else core.resample(P, len(P), closed=True))
+    return out
+
+
+def add_knot(kind: str = "fhw", n: int = 150, p: int = 2, q: int = 3, seed: int = 0,
+             size: float = 2.0, location: Sequence[float] = (0.0, 0.0, 0.0),
+             context: bpy.types.Context | None = None) -> bpy.types.Object:
+    """Add a catalogue knot as a curve object ready to relax.
+
+    Parameters
+    ----------
+    kind, n, p, q, seed
+        See :func:`knot_polygons`.
+    size : float
+        Largest extent of the bounding box, in scene units (the energy is scale invariant).
+    location : 3 floats
+        Where the object origin (the curve's barycenter) goes.
+    context : bpy.types.Context, optional
+
+    Returns
+    -------
+    bpy.types.Object
+        The new, selected and active curve object.
+    """
+    polygons = knot_polygons(kind, n, p, q, seed)
+    X = np.concatenate(polygons)
+    centre = X.mean(axis=0)
+    scale = size / max(float(np.ptp(X, axis=0).max()), 1e-300)
+    polygons = [(P - centre) * scale for P in polygons]
+    label = {"torus": f"torus {p},{q}", "random": f"random {seed}"}.get(kind, kind)
+    obj = make_curve_object(f"Knot {label}", polygons, context=context)
+    obj.location = location
+    obj.data.bevel_depth = 0.01 * size
+    return obj
+
+
+_GRADIENT_COLOURS = {"l2": (0.9, 0.2, 0.15, 1.0), "hs_pure": (0.2, 0.7, 0.2, 1.0),
+                     "hs": (0.15, 0.35, 0.9, 1.0), "h1": (0.8, 0.6, 0.1, 1.0),
+                     "h2": (0.6, 0.2, 0.8, 1.0)}
+
+
+def show_gradients(obj: bpy.types.Object, metrics: Sequence[str] = ("l2", "hs_pure", "hs"),
+                   length: float = 0.15, projected: bool = True,
+                   context: bpy.types.Context | None = None) -> list[bpy.types.Object]:
+    """Draw energy gradients of a curve as vector fields (the paper's Fig. 2).
+
+    For each metric a mesh object ``"<curve>.grad.<metric>"`` is made with one edge per vertex,
+    from the vertex along the gradient. Each field is scaled on its own so that its longest
+    arrow is ``length`` times the curve's bounding-box diagonal (the fields differ by orders of
+    magnitude); the factor is stored as ``["moebius_arrow_scale"]``. Earlier fields of the same
+    curve and metric are replaced.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        Curve of cyclic poly splines.
+    metrics : sequence of str
+        Metric names of ``core.sobolev_gradient``.
+    length : float
+        Longest arrow as a fraction of the bounding-box diagonal.
+    projected : bool
+        Project onto the constraints' tangent space (what the flow uses).
+    context : bpy.types.Context, optional
+
+    Returns
+    -------
+    list of bpy.types.Object
+        The gradient objects, parented to ``obj``.
+    """
+    context = context or bpy.context
+    polygons = geometry.curve_polygons(obj)
+    X = np.concatenate(polygons)
+    diagonal = float(np.linalg.norm(np.ptp(X, axis=0)))
+    out = []
+    for metric in metrics:
+        G = np.concatenate(_as_link(core.sobolev_gradient(_as_input(polygons), metric=metric,
+                                                          projected=projected)))
+        longest = float(np.linalg.norm(G, axis=1).max())
+        scale = length * diagonal / longest if longest > 0 else 0.0
+        name = f"{obj.name}.grad.{metric}"
+        old = bpy.data.objects.get(name)
+        if old is not None:
+            mesh_old = old.data
+            bpy.data.objects.remove(old)
+            if mesh_old.users == 0:
+                bpy.data.meshes.remove(mesh_old)
+        mesh = bpy.data.meshes.new(name)
+        n = len(X)
+        mesh.from_pydata(np.vstack([X, X + scale * G]).tolist(),
+                         np.column_stack([np.arange(n), np.arange(n) + n]).tolist(), [])
+        mesh.update()
+        arrows = bpy.data.objects.new(name, mesh)
+        _link_like(arrows, obj, context)
+        arrows.parent = obj
+        arrows.matrix_parent_inverse.identity()
+        arrows.color = _GRADIENT_COLOURS.get(metric, (1, 1, 1, 1))
+        arrows["moebius_gradient"] = metric
+        arrows["moebius_arrow_scale"] = scale
+        out.append(arrows)
+    return out
+
+
+def export_flow(obj: bpy.types.Object, filepath: str | Path,
+                scene: bpy.types.Scene | None = None) -> Path:
+    """Export the keyframed curve over the scene's frame range as Alembic or USD.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        The relaxed curve; only it is exported.
+    filepath : str or Path
+        ``.abc`` for Alembic, ``.usd``/``.usda``/``.usdc``/``.usdz`` for USD.
+    scene : bpy.types.Scene, optional
+
+    Returns
+    -------
+    Path
+    """
+    scene = scene or bpy.context.scene
+    path = Path(filepath)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    selected = [o for o in bpy.context.view_layer.objects if o.select_get()]
+    active = bpy.context.view_layer.objects.active
+    _select_only(bpy.context, obj)
+    frame = scene.frame_current
+    try:
+        suffix = path.suffix.lower()
+        if suffix == ".abc":
+            bpy.ops.wm.alembic_export(filepath=str(path), start=scene.frame_start,
+                                      end=scene.frame_end, selected=True)
+        elif suffix in (".usd", ".usda", ".usdc", ".usdz"):
+            bpy.ops.wm.usd_export(filepath=str(path), export_animation=True,
+                                  selected_objects_only=True)
+        else:
+            raise ValueError(f"unknown export format '{suffix}'; use .abc or .usd/.usda/.usdc")
+    finally:
+        obj.select_set(False)
+        for o in selected:
+            o.select_set(True)
+        bpy.context.view_layer.objects.active = active
+        scene.frame_set(frame)
+    return path

@@ -1,0 +1,116 @@
+"""``blender -c moebius ...``: relax a curve from the command line.
+
+Examples::
+
+    blender -c moebius --knot fhw --edges 150 --save out/fhw.blend --export out/fhw.abc
+    blender -c moebius --open scene.blend --object Knot --edges 200 --save relaxed.blend
+
+The same function is callable from Python as :func:`main` (it returns the exit status).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import bpy
+
+from . import api, geometry
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="blender -c moebius",
+        description="Convert a curve (or add a catalogue knot), relax it by the Möbius energy "
+                    "flow, keyframe the flow, save and export it.",
+    )
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--object", help="name of the curve or edge-loop mesh object to relax")
+    src.add_argument("--knot", help="add this catalogue knot instead (fhw, helix, random, "
+                                    "torus, circle, figure_eight or a table name such as 7_2)")
+    p.add_argument("--open", metavar="FILE.blend", help="open this file first")
+    p.add_argument("--edges", type=int, default=None,
+                   help="edges per component (converts the object; default: keep a converted "
+                        "curve as it is, 100 otherwise; 150 for --knot)")
+    p.add_argument("--close-open", action="store_true", help="close open splines")
+    p.add_argument("--seed", type=int, default=0, help="seed of --knot random")
+    p.add_argument("--pq", type=int, nargs=2, default=(2, 3), metavar=("P", "Q"),
+                   help="p and q of --knot torus")
+    p.add_argument("--metric", default="hs", choices=[m for m, *_ in api.METRICS])
+    p.add_argument("--max-iterations", type=int, default=200)
+    p.add_argument("--tolerance", type=float, default=1e-6)
+    p.add_argument("--frame-start", type=int, default=1)
+    p.add_argument("--stride", type=int, default=1, help="keyframe every STRIDE-th iterate")
+    p.add_argument("--no-relax", action="store_true", help="only convert / add")
+    p.add_argument("--save", metavar="OUT.blend", help="save the result here")
+    p.add_argument("--export", metavar="OUT.abc|OUT.usd", action="append", default=[],
+                   help="export the keyframed curve (Alembic or USD; may repeat)")
+    return p
+
+
+def _is_converted(obj) -> bool:
+    try:
+        geometry.curve_polygons(obj)
+    except ValueError:
+        return False
+    return True
+
+
+def main(argv: list[str]) -> int:
+    """Run the command with ``argv`` (the arguments after ``-c moebius``); return 0 or 1."""
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exit_:
+        return int(exit_.code or 0)
+    try:
+        if args.open:
+            bpy.ops.wm.open_mainfile(filepath=args.open)
+        if args.knot:
+            obj = api.add_knot(args.knot, args.edges or 150, p=args.pq[0], q=args.pq[1],
+                               seed=args.seed)
+        else:
+            obj = bpy.data.objects.get(args.object)
+            if obj is None:
+                names = ", ".join(o.name for o in bpy.data.objects) or "none"
+                raise ValueError(f"no object '{args.object}' (objects: {names})")
+            if args.edges is not None or not _is_converted(obj):
+                obj = api.convert_object(obj, edges=args.edges or 100,
+                                         close_open=args.close_open)
+        print(f"moebius: '{obj.name}', {sum(len(s.points) for s in obj.data.splines)} edges, "
+              f"energy {obj[api.ENERGY_PROP]:.6g}")
+        if not args.no_relax:
+            t0 = time.perf_counter()
+            result = api.relax_object(obj, metric=args.metric, max_iterations=args.max_iterations,
+                                      tolerance=args.tolerance, frame_start=args.frame_start,
+                                      keyframe_stride=args.stride)
+            scene = bpy.context.scene
+            print(f"moebius: {result.nit} iterations in {time.perf_counter() - t0:.2f} s, "
+                  f"energy {result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, "
+                  f"frames {scene.frame_start}-{scene.frame_end} ({result.message})")
+        if args.save:
+            bpy.ops.wm.save_as_mainfile(filepath=args.save)
+            print(f"moebius: saved {args.save}")
+        for path in args.export:
+            api.export_flow(obj, path)
+            print(f"moebius: exported {path}")
+    except (ValueError, RuntimeError, OSError) as err:
+        print(f"moebius: error: {err}", file=sys.stderr)
+        return 1
+    return 0
+
+
+_handle = None
+
+
+def register() -> None:
+    global _handle
+    if hasattr(bpy.utils, "register_cli_command"):  # Blender 4.2+
+        _handle = bpy.utils.register_cli_command("moebius", main)
+
+
+def unregister() -> None:
+    global _handle
+    if _handle is not None:
+        bpy.utils.unregister_cli_command(_handle)
+        _handle = None

@@ -1,0 +1,231 @@
+"""Curve and mesh objects <-> polygons (``(N, 3)`` float64 arrays in object coordinates).
+
+Reading accepts poly, Bezier and NURBS curves (the last two through Blender's own evaluation) and
+meshes made only of edge loops, which is what OBJ polyline import produces. Writing makes one
+cyclic ``POLY`` spline per component.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import bpy
+import numpy as np
+
+#: Samples per Bezier segment (or per NURBS control point) when reading a smooth curve; the
+#: result is resampled to equal edges afterwards, so this only sets how faithfully the shape
+#: is followed.
+READ_RESOLUTION = 24
+
+
+def _mesh_polylines(vertices: np.ndarray, edges: np.ndarray, name: str) -> list[tuple]:
+    """Split an edge graph into closed loops and open chains.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float array
+    edges : (E, 2) int array
+    name : str
+        Object name used in error messages.
+
+    Returns
+    -------
+    list of (points, closed)
+        ``points`` is ``(n, 3)`` in walking order; ``closed`` says whether it is a loop.
+    """
+    nv = len(vertices)
+    degree = np.bincount(edges.ravel(), minlength=nv) if len(edges) else np.zeros(nv, int)
+    if np.any(degree > 2):
+        v = int(np.flatnonzero(degree > 2)[0])
+        raise ValueError(
+            f"'{name}' is not made of separate curves: vertex {v} has {degree[v]} edges. "
+            "Use a mesh whose vertices each have exactly two edges (closed edge loops), "
+            "e.g. from an OBJ polyline, or a curve object"
+        )
+    neighbours = [[] for _ in range(nv)]
+    for a, b in edges:
+        neighbours[a].append(b)
+        neighbours[b].append(a)
+    seen = np.zeros(nv, bool)
+    seen[degree == 0] = True  # loose vertices carry no curve
+    out = []
+    # open chains first (start at an end), then whatever is left are loops
+    starts = [int(v) for v in np.flatnonzero(degree == 1)] + list(range(nv))
+    for start in starts:
+        if seen[start]:
+            continue
+        order, prev, cur = [start], -1, start
+        seen[start] = True
+        while True:
+            nxt = [v for v in neighbours[cur] if v != prev and not seen[v]]
+            if not nxt:
+                break
+            prev, cur = cur, nxt[0]
+            seen[cur] = True
+            order.append(cur)
+        closed = bool(degree[start] == 2)
+        out.append((vertices[order].astype(np.float64), closed))
+    return out
+
+
+def _curve_polylines(obj: bpy.types.Object) -> list[tuple]:
+    curve = obj.data
+    if all(s.type == "POLY" for s in curve.splines):
+        out = []
+        for s in curve.splines:
+            co = np.empty(4 * len(s.points))
+            s.points.foreach_get("co", co)
+            out.append((co.reshape(-1, 4)[:, :3].copy(), bool(s.use_cyclic_u)))
+        return out
+    # Bezier/NURBS: let Blender evaluate the splines on a bare copy (no bevel, extrusion or
+    # modifiers, so the evaluated mesh is just the centre line), then read its edges.
+    tmp_curve = curve.copy()
+    tmp_obj = None
+    try:
+        tmp_curve.dimensions = "3D"
+        tmp_curve.bevel_depth = 0.0
+        tmp_curve.bevel_mode = "ROUND"
+        tmp_curve.bevel_object = None
+        tmp_curve.taper_object = None
+        tmp_curve.extrude = 0.0
+        tmp_curve.offset = 1.0
+        tmp_curve.resolution_u = max(curve.resolution_u, READ_RESOLUTION)
+        tmp_obj = bpy.data.objects.new("_moebius_read", tmp_curve)
+        bpy.context.scene.collection.objects.link(tmp_obj)
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        evaluated = tmp_obj.evaluated_get(depsgraph)
+        mesh = evaluated.to_mesh()
+        try:
+            vertices, edges = _mesh_arrays(mesh)
+        finally:
+            evaluated.to_mesh_clear()
+    finally:
+        if tmp_obj is not None:
+            bpy.data.objects.remove(tmp_obj)
+        bpy.data.curves.remove(tmp_curve)
+    return _mesh_polylines(vertices, edges, obj.name)
+
+
+def _mesh_arrays(mesh: bpy.types.Mesh) -> tuple[np.ndarray, np.ndarray]:
+    vertices = np.empty(3 * len(mesh.vertices))
+    mesh.vertices.foreach_get("co", vertices)
+    edges = np.empty(2 * len(mesh.edges), dtype=np.int64)
+    mesh.edges.foreach_get("vertices", edges)
+    return vertices.reshape(-1, 3), edges.reshape(-1, 2)
+
+
+def object_polylines(obj: bpy.types.Object) -> list[tuple[np.ndarray, bool]]:
+    """Read the centre lines of a curve or edge-loop mesh object.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        A ``CURVE`` object (poly, Bezier or NURBS splines) or a ``MESH`` object without faces.
+
+    Returns
+    -------
+    list of (points, closed)
+        One entry per spline or edge component: ``points`` an ``(n, 3)`` float64 array in object
+        coordinates, ``closed`` whether the component is cyclic.
+
+    Raises
+    ------
+    ValueError
+        For other object types, meshes with faces or branching vertices, and empty objects.
+    """
+    if obj.type == "CURVE":
+        if len(obj.data.splines) == 0:
+            raise ValueError(f"curve '{obj.name}' has no splines; draw or add a curve first")
+        return _curve_polylines(obj)
+    if obj.type == "MESH":
+        mesh = obj.data
+        if len(mesh.polygons):
+            raise ValueError(
+                f"mesh '{obj.name}' has {len(mesh.polygons)} faces, so it is not a curve; "
+                "select a curve object or a mesh made only of closed edge loops "
+                "(e.g. an imported OBJ polyline)"
+            )
+        if len(mesh.edges) == 0:
+            raise ValueError(f"mesh '{obj.name}' has no edges; it holds no curve to convert")
+        vertices, edges = _mesh_arrays(mesh)
+        return _mesh_polylines(vertices, edges, obj.name)
+    raise ValueError(
+        f"'{obj.name}' is a {obj.type.lower()} object; select a curve object "
+        "or a mesh made of closed edge loops"
+    )
+
+
+def curve_polygons(obj: bpy.types.Object) -> list[np.ndarray]:
+    """Polygons of a curve made of cyclic poly splines, as shown at the current frame.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        A curve object whose splines are all cyclic ``POLY`` splines (what
+        :func:`~moebius_addon.blender.convert_object` and ``moebius.add_knot`` make).
+
+    Returns
+    -------
+    list of (n_i, 3) float64 arrays
+        One polygon per spline, in object coordinates.
+
+    Raises
+    ------
+    ValueError
+        If ``obj`` is not such a curve, saying how to make it one.
+    """
+    if obj is None or obj.type != "CURVE":
+        kind = "nothing" if obj is None else f"a {obj.type.lower()} object"
+        raise ValueError(f"the active object is {kind}; select a converted Möbius curve "
+                         "(Möbius ▸ Polygon ▸ Convert)")
+    splines = obj.data.splines
+    if len(splines) == 0:
+        raise ValueError(f"curve '{obj.name}' has no splines")
+    for s in splines:
+        if s.type != "POLY" or not s.use_cyclic_u:
+            what = "open" if s.type == "POLY" else f"a {s.type.title()} spline"
+            raise ValueError(
+                f"curve '{obj.name}' has {what} spline; convert it to equal-edge closed "
+                "polygons first (Möbius ▸ Polygon ▸ Convert)"
+            )
+    return [p for p, _ in _curve_polylines(obj)]
+
+
+def write_polygons(curve: bpy.types.Curve, polygons: Sequence[np.ndarray]) -> None:
+    """Overwrite the point positions of a curve whose splines match ``polygons`` in size.
+
+    Parameters
+    ----------
+    curve : bpy.types.Curve
+        Curve data with one poly spline per polygon.
+    polygons : sequence of (n_i, 3) arrays
+    """
+    for spline, P in zip(curve.splines, polygons, strict=True):
+        co = np.ones((len(P), 4))
+        co[:, :3] = P
+        spline.points.foreach_set("co", co.ravel())
+    curve.update_tag()
+
+
+def new_curve(name: str, polygons: Sequence[np.ndarray]) -> bpy.types.Curve:
+    """Make curve data with one cyclic ``POLY`` spline per polygon.
+
+    Parameters
+    ----------
+    name : str
+    polygons : sequence of (n_i, 3) arrays
+        Vertices in object coordinates.
+
+    Returns
+    -------
+    bpy.types.Curve
+    """
+    curve = bpy.data.curves.new(name, "CURVE")
+    curve.dimensions = "3D"
+    curve.twist_mode = "MINIMUM"
+    for P in polygons:
+        spline = curve.splines.new("POLY")
+        spline.points.add(len(P) - 1)
+        spline.use_cyclic_u = True
+    write_polygons(curve, polygons)
+    return curve

@@ -1,0 +1,335 @@
+"""Operators ``bpy.ops.moebius.*``: validate, call :mod:`.api`, report.
+
+Errors from the API are ``ValueError`` messages that already say what to do; they are reported
+as errors and the operator cancels before changing anything.
+"""
+
+from __future__ import annotations
+
+import time
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
+
+from . import api, keyframes
+
+_CONVERTIBLE = {"CURVE", "MESH"}
+
+
+def _active_curve(context):
+    obj = context.active_object
+    return obj if obj is not None and obj.type == "CURVE" else None
+
+
+def _poll_active_curve(cls, context) -> bool:
+    if _active_curve(context) is None:
+        cls.poll_message_set("Select a curve object (convert one with Möbius ▸ Polygon ▸ Convert)")
+        return False
+    settings = getattr(context.scene, "moebius", None)
+    if settings is not None and settings.running:
+        cls.poll_message_set("A relaxation is running; press Esc in the 3D Viewport to stop it")
+        return False
+    return True
+
+
+class MOEBIUS_OT_convert(bpy.types.Operator):
+    """Turn the selected curves (or meshes of closed edge loops) into closed polygons with
+    equal edges, ready to relax; the originals are kept, hidden"""
+
+    bl_idname = "moebius.convert"
+    bl_label = "Convert to Möbius Polygon"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        if not any(o.type in _CONVERTIBLE for o in context.selected_objects):
+            cls.poll_message_set("Select a curve object, or a mesh made of closed edge loops")
+            return False
+        return True
+
+    def execute(self, context):
+        s = context.scene.moebius
+        objs = [o for o in context.selected_objects if o.type in _CONVERTIBLE]
+        prepared = []
+        try:  # check everything before changing anything
+            for obj in objs:
+                prepared.append(api.prepare_conversion(
+                    obj, edges=s.edges, edge_length=s.edge_length if s.use_edge_length else None,
+                    close_open=s.close_open))
+        except ValueError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        new = [api.apply_conversion(o, p, context) for o, p in zip(objs, prepared, strict=True)]
+        for obj in new:
+            obj.select_set(True)
+        edges = ", ".join(str(sum(len(p) for p in polys)) for polys in prepared)
+        self.report({"INFO"}, f"Converted {len(new)} object(s) to polygons with {edges} edges")
+        return {"FINISHED"}
+
+
+class MOEBIUS_OT_relax(bpy.types.Operator):
+    """Relax the active curve by the Möbius energy flow, keyframing every iterate
+    (Esc stops and keeps the iterates so far)"""
+
+    bl_idname = "moebius.relax"
+    bl_label = "Relax"
+    bl_options = {"REGISTER", "UNDO"}
+
+    #: Seconds of computation per timer tick before the viewport is redrawn.
+    TICK_BUDGET = 0.08
+
+    poll = classmethod(_poll_active_curve)
+
+    def _start(self, context):
+        settings = context.scene.moebius
+        try:
+            self._run = api.ObjectRelaxation(_active_curve(context),
+                                             **api.relax_settings(settings))
+        except ValueError as err:
+            self.report({"ERROR"}, str(err))
+            return False
+        self._max = settings.max_iterations
+        return True
+
+    def _report_result(self, result):
+        run = self._run
+        kind = "WARNING" if not result.success else "INFO"
+        self.report({kind}, f"'{run.obj.name}': {run.nit} iterations, energy "
+                            f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
+                            f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
+                            f"({result.message})")
+
+    def execute(self, context):
+        if not self._start(context):
+            return {"CANCELLED"}
+        try:
+            while self._run.step():
+                pass
+        except Exception as err:  # noqa: BLE001 - any core failure: restore and report
+            return self._fail(context, err)
+        self._report_result(self._run.finish(context.scene))
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if context.window is None or bpy.app.background:
+            return self.execute(context)
+        if not self._start(context):
+            return {"CANCELLED"}
+        settings = context.scene.moebius
+        settings.running = True
+        settings.progress = 0.0
+        settings.live_iteration = 0
+        settings.live_energy = self._run.energy
+        self._timer = context.window_manager.event_timer_add(0.01, window=context.window)
+        context.window_manager.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def _cleanup(self, context):
+        context.window_manager.event_timer_remove(self._timer)
+        context.workspace.status_text_set(None)
+        context.scene.moebius.running = False
+        for area in context.screen.areas:
+            area.tag_redraw()
+
+    def _fail(self, context, err):
+        api.geometry.write_polygons(self._run.obj.data, self._run.start)
+        if getattr(self, "_timer", None) is not None:
+            self._cleanup(context)
+        self.report({"ERROR"}, f"Relaxation failed, curve restored: {err}")
+        return {"CANCELLED"}
+
+    def modal(self, context, event):
+        if event.type == "ESC" and event.value == "PRESS":
+            self._run.stop("cancelled by the user (Esc)")
+            self._cleanup(context)
+            self._report_result(self._run.finish(context.scene))
+            return {"FINISHED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        t0 = time.perf_counter()
+        more = True
+        try:
+            while more and time.perf_counter() - t0 < self.TICK_BUDGET:
+                more = self._run.step()
+        except Exception as err:  # noqa: BLE001
+            return self._fail(context, err)
+        self._run.show()
+        settings = context.scene.moebius
+        settings.live_iteration = self._run.nit
+        settings.live_energy = self._run.energy
+        settings.progress = min(1.0, self._run.nit / max(1, self._max))
+        context.workspace.status_text_set(
+            f"Möbius flow: iteration {self._run.nit}/{self._max}, energy "
+            f"{self._run.energy:.6g} — Esc stops and keeps the iterates so far")
+        for area in context.screen.areas:
+            if area.type in {"VIEW_3D", "PROPERTIES"}:
+                area.tag_redraw()
+        if more:
+            return {"RUNNING_MODAL"}
+        self._cleanup(context)
+        self._report_result(self._run.finish(context.scene))
+        return {"FINISHED"}
+
+
+def _knot_items(self, context):
+    return _KNOT_ITEMS
+
+
+def _build_knot_items():
+    from ..core import knots
+
+    items = [(k, label, desc) for k, label, desc in api.SPECIAL_KNOTS]
+    special = {key for key, *_ in items}
+    items += [(name, f"Knot {name}", f"Prime knot {name} of the knot table")
+              for name in knots.names() if name not in special]
+    return [(k, label, desc, i) for i, (k, label, desc) in enumerate(items)]
+
+
+# Blender keeps only pointers to the strings of dynamic enum items: hold them here.
+_KNOT_ITEMS: list = []
+
+
+class MOEBIUS_OT_add_knot(bpy.types.Operator):
+    """Add a knot from the catalogue as a closed polygon ready to relax"""
+
+    bl_idname = "moebius.add_knot"
+    bl_label = "Add Knot"
+    bl_options = {"REGISTER", "UNDO"}
+
+    kind: EnumProperty(name="Knot", items=_knot_items, description="Catalogue entry")
+    edges: IntProperty(name="Edges", default=150, min=4, soft_max=1000, max=api.EDGE_LIMIT,
+                       description="Edges of the polygon (per component)")
+    p: IntProperty(name="p", default=2, min=1, soft_max=20, description="Torus knot: p")
+    q: IntProperty(name="q", default=3, min=1, soft_max=20, description="Torus knot: q")
+    seed: IntProperty(name="Seed", default=0, min=0, description="Random unknot: seed")
+    size: FloatProperty(name="Size", default=2.0, min=1e-6, subtype="DISTANCE",
+                        description="Largest extent of the knot")
+
+    def draw(self, context):
+        col = self.layout.column()
+        col.prop(self, "kind")
+        col.prop(self, "edges")
+        if self.kind == "torus":
+            row = col.row(align=True)
+            row.prop(self, "p")
+            row.prop(self, "q")
+        if self.kind == "random":
+            col.prop(self, "seed")
+        col.prop(self, "size")
+
+    def execute(self, context):
+        try:
+            obj = api.add_knot(self.kind, self.edges, p=self.p, q=self.q, seed=self.seed,
+                               size=self.size, location=context.scene.cursor.location,
+                               context=context)
+        except ValueError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        edges = sum(len(s.points) for s in obj.data.splines)
+        self.report({"INFO"}, f"Added '{obj.name}' with {edges}"
+                              f" edges, energy {obj[keyframes.ENERGY_PROP]:.6g}")
+        return {"FINISHED"}
+
+
+class MOEBIUS_OT_clear_animation(bpy.types.Operator):
+    """Remove the relaxation keyframes of the active curve and restore its start shape"""
+
+    bl_idname = "moebius.clear_animation"
+    bl_label = "Clear Flow Animation"
+    bl_options = {"REGISTER", "UNDO"}
+
+    poll = classmethod(_poll_active_curve)
+
+    def execute(self, context):
+        obj = _active_curve(context)
+        if not keyframes.keyed_frames(obj):
+            self.report({"WARNING"}, f"'{obj.name}' has no relaxation keyframes to clear")
+            return {"CANCELLED"}
+        api.clear_animation(obj)
+        self.report({"INFO"}, f"Cleared the flow animation of '{obj.name}'")
+        return {"FINISHED"}
+
+
+class MOEBIUS_OT_apply_frame(bpy.types.Operator):
+    """Make the shape at the current frame the curve's rest shape and remove the flow keys"""
+
+    bl_idname = "moebius.apply_frame"
+    bl_label = "Apply Current Frame"
+    bl_options = {"REGISTER", "UNDO"}
+
+    poll = classmethod(_poll_active_curve)
+
+    def execute(self, context):
+        obj = _active_curve(context)
+        try:
+            api.apply_frame(obj, scene=context.scene)
+        except ValueError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Frame {context.scene.frame_current} is now the rest shape "
+                              f"of '{obj.name}'")
+        return {"FINISHED"}
+
+
+class MOEBIUS_OT_show_gradient(bpy.types.Operator):
+    """Draw the energy gradients of the active curve as vector fields (one edge per vertex)"""
+
+    bl_idname = "moebius.show_gradient"
+    bl_label = "Show Gradients"
+    bl_options = {"REGISTER", "UNDO"}
+
+    l2: BoolProperty(name="L²", default=True, description="Plain L² gradient (red)")
+    hs_pure: BoolProperty(name="W^{3/2,2} pure", default=True,
+                          description="Pure fractional Sobolev gradient (green)")
+    hs: BoolProperty(name="W^{3/2,2} geometric", default=True,
+                     description="Geometric Sobolev gradient used by the flow (blue)")
+    length: FloatProperty(name="Arrow Length", default=0.15, min=0.0, soft_max=1.0,
+                          subtype="FACTOR",
+                          description="Longest arrow of each field, relative to the curve's size")
+    projected: BoolProperty(name="Projected", default=True,
+                            description="Project onto the constraints (what the flow follows)")
+
+    poll = classmethod(_poll_active_curve)
+
+    def execute(self, context):
+        metrics = [m for m in ("l2", "hs_pure", "hs") if getattr(self, m)]
+        if not metrics:
+            self.report({"ERROR"}, "Tick at least one gradient to show")
+            return {"CANCELLED"}
+        obj = _active_curve(context)
+        try:
+            made = api.show_gradients(obj, metrics, length=self.length,
+                                      projected=self.projected, context=context)
+        except ValueError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        context.view_layer.objects.active = obj
+        self.report({"INFO"}, "Added " + ", ".join(o.name for o in made))
+        return {"FINISHED"}
+
+
+def menu_add_knot(self, context):
+    self.layout.operator_menu_enum("moebius.add_knot", "kind", text="Knot", icon="CURVE_DATA")
+
+
+classes = (
+    MOEBIUS_OT_convert,
+    MOEBIUS_OT_relax,
+    MOEBIUS_OT_add_knot,
+    MOEBIUS_OT_clear_animation,
+    MOEBIUS_OT_apply_frame,
+    MOEBIUS_OT_show_gradient,
+)
+
+
+def register() -> None:
+    _KNOT_ITEMS[:] = _build_knot_items()
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.VIEW3D_MT_curve_add.append(menu_add_knot)
+
+
+def unregister() -> None:
+    bpy.types.VIEW3D_MT_curve_add.remove(menu_add_knot)
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,146 @@
+"""``scene.moebius``: the settings of the panel and the statistics of the last run."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import (
+    BoolProperty,
+    EnumProperty,
+    FloatProperty,
+    IntProperty,
+    StringProperty,
+)
+
+from . import api
+
+
+def _stat(key: str, default):
+    """Read-only property getter backed by an ID property the operators write."""
+    def get(self):
+        return self.get("_stats", {}).get(key, default)
+    return get
+
+
+class MoebiusSettings(bpy.types.PropertyGroup):
+    """Settings of the Möbius panel (``scene.moebius``)."""
+
+    # Polygon
+    edges: IntProperty(
+        name="Edges", default=100, min=4, soft_max=1000, max=1_000_000,
+        description="Edges of each converted component (cost per iteration grows as edges²)",
+    )
+    use_edge_length: BoolProperty(
+        name="Use Edge Length", default=False,
+        description="Choose the number of edges from a target edge length instead",
+    )
+    edge_length: FloatProperty(
+        name="Edge Length", default=0.05, min=1e-6, soft_min=1e-3, subtype="DISTANCE",
+        description="Target edge length in object units (edges = curve length / this)",
+    )
+    close_open: BoolProperty(
+        name="Close Open Splines", default=False,
+        description="Join the ends of open splines instead of refusing them",
+    )
+    # Flow
+    metric: EnumProperty(
+        name="Metric", default="hs",
+        items=[(key, label, desc) for key, label, desc in api.METRICS],
+        description="Inner product that turns the energy's derivative into a gradient",
+    )
+    max_iterations: IntProperty(
+        name="Max Iterations", default=200, min=1, soft_max=5000,
+        description="Stop after this many accepted steps",
+    )
+    tolerance: FloatProperty(
+        name="Tolerance", default=1e-6, min=0.0, precision=8,
+        description="Stop once the projected gradient is smaller than this",
+    )
+    # Keyframes
+    frame_start: IntProperty(
+        name="Start Frame", default=1,
+        description="Frame of the start shape; iterate k is keyed k frames later",
+    )
+    keyframe_stride: IntProperty(
+        name="Keyframe Every", default=1, min=1, soft_max=100,
+        description="Keyframe every this many iterates (the last one always); 1 keeps the "
+                    "guarantee that in-between frames never pass the curve through itself",
+    )
+    # Advanced
+    initial_step: FloatProperty(
+        name="Initial Step", default=1.0, min=1e-12, precision=4,
+        description="First trial step size of the line search",
+    )
+    armijo: FloatProperty(
+        name="Armijo Constant", default=0.5, min=1e-6, max=0.999, precision=3,
+        description="Sufficient-decrease constant σ of the line search",
+    )
+    growth: FloatProperty(
+        name="Step Growth", default=1.5, min=1.0, soft_max=10.0,
+        description="Largest factor by which the step may grow from one iteration to the next",
+    )
+    backproject_iter: IntProperty(
+        name="Back-projection Iterations", default=10, min=1, max=100,
+        description="Newton iterations that restore the constraints after each step",
+    )
+    backproject_tol: FloatProperty(
+        name="Back-projection Tolerance", default=1e-10, min=1e-16, max=1e-2, precision=12,
+        description="Constraint residual at which back-projection stops",
+    )
+    keep_edge_lengths: BoolProperty(
+        name="Keep Edge Lengths", default=True,
+        description="Constrain every edge to keep its length (the curve's length is fixed)",
+    )
+    keep_barycenter: BoolProperty(
+        name="Keep Barycenter", default=True,
+        description="Constrain the barycenter so the curve does not drift",
+    )
+    use_energy_target: BoolProperty(
+        name="Energy Target", default=False,
+        description="Stop once the energy is at or below a value",
+    )
+    energy_target: FloatProperty(
+        name="Target", default=4.5, min=4.0,
+        description="Energy at which to stop (4 is the round circle's)",
+    )
+    max_seconds: FloatProperty(
+        name="Time Limit", default=0.0, min=0.0, subtype="TIME_ABSOLUTE", unit="TIME_ABSOLUTE",
+        description="Stop after this many seconds (0: no limit)",
+    )
+    # Live state of a running flow (written by the modal operator)
+    running: BoolProperty(name="Running", default=False, options={"SKIP_SAVE"})
+    progress: FloatProperty(name="Progress", default=0.0, min=0.0, max=1.0, subtype="FACTOR",
+                            options={"SKIP_SAVE"})
+    live_energy: FloatProperty(name="Energy", default=0.0, options={"SKIP_SAVE"})
+    live_iteration: IntProperty(name="Iteration", default=0, options={"SKIP_SAVE"})
+    # Read-only statistics of the last run
+    last_object: StringProperty(name="Object", get=_stat("object", ""))
+    last_iterations: IntProperty(name="Iterations", get=_stat("iterations", 0))
+    last_energy_start: FloatProperty(name="Start Energy", get=_stat("energy_start", 0.0))
+    last_energy_end: FloatProperty(name="Final Energy", get=_stat("energy_end", 0.0))
+    last_seconds: FloatProperty(name="Seconds", get=_stat("seconds", 0.0))
+    last_message: StringProperty(name="Stopped Because", get=_stat("message", ""))
+    last_keyframes: IntProperty(name="Keyed Frames", get=_stat("keyframes", 0))
+
+    def store_run(self, obj_name: str, iterations: int, energy_start: float, energy_end: float,
+                  seconds: float, message: str, keyed: int) -> None:
+        """Record the statistics of a finished run (shown read-only in the panel)."""
+        self["_stats"] = {
+            "object": obj_name, "iterations": int(iterations),
+            "energy_start": float(energy_start), "energy_end": float(energy_end),
+            "seconds": float(seconds), "message": message, "keyframes": int(keyed),
+        }
+
+
+classes = (MoebiusSettings,)
+
+
+def register() -> None:
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.moebius = bpy.props.PointerProperty(type=MoebiusSettings)
+
+
+def unregister() -> None:
+    del bpy.types.Scene.moebius
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)
