@@ -2,8 +2,8 @@
 
 The step bound ``τ*`` is the smallest ``τ`` at which ``P − τU`` touches itself. Each pair of
 disjoint edges is tested by conservative advancement: the distance between two segments changes
-at most at the speed ``v_I + v_J`` (the largest endpoint speeds), so ``τ`` may advance by
-``(d − ε) / (v_I + v_J)`` without contact. This needs no root finding and is exact for planar
+at most at the largest relative speed ``v`` of their endpoints, so ``τ`` may advance by
+``(d − ε) / v`` without contact. This needs no root finding and is exact for planar
 motions, where the coplanarity cubic of the classical test vanishes identically. Pairs whose
 midpoint distance rules out contact before the current bound are skipped at once.
 """
@@ -60,9 +60,20 @@ def segment_distance2(a0x, a0y, a0z, a1x, a1y, a1z, b0x, b0y, b0z, b1x, b1y, b1z
 
 
 @nb.njit(cache=True)
-def _pair_contact(X, U, i, i1, j, j1, tau_max, eps, v):
+def _pair_contact(X, U, i, i1, j, j1, tau_max, eps):
     """First τ in [0, tau_max) where edges (i, i1), (j, j1) of X − τU come within eps, or
-    tau_max. Conservative: the returned τ never exceeds the true contact time."""
+    tau_max. Conservative: the returned τ never exceeds the true contact time.
+
+    The relative velocity of any two points on the segments is a convex combination of the
+    endpoint differences U_a − U_b, so its norm is at most their largest norm ``v``."""
+    v = 0.0
+    for a in (i, i1):
+        for b in (j, j1):
+            w = np.sqrt((U[a, 0] - U[b, 0]) ** 2 + (U[a, 1] - U[b, 1]) ** 2
+                        + (U[a, 2] - U[b, 2]) ** 2)
+            v = max(v, w)
+    if v == 0.0:
+        return tau_max
     tau = 0.0
     for _ in range(_MAX_ADVANCE):
         d2, _s, _t = segment_distance2(
@@ -119,7 +130,7 @@ def _contact_rows(X, U, nxt, starts, comp, tau_max, eps, nchunks):
                 lower = np.sqrt(dx * dx + dy * dy + dz * dz) - hi_ - hj  # ≤ segment distance
                 if lower - eps >= tb * v:
                     continue
-                t = _pair_contact(X, U, i, i1, j, j1, tb, eps, v)
+                t = _pair_contact(X, U, i, i1, j, j1, tb, eps)
                 if t < tb:
                     tb = t
         best[ch] = tb

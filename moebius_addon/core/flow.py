@@ -36,7 +36,10 @@ HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
 # about as much as N / _FACTOR_PER_ITER preconditioned Krylov iterations (measured on the
 # benchmark machine: 1.1 s against 15 ms per iteration at N = 3000).
 _FACTOR_PER_ITER = 40.0
-_AUTO_REUSE_FROM = 400  # below this many vertices exact factorization every iteration is cheap
+_AUTO_REUSE_FROM = 400
+# A run that stops moving with a projected gradient above this many times tol is jammed, not
+# converged (near the minimum Armijo fails on round-off with sqrt(<g,u>) ≈ 1e-8, DESIGN.md).
+_STALL_FACTOR = 1e3  # below this many vertices exact factorization every iteration is cheap
 
 
 @dataclass
@@ -246,7 +249,10 @@ class Relaxation:
         elif self.energy_target is not None and self.E <= self.energy_target:
             self._finish(True, f"energy {self.E:.10g} reached the target {self.energy_target:g}")
         elif e_prev is not None and abs(e_prev - self.E) <= self.ftol * abs(self.E):
-            self._finish(True, f"relative energy change below ftol {self.ftol:g}")
+            if gn <= _STALL_FACTOR * self.tol:
+                self._finish(True, f"relative energy change below ftol {self.ftol:g}")
+            else:
+                self._finish(False, self._stall_message(gn))
         elif self.nit >= self.max_iter:
             self._finish(False, f"maximum number of iterations ({self.max_iter}) reached")
         elif self.max_seconds is not None and time.perf_counter() - self.t0 >= self.max_seconds:
@@ -295,11 +301,19 @@ class Relaxation:
                 break
         # No acceptable step: at the minimum the Armijo test fails on round-off
         # (DESIGN.md, step 6); anywhere else it is a failure worth reporting.
-        if tau * gu <= 1e-13 * abs(E) or np.sqrt(max(gu, 0.0)) <= 1e3 * self.tol:
+        gn = float(np.sqrt(max(gu, 0.0)))
+        if gn <= _STALL_FACTOR * self.tol:
             self._finish(True, "converged: no further decrease above round-off")
         else:
-            self._finish(False, f"line search failed at energy {E:.10g} (step {tau:.3g})")
+            self._finish(False, self._stall_message(gn))
         return False
+
+    def _stall_message(self, gn: float) -> str:
+        return (
+            f"stalled at energy {self.E:.10g}: steps collapsed while the projected gradient "
+            f"norm is still {gn:.3g}; strands are probably jammed against each other — use "
+            f"more edges"
+        )
 
     def result(self) -> RelaxResult:
         if not self.done:

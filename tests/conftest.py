@@ -1,0 +1,45 @@
+"""Shared fixtures: test curves built from closed formulas (no catalogue needed)."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+
+
+def trefoil(n: int) -> np.ndarray:
+    """DESIGN.md's trefoil (sin t + 2 sin 2t, cos t − 2 cos 2t, −sin 3t), n equal parameter
+    steps (not equilateral)."""
+    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    return np.c_[np.sin(t) + 2 * np.sin(2 * t), np.cos(t) - 2 * np.cos(2 * t), -np.sin(3 * t)]
+
+
+def ngon(n: int) -> np.ndarray:
+    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    return np.c_[np.cos(t), np.sin(t), np.zeros(n)]
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.standard_normal((3, 3)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] *= -1
+    return q
+
+
+def read_obj_vertices(path) -> np.ndarray:
+    with open(path) as f:
+        return np.array([[float(x) for x in line.split()[1:4]] for line in f
+                         if line.startswith("v ")])
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def fhw_raw() -> np.ndarray:
+    """The Freedman–He–Wang unknot as published (1184 vertices)."""
+    return read_obj_vertices(SHARED / "data" / "repulsive-curves" / "freedman_unknot_1184.obj")

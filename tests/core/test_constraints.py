@@ -1,0 +1,114 @@
+"""Constraint map, Jacobian (finite differences, adjoint) and the saddle-point solvers."""
+
+import numpy as np
+import pytest
+
+from moebius_addon.core._layout import as_layout
+from moebius_addon.core.constraints import jacobian, make_constraints, residual
+from moebius_addon.core.linalg import (
+    Factorization,
+    SaddlePointSolver,
+    spd_inverse,
+    triangular_inverse,
+)
+from moebius_addon.core.metrics import gram_x
+from tests.conftest import ngon, trefoil
+
+
+def _setup(P, rng, **kw):
+    X, lay = as_layout(P)
+    ln = np.linalg.norm(X[lay.nxt] - X, axis=1)
+    con = make_constraints(X, lay, ln * (1 + 0.01 * rng.standard_normal(len(ln))), **kw)
+    return X, lay, con
+
+
+def dense_C(X, con):
+    jac = jacobian(X, con)
+    n = len(X)
+    C = np.zeros((con.size, 3 * n))
+    for k in range(3 * n):
+        e = np.zeros(3 * n)
+        e[k] = 1
+        C[:, k] = jac.matvec(e.reshape(n, 3))
+    return C
+
+
+@pytest.mark.parametrize("link", [False, True])
+def test_jacobian_matches_finite_differences(link, rng):
+    P = trefoil(20) + 0.05 * rng.standard_normal((20, 3))
+    if link:
+        P = [P, ngon(6) * 0.5 + [4.0, 0.0, 0.0]]
+    X, lay, con = _setup(P, rng)
+    C = dense_C(X, con)
+    h = 1e-6
+    for k in rng.choice(X.size, 12, replace=False):
+        Y = X.copy().ravel()
+        Y[k] += h
+        fp = residual(Y.reshape(X.shape), con)
+        Y[k] -= 2 * h
+        fm = residual(Y.reshape(X.shape), con)
+        np.testing.assert_allclose(C[:, k], (fp - fm) / (2 * h), atol=1e-7)
+
+
+def test_rmatvec_is_the_adjoint(rng):
+    X, lay, con = _setup([trefoil(15), ngon(5) + [5.0, 0, 0]], rng)
+    jac = jacobian(X, con)
+    U = rng.standard_normal(X.shape)
+    lam = rng.standard_normal(con.size)
+    assert jac.matvec(U) @ lam == pytest.approx(np.sum(U * jac.rmatvec(lam)), rel=1e-12)
+
+
+def test_barycenter_rows_are_scale_free():
+    # translating by δ·L along x changes Σ l_I m_I by δ L², so the scaled row reads δ at any size
+    for scale in (1e-3, 1.0, 1e3):
+        X, lay = as_layout(scale * trefoil(25))
+        ln = np.linalg.norm(X[lay.nxt] - X, axis=1)
+        con = make_constraints(X, lay, ln)
+        phi = residual(X + [1e-4 * ln.sum(), 0.0, 0.0], con)
+        np.testing.assert_allclose(phi[:25], 0.0, atol=1e-12)
+        np.testing.assert_allclose(phi[25:], [1e-4, 0.0, 0.0], rtol=1e-8, atol=1e-14)
+
+
+def test_triangular_and_spd_inverse(rng):
+    n = 300  # beyond the recursion's base size
+    B = rng.standard_normal((n, n))
+    A = B @ B.T + n * np.eye(n)
+    L = np.linalg.cholesky(A)
+    np.testing.assert_allclose(triangular_inverse(L) @ L, np.eye(n), atol=1e-12)
+    np.testing.assert_allclose(spd_inverse(A) @ A, np.eye(n), atol=1e-10)
+
+
+@pytest.mark.parametrize("metric", ["hs", "h1"])
+def test_factorization_solves_the_saddle_point_system(metric, rng):
+    P = trefoil(40) + 0.03 * rng.standard_normal((40, 3))
+    X, lay, con = _setup([P, ngon(8) * 0.7 + [5, 0, 0]], rng)
+    A = gram_x(metric, X, lay)
+    jac = jacobian(X, con)
+    n = len(X)
+    G = np.kron(A, np.eye(3))
+    C = dense_C(X, con)
+    K = np.block([[G, C.T], [C, np.zeros((con.size, con.size))]])
+    g = rng.standard_normal((n, 3))
+    r = rng.standard_normal(con.size) * 1e-3
+    ref = np.linalg.solve(K, np.concatenate([g.ravel(), r]))
+    u, lam = Factorization(A, jac).solve(g, r)
+    np.testing.assert_allclose(u.ravel(), ref[: 3 * n], rtol=1e-8, atol=1e-10 * np.abs(ref).max())
+    np.testing.assert_allclose(lam, ref[3 * n :], rtol=1e-8, atol=1e-10 * np.abs(ref).max())
+
+
+def test_reused_factorization_gives_the_current_solution(rng):
+    """GMRES preconditioned with an older iterate's factorization solves the new system."""
+    P = trefoil(60)
+    X, lay, con = _setup(P, rng)
+    solver = SaddlePointSolver(reuse=True, factor_cost=1e9)  # never refactor on cost
+    solver.update(gram_x("hs", X, lay), jacobian(X, con))
+    Y = X + 0.02 * rng.standard_normal(X.shape)
+    A, jac = gram_x("hs", Y, lay), jacobian(Y, con)
+    solver.update(A, jac)
+    assert not solver.fresh
+    g = rng.standard_normal(X.shape)
+    u, lam = solver.solve(g, np.zeros(con.size))
+    assert solver.krylov_its[-1] > 1
+    u_ref, lam_ref = Factorization(A, jac).solve(g, np.zeros(con.size))
+    np.testing.assert_allclose(u, u_ref, rtol=1e-7, atol=1e-9 * np.abs(u_ref).max())
+    assert np.abs(jac.matvec(u)).max() < 1e-8 * np.abs(u).max()

@@ -1,0 +1,142 @@
+"""The projected Sobolev-gradient flow: reference behaviour, invariants after every iteration,
+stopping, determinism."""
+
+import numpy as np
+import pytest
+
+from moebius_addon.core import METRICS, Relaxation, moebius_energy, relax, resample
+from tests.conftest import ngon, trefoil
+
+
+@pytest.fixture(scope="module")
+def trefoil300():
+    return resample(trefoil(600), 300)
+
+
+def linking_number(A, B):
+    """Gauss linking integral by the midpoint rule (exact up to discretisation error)."""
+    ea, eb = np.roll(A, -1, 0) - A, np.roll(B, -1, 0) - B
+    ma, mb = A + ea / 2, B + eb / 2
+    d = ma[:, None] - mb[None]
+    cr = np.cross(ea[:, None], eb[None])
+    return float(np.sum(np.einsum("ijk,ijk->ij", d, cr) / np.linalg.norm(d, axis=2) ** 3)
+                 / (4 * np.pi))
+
+
+def test_trefoil_settles_at_the_reference_energy(trefoil300):
+    # DESIGN.md: with hs at 300 edges the energy settles near 74.436 within a few dozen
+    # iterations (the continuous minimum is about 74.41)
+    r = relax(trefoil300, metric="hs", max_iter=40)
+    assert r.success, r.message
+    assert 74.42 < r.fun < 74.45
+    assert r.nit <= 40
+    assert r.history["energy"][0] == pytest.approx(moebius_energy(trefoil300))
+
+
+def test_every_iterate_is_feasible_and_energy_decreases(trefoil300):
+    r = relax(trefoil300, max_iter=15, backproject_tol=1e-10)
+    h = r.history
+    assert len(h["energy"]) == r.nit + 1 == len(h["seconds"]) == len(h["step"])
+    assert max(h["constraint_residual"][1:]) <= 1e-10
+    assert np.all(np.diff(h["energy"]) <= 0)
+    ln = np.linalg.norm(np.roll(r.x, -1, 0) - r.x, axis=1)
+    ln0 = np.linalg.norm(np.roll(trefoil300, -1, 0) - trefoil300, axis=1)
+    np.testing.assert_allclose(ln, ln0.mean(), rtol=1e-9)
+    # the weighted barycenter stays put
+    w = (ln + np.roll(ln, 1)) / 2
+    np.testing.assert_allclose(w @ r.x / w.sum(), w @ trefoil300 / w.sum(), atol=1e-9)
+
+
+@pytest.mark.parametrize("metric", METRICS)
+def test_every_metric_decreases_the_energy(metric):
+    P = resample(trefoil(300), 120)
+    r = relax(P, metric=metric, max_iter=5)
+    assert r.nit == 5
+    assert r.fun < r.history["energy"][0] - 0.1
+    assert max(r.history["constraint_residual"]) <= 1e-10
+
+
+def test_sobolev_metric_beats_l2(trefoil300):
+    hs = relax(trefoil300, metric="hs", max_iter=20)
+    l2 = relax(trefoil300, metric="l2", max_iter=20)
+    assert hs.fun < l2.fun - 0.3
+
+
+def test_callback_stops_cleanly(trefoil300):
+    seen = []
+
+    def cb(state):
+        seen.append((state.nit, state.energy, state.x.shape))
+        return state.nit == 3
+
+    r = relax(trefoil300, max_iter=50, callback=cb)
+    assert r.nit == 3 and r.success and "callback" in r.message
+    assert [s[0] for s in seen] == [1, 2, 3]
+    assert seen[-1][1] == r.fun and seen[-1][2] == (300, 3)
+
+
+def test_stepper_and_stop(trefoil300):
+    run = Relaxation(trefoil300, max_iter=100)
+    energies = [run.energy]
+    while run.step():
+        energies.append(run.energy)
+        if run.nit == 4:
+            run.stop("cancelled")
+    res = run.result()
+    assert res.nit == 4 and res.message == "cancelled" and res.success
+    assert energies == res.history["energy"]
+    assert not run.step()
+
+
+def test_deterministic(trefoil300):
+    a = relax(trefoil300, max_iter=6)
+    b = relax(trefoil300.copy(), max_iter=6)
+    np.testing.assert_array_equal(a.x, b.x)
+    assert a.history["energy"] == b.history["energy"]
+
+
+def test_scale_and_position_do_not_matter(trefoil300):
+    a = relax(trefoil300, max_iter=6)
+    b = relax(250.0 * trefoil300 + [1e3, -5.0, 2.0], max_iter=6)
+    assert a.nit == b.nit
+    np.testing.assert_allclose(a.history["energy"], b.history["energy"], rtol=1e-9)
+    np.testing.assert_allclose((b.x - [1e3, -5.0, 2.0]) / 250.0, a.x, atol=1e-7)
+
+
+def test_reused_factorization_follows_the_exact_flow():
+    P = resample(trefoil(900), 450)
+    exact = relax(P, max_iter=6, reuse_factorization=False)
+    reused = relax(P, max_iter=6, reuse_factorization=True)
+    assert reused.stats["factorizations"] < exact.stats["factorizations"]
+    np.testing.assert_allclose(reused.history["energy"], exact.history["energy"], rtol=1e-6)
+
+
+def test_energy_target_and_iteration_limit(trefoil300):
+    r = relax(trefoil300, max_iter=50, energy_target=75.0)
+    assert r.success and "target" in r.message and r.fun <= 75.0
+    assert r.history["energy"][-2] > 75.0
+    r = relax(trefoil300, max_iter=2)
+    assert not r.success and "maximum number of iterations" in r.message and r.nit == 2
+
+
+def test_hopf_link_stays_linked_and_rounds_up():
+    A = resample(ngon(64) + 0.15 * np.c_[np.zeros(64), np.zeros(64), np.sin(np.arange(64))], 48)
+    B = ngon(48)[:, [0, 2, 1]] * 1.2 + [1.0, 0.0, 0.0]
+    r = relax([A, B], max_iter=30)
+    assert isinstance(r.x, list) and [len(c) for c in r.x] == [48, 48]
+    assert r.fun < r.history["energy"][0]
+    assert abs(linking_number(*r.x)) == pytest.approx(1.0, abs=0.05)
+    assert max(r.history["constraint_residual"][1:]) <= 1e-10
+
+
+def test_bad_inputs_raise_with_advice(trefoil300):
+    with pytest.raises(ValueError, match="not equilateral.*resample"):
+        relax(trefoil(100), max_iter=1)
+    r = relax(trefoil(100), max_iter=2, target_lengths="keep")
+    assert r.nit == 2
+    with pytest.raises(ValueError, match="unknown metric"):
+        relax(trefoil300, metric="w32")
+    bad = trefoil300.copy()
+    bad[10] = np.inf
+    with pytest.raises(ValueError, match="NaN or infinite"):
+        relax(bad)

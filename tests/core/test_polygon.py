@@ -1,0 +1,92 @@
+"""Equilateral resampling and the start checks (clear messages for every bad input)."""
+
+import numpy as np
+import pytest
+
+from moebius_addon.core import check_polygon, contact_ratio, resample, suggest_edge_count
+from tests.conftest import ngon, trefoil
+
+
+def _distance_to_polyline(points, poly):
+    a = poly
+    b = np.roll(poly, -1, axis=0)
+    d = b - a
+    t = np.clip(np.einsum("ikj,kj->ik", points[:, None, :] - a[None], d) / (d * d).sum(1), 0, 1)
+    closest = a[None] + t[..., None] * d[None]
+    return np.linalg.norm(points[:, None, :] - closest, axis=2).min(axis=1)
+
+
+@pytest.mark.parametrize("n", [7, 100, 1000])
+def test_resample_is_equilateral_and_on_the_curve(n):
+    raw = trefoil(333)
+    P = resample(raw, n)
+    assert P.shape == (n, 3)
+    ln = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
+    assert ln.max() / ln.min() - 1 < 1e-10
+    assert _distance_to_polyline(P, raw).max() < 1e-12 * np.abs(raw).max()
+    np.testing.assert_array_equal(P[0], raw[0])
+
+
+def test_resample_open_polyline_keeps_both_ends():
+    raw = trefoil(100)[:60]
+    P = resample(raw, 25, closed=False)
+    ln = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    assert ln.max() / ln.min() - 1 < 1e-10
+    np.testing.assert_allclose(P[[0, -1]], raw[[0, -1]], atol=1e-12)
+
+
+def test_resample_link_and_duplicates():
+    raw = np.repeat(ngon(20), 2, axis=0)  # every point twice
+    P = resample([raw, 2 * ngon(30)], 90)
+    assert [len(c) for c in P] == [30, 60]  # proportional to length
+
+
+def test_resample_rejects_nonsense():
+    with pytest.raises(ValueError, match="NaN"):
+        resample(np.array([[0, 0, 0], [1, np.nan, 0], [1, 1, 0]]), 10)
+    with pytest.raises(ValueError, match="at least 4"):
+        resample(ngon(10), 3)
+    with pytest.raises(ValueError, match="coincide"):
+        resample(np.zeros((5, 3)), 10)
+
+
+def test_check_accepts_good_curves():
+    check_polygon(resample(trefoil(300), 200))
+    check_polygon([ngon(20), ngon(20)[:, [0, 2, 1]] + [1.0, 0.0, 0.0]])
+
+
+def test_check_messages():
+    with pytest.raises(ValueError, match="3 vertices; a closed polygon needs at least 4"):
+        check_polygon(ngon(3))
+    P = ngon(10)
+    P[4, 1] = np.nan
+    with pytest.raises(ValueError, match="NaN or infinite.*vertex 4"):
+        check_polygon(P)
+    P = ngon(10)
+    P[5] = P[4]
+    with pytest.raises(ValueError, match="repeats a point: vertex 4"):
+        check_polygon(P)
+    with pytest.raises(ValueError, match="component 1 .*repeats|repeats a point: vertex 2 of component 1"):
+        Q = ngon(10)
+        Q[3] = Q[2]
+        check_polygon([ngon(10), Q + [5, 0, 0]])
+
+
+def test_self_intersection_is_located():
+    bowtie = np.array([[0, 0, 0], [1, 1, 0], [1, 0, 0], [0, 1, 0]], dtype=float)
+    P = resample(bowtie, 40)
+    with pytest.raises(ValueError, match=r"intersects itself.*near \(0\.5, 0\.5, 0\)"):
+        check_polygon(P)
+
+
+def test_too_coarse_start_names_an_edge_count_that_works(fhw_raw):
+    # DESIGN.md: the FHW unknot at 300 edges is a true near-contact (ratio ~0.7)
+    P = resample(fhw_raw, 300)
+    assert contact_ratio(P) < 0.75
+    with pytest.raises(ValueError, match=r"too coarse.*at least (\d+) edges") as info:
+        check_polygon(P)
+    k = int(info.value.args[0].rsplit("at least ", 1)[1].split()[0])
+    assert 450 < k < 700
+    check_polygon(resample(fhw_raw, k))
+    assert suggest_edge_count(P) == k
+    assert contact_ratio(resample(fhw_raw, 600)) > 1.1
