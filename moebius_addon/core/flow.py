@@ -341,6 +341,7 @@ def relax(
     max_iter: int = 200,
     tol: float = 1e-6,
     callback: Callable[[IterationState], bool | None] | None = None,
+    method: str = "projected_gradient",
     **options,
 ) -> RelaxResult:
     """Relax a knot or link by the projected Sobolev-gradient flow of the Möbius energy.
@@ -355,6 +356,9 @@ def relax(
         Iteration limit and tolerance on the projected gradient norm ``sqrt(<g, u>)``.
     callback : callable, optional
         ``callback(state)`` after every accepted iterate; returning True stops the run cleanly.
+    method : str
+        ``projected_gradient`` (the paper's explicit method, DESIGN.md) or another optimizer
+        from :mod:`moebius_addon.core.methods` (``METHODS`` lists them).
     **options
         See :class:`Relaxation` (``energy_target``, ``ftol``, ``max_seconds``, ``initial_step``,
         ``armijo``, ``growth``, ``backproject_iter``, ``backproject_tol``, ``edge_lengths``,
@@ -367,7 +371,12 @@ def relax(
         (per-iteration lists from the start: energy, step, grad_norm, constraint_residual,
         seconds). Deterministic for a given input.
     """
-    run = Relaxation(P, metric, max_iter, tol, **options)
+    if method == "projected_gradient":
+        run = Relaxation(P, metric, max_iter, tol, **options)
+    else:
+        from .methods import make_run
+
+        run = make_run(method, P, metric, max_iter, tol, **options)
     while run.step():
         if callback is not None and callback(run.state()):
             run.stop("stopped by callback")
