@@ -143,6 +143,10 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
                 f"{where} has only {len(points)} distinct points; a closed curve to relax needs "
                 "at least 4 (subdivide it or draw more points)"
             )
+        try:  # the drawn curve itself must not touch itself (resampling could hide it)
+            core.check_polygon(points, coarseness=False)
+        except ValueError as err:
+            raise ValueError(f"{where}: {err}") from None
         cleaned.append(points)
     lengths = [float(np.linalg.norm(np.diff(np.vstack([p, p[:1]]), axis=0), axis=1).sum())
                for p in cleaned]
@@ -185,6 +189,18 @@ def _deselect_all(context: bpy.types.Context) -> None:
             o.select_set(False)
 
 
+def _copy_transform(src: bpy.types.Object, dst: bpy.types.Object) -> None:
+    """Copy parent and transform channels exactly (no round trip through a matrix)."""
+    dst.parent = src.parent
+    dst.parent_type = src.parent_type
+    dst.matrix_parent_inverse = src.matrix_parent_inverse.copy()
+    dst.rotation_mode = src.rotation_mode
+    for attr in ("location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle",
+                 "scale", "delta_location", "delta_rotation_euler",
+                 "delta_rotation_quaternion", "delta_scale"):
+        setattr(dst, attr, getattr(src, attr))
+
+
 def _select_only(context: bpy.types.Context, obj: bpy.types.Object) -> None:
     _deselect_all(context)
     obj.select_set(True)
@@ -221,7 +237,7 @@ def make_curve_object(name: str, polygons: Sequence[np.ndarray],
             curve.materials.append(mat)
     obj = bpy.data.objects.new(name, curve)
     if like is not None:
-        obj.matrix_world = like.matrix_world
+        _copy_transform(like, obj)
     _deselect_all(context)
     _link_like(obj, like, context)
     _set_rest(obj, polygons)
@@ -491,7 +507,8 @@ def apply_frame(obj: bpy.types.Object, frame: int | None = None,
     return polygons
 
 
-def knot_polygons(kind: str, n: int = 150, p: int = 2, q: int = 3, seed: int = 0) -> list:
+def knot_polygons(kind: str, n: int | None = None, p: int = 2, q: int = 3,
+                  seed: int = 0) -> list:
     """Polygons of a catalogue entry, equilateral and ready to relax.
 
     Parameters
@@ -499,8 +516,9 @@ def knot_polygons(kind: str, n: int = 150, p: int = 2, q: int = 3, seed: int = 0
     kind : str
         ``"fhw"``, ``"helix"``, ``"random"``, ``"torus"``, ``"circle"``, ``"figure_eight"`` or a
         name from ``core.knots.names()`` such as ``"7_2"``.
-    n : int
-        Edges (per component).
+    n : int, optional
+        Edges in total (split over the components of a link); None or 0 takes the catalogue's
+        default for the entry, which is fine enough for its shape.
     p, q : int
         Torus knot parameters.
     seed : int
@@ -512,13 +530,14 @@ def knot_polygons(kind: str, n: int = 150, p: int = 2, q: int = 3, seed: int = 0
     """
     from ..core import knots
 
+    n = n or None
     makers = {
-        "fhw": lambda: knots.freedman_unknot(n),
-        "helix": lambda: knots.helix_unknot(n),
-        "random": lambda: knots.random_unknot(n, seed),
+        "fhw": lambda: knots.freedman_unknot(*(n,) if n else ()),
+        "helix": lambda: knots.helix_unknot(*(n,) if n else ()),
+        "random": lambda: knots.random_unknot(*(n,) if n else (), seed=seed),
         "torus": lambda: knots.torus_knot(p, q, n),
-        "circle": lambda: knots.circle(n),
-        "figure_eight": lambda: knots.figure_eight(n),
+        "circle": lambda: knots.circle(*(n,) if n else ()),
+        "figure_eight": lambda: knots.figure_eight(*(n,) if n else ()),
     }
     if kind in makers:
         link = _as_link(makers[kind]())
@@ -531,10 +550,14 @@ def knot_polygons(kind: str, n: int = 150, p: int = 2, q: int = 3, seed: int = 0
     for P in link:
         e = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
         out.append(P if np.ptp(e) <= 1e-9 * e.mean() else core.resample(P, len(P), closed=True))
+    try:
+        core.check_polygon(_as_input(out))
+    except ValueError as err:
+        raise ValueError(f"knot '{kind}' with {n or 'default'} edges: {err}") from None
     return out
 
 
-def add_knot(kind: str = "fhw", n: int = 150, p: int = 2, q: int = 3, seed: int = 0,
+def add_knot(kind: str = "fhw", n: int | None = None, p: int = 2, q: int = 3, seed: int = 0,
              size: float = 2.0, location: Sequence[float] = (0.0, 0.0, 0.0),
              context: bpy.types.Context | None = None) -> bpy.types.Object:
     """Add a catalogue knot as a curve object ready to relax.

@@ -32,7 +32,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--open", metavar="FILE.blend", help="open this file first")
     p.add_argument("--edges", type=int, default=None,
                    help="edges per component (converts the object; default: keep a converted "
-                        "curve as it is, 100 otherwise; 150 for --knot)")
+                        "curve as it is, 100 otherwise; the catalogue default for --knot)")
     p.add_argument("--close-open", action="store_true", help="close open splines")
     p.add_argument("--seed", type=int, default=0, help="seed of --knot random")
     p.add_argument("--pq", type=int, nargs=2, default=(2, 3), metavar=("P", "Q"),
@@ -67,7 +67,7 @@ def main(argv: list[str]) -> int:
         if args.open:
             bpy.ops.wm.open_mainfile(filepath=args.open)
         if args.knot:
-            obj = api.add_knot(args.knot, args.edges or 150, p=args.pq[0], q=args.pq[1],
+            obj = api.add_knot(args.knot, args.edges, p=args.pq[0], q=args.pq[1],
                                seed=args.seed)
         else:
             obj = bpy.data.objects.get(args.object)

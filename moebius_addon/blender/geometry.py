@@ -183,7 +183,7 @@ def curve_polygons(obj: bpy.types.Object) -> list[np.ndarray]:
         raise ValueError(f"curve '{obj.name}' has no splines")
     for s in splines:
         if s.type != "POLY" or not s.use_cyclic_u:
-            what = "open" if s.type == "POLY" else f"a {s.type.title()} spline"
+            what = "an open" if s.type == "POLY" else f"a {s.type.title()}"
             raise ValueError(
                 f"curve '{obj.name}' has {what} spline; convert it to equal-edge closed "
                 "polygons first (Möbius ▸ Polygon ▸ Convert)"

@@ -87,9 +87,9 @@ def remove_flow_keyframes(obj: bpy.types.Object) -> int:
 
 def _write_channel(fcurves, data_path: str, index: int, frames: np.ndarray,
                    values: np.ndarray) -> None:
-    if isinstance(fcurves, getattr(bpy.types, "ActionChannelbagFCurves", ())):  # 4.4+
+    try:  # channelbag F-curves (4.4+)
         fc = fcurves.new(data_path, index=index, group_name=_GROUP)
-    else:  # legacy action.fcurves (4.2-4.3)
+    except TypeError:  # legacy action.fcurves (4.2-4.3)
         fc = fcurves.new(data_path, index=index, action_group=_GROUP)
     keys = fc.keyframe_points
     keys.add(len(frames))

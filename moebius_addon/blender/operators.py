@@ -171,11 +171,7 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         return {"FINISHED"}
 
 
-def _knot_items(self, context):
-    return _KNOT_ITEMS
-
-
-def _build_knot_items():
+def _knot_items():
     from ..core import knots
 
     items = [(k, label, desc) for k, label, desc in api.SPECIAL_KNOTS]
@@ -185,10 +181,6 @@ def _build_knot_items():
     return [(k, label, desc, i) for i, (k, label, desc) in enumerate(items)]
 
 
-# Blender keeps only pointers to the strings of dynamic enum items: hold them here.
-_KNOT_ITEMS: list = []
-
-
 class MOEBIUS_OT_add_knot(bpy.types.Operator):
     """Add a knot from the catalogue as a closed polygon ready to relax"""
 
@@ -196,9 +188,10 @@ class MOEBIUS_OT_add_knot(bpy.types.Operator):
     bl_label = "Add Knot"
     bl_options = {"REGISTER", "UNDO"}
 
-    kind: EnumProperty(name="Knot", items=_knot_items, description="Catalogue entry")
-    edges: IntProperty(name="Edges", default=150, min=4, soft_max=1000, max=api.EDGE_LIMIT,
-                       description="Edges of the polygon (per component)")
+    # kind: EnumProperty over the catalogue, added in register() (the catalogue is read then)
+    edges: IntProperty(name="Edges", default=0, min=0, soft_max=1000, max=api.EDGE_LIMIT,
+                       description="Edges of the polygon (0: the catalogue's default for this "
+                                   "knot, fine enough for its shape)")
     p: IntProperty(name="p", default=2, min=1, soft_max=20, description="Torus knot: p")
     q: IntProperty(name="q", default=3, min=1, soft_max=20, description="Torus knot: q")
     seed: IntProperty(name="Seed", default=0, min=0, description="Random unknot: seed")
@@ -323,7 +316,8 @@ classes = (
 
 
 def register() -> None:
-    _KNOT_ITEMS[:] = _build_knot_items()
+    MOEBIUS_OT_add_knot.__annotations__["kind"] = EnumProperty(
+        name="Knot", items=_knot_items(), default="fhw", description="Catalogue entry")
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.VIEW3D_MT_curve_add.append(menu_add_knot)

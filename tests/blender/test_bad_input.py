@@ -1,0 +1,94 @@
+"""Bad input: a clear report that says what to do, and the scene left exactly as it was."""
+
+import bpy
+import numpy as np
+import pytest
+from conftest import poly_curve, scene_state
+
+
+def _refused(op, match, **kwargs):
+    before = scene_state()
+    with pytest.raises(RuntimeError, match=match):
+        op(**kwargs)
+    assert scene_state() == before
+
+
+def _circle(n, r=1.0):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([r * np.cos(t), r * np.sin(t), 0 * t])
+
+
+def test_nothing_selected(scene, mb):
+    bpy.ops.curve.primitive_bezier_circle_add()
+    bpy.context.active_object.select_set(False)
+    bpy.context.view_layer.objects.active = None
+    assert not bpy.ops.moebius.convert.poll()
+    _refused(bpy.ops.moebius.convert, "Select a curve object")
+    _refused(bpy.ops.moebius.relax, "Select a curve object")
+    _refused(bpy.ops.moebius.clear_animation, "Select a curve object")
+    _refused(bpy.ops.moebius.apply_frame, "Select a curve object")
+    _refused(bpy.ops.moebius.show_gradient, "Select a curve object")
+
+
+def test_cube_is_not_a_curve(scene, mb):
+    bpy.ops.mesh.primitive_cube_add()
+    _refused(bpy.ops.moebius.convert, "6 faces.*closed edge loops")
+
+
+def test_branching_mesh(scene, mb):
+    mesh = bpy.data.meshes.new("Star")
+    mesh.from_pydata([(0, 0, 0), (1, 0, 0), (0, 1, 0), (-1, 0, 0)], [(0, 1), (0, 2), (0, 3)], [])
+    obj = bpy.data.objects.new("Star", mesh)
+    scene.collection.objects.link(obj)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    _refused(bpy.ops.moebius.convert, "vertex 0 has 3 edges")
+
+
+def test_open_spline_refused_with_the_fix(scene, mb):
+    poly_curve("Arc", [_circle(20)[:15]], cyclic=False)
+    _refused(bpy.ops.moebius.convert, r"open curve; close it \(.*Alt\+C.*'Close open splines'")
+
+
+def test_fewer_than_four_points(scene, mb):
+    poly_curve("Triangle", [_circle(3)])
+    _refused(bpy.ops.moebius.convert, "only 3 distinct points.*at least 4")
+
+
+def test_self_touching_curve(scene, mb):
+    # a figure-eight drawn in a plane: the curve passes through the origin twice
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    lemniscate = np.column_stack([np.sin(t), np.sin(t) * np.cos(t), 0 * t])
+    poly_curve("Lemniscate", [lemniscate])
+    _refused(bpy.ops.moebius.convert, "intersects itself.*move the strands apart")
+
+
+def test_absurd_edge_count(scene, mb):
+    bpy.ops.curve.primitive_bezier_circle_add()
+    scene.moebius.edges = 100_000
+    _refused(bpy.ops.moebius.convert, "100000 edges is too many.*N².*at most 5000")
+
+
+def test_relax_refuses_unconverted_and_touching_curves(scene, mb):
+    bpy.ops.curve.primitive_bezier_circle_add()
+    _refused(bpy.ops.moebius.relax, "Bezier spline; convert it")
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    poly_curve("Lemniscate", [np.column_stack([np.sin(t), np.sin(t) * np.cos(t), 0 * t])])
+    _refused(bpy.ops.moebius.relax, "'Lemniscate'.*intersects itself")
+    poly_curve("Tri", [_circle(3)])
+    _refused(bpy.ops.moebius.relax, "3 vertices.*at least 4")
+
+
+def test_one_bad_object_converts_none(scene, mb):
+    poly_curve("Good", [_circle(30)])
+    good = bpy.context.active_object
+    poly_curve("Open", [_circle(20)[:15]], cyclic=False)
+    good.select_set(True)
+    _refused(bpy.ops.moebius.convert, "'Open' is an open curve")
+
+
+def test_clear_animation_without_keys(scene, mb):
+    bpy.ops.moebius.add_knot(kind="3_1", edges=60)
+    before = scene_state()
+    assert bpy.ops.moebius.clear_animation() == {"CANCELLED"}  # a warning, not an error
+    assert scene_state() == before

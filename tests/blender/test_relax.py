@@ -1,0 +1,171 @@
+"""moebius.relax: keyframes on the splines and the energy, frame range, stride, stop, undo."""
+
+import bpy
+import numpy as np
+import pytest
+from conftest import poly_curve, scene_state
+
+
+def _points(obj):
+    X = []
+    for s in obj.data.splines:
+        co = np.empty(4 * len(s.points))
+        s.points.foreach_get("co", co)
+        X.append(co.reshape(-1, 4)[:, :3])
+    return np.concatenate(X)
+
+
+def _fcurves(idblock):
+    from bpy_extras import anim_utils
+
+    adt = idblock.animation_data
+    return anim_utils.action_get_channelbag_for_slot(adt.action, adt.action_slot).fcurves
+
+
+@pytest.fixture
+def trefoil(scene, mb):
+    bpy.ops.moebius.add_knot(kind="3_1", edges=60)
+    return bpy.context.active_object
+
+
+def test_relax_keyframes_every_iterate(scene, mb, trefoil):
+    start = _points(trefoil)
+    s = scene.moebius
+    s.max_iterations = 6
+    s.frame_start = 10
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    nit = s.last_iterations
+    assert 1 <= nit <= 6 and s.last_keyframes == nit + 1
+    assert (scene.frame_start, scene.frame_end) == (10, 10 + nit)
+    assert scene.frame_current == 10 + nit
+    # slotted action (Blender 5.0): one channelbag, 3 F-curves per point, LINEAR keys
+    fcurves = _fcurves(trefoil.data)
+    assert len(fcurves) == 3 * 60
+    fc = fcurves.find("splines[0].points[7].co", index=2)
+    co = np.empty(2 * len(fc.keyframe_points))
+    fc.keyframe_points.foreach_get("co", co)
+    np.testing.assert_array_equal(co[0::2], np.arange(10, 11 + nit))
+    assert {k.interpolation for k in fc.keyframe_points} == {"LINEAR"}
+    assert co[1] == pytest.approx(start[7, 2], abs=1e-6)
+    # frame_start shows the start; the current (last) frame the final iterate
+    scene.frame_set(10)
+    np.testing.assert_allclose(_points(trefoil), start, atol=1e-6)
+    scene.frame_set(10 + nit)
+    final = _points(trefoil)
+    assert np.abs(final - start).max() > 1e-3
+    # energy keyed on the object, strictly decreasing, matching the core's energy
+    efc = _fcurves(trefoil).find('["moebius_energy"]')
+    energies = np.array([k.co[1] for k in efc.keyframe_points])
+    assert len(energies) == nit + 1 and np.all(np.diff(energies) < 0)
+    assert trefoil["moebius_energy"] == pytest.approx(energies[-1], rel=1e-6)
+    assert s.last_energy_end == pytest.approx(mb.energy([final]), rel=1e-4)
+    assert s.last_energy_start == pytest.approx(energies[0], rel=1e-6)
+    # the flow kept the edge lengths and the barycenter (to float32)
+    e0 = np.linalg.norm(np.roll(start, -1, 0) - start, axis=1)
+    e1 = np.linalg.norm(np.roll(final, -1, 0) - final, axis=1)
+    np.testing.assert_allclose(e1, e0, atol=1e-5)
+    np.testing.assert_allclose(final.mean(0), start.mean(0), atol=1e-5)
+
+
+def test_invoke_without_window_runs_blocking(scene, mb, trefoil):
+    scene.moebius.max_iterations = 3
+    assert bpy.ops.moebius.relax("INVOKE_DEFAULT") == {"FINISHED"}
+    assert scene.moebius.last_keyframes == scene.moebius.last_iterations + 1
+
+
+def test_keyframe_stride_keeps_the_last_iterate(scene, mb, trefoil):
+    s = scene.moebius
+    s.max_iterations = 7
+    s.tolerance = 0.0
+    s.keyframe_stride = 3
+    bpy.ops.moebius.relax()
+    nit = s.last_iterations
+    assert nit == 7
+    assert s.last_keyframes == 4  # iterates 0, 3, 6 and 7
+    assert (scene.frame_start, scene.frame_end) == (1, 4)
+    assert "maximum number of iterations" in s.last_message
+
+
+def test_relax_api_matches_core_relax(scene, mb, core, trefoil):
+    start = mb.curve_polygons(trefoil)[0]
+    result = mb.relax_object(trefoil, max_iterations=4, tolerance=0.0)
+    ref = core.relax(start, max_iter=4, tol=0.0, target_lengths="keep")
+    assert result.nit == ref.nit == 4
+    np.testing.assert_allclose(result.x, ref.x, atol=1e-12)
+    np.testing.assert_allclose(_points(trefoil), ref.x, atol=1e-6)  # last frame shown
+    assert result.history["energy"] == ref.history["energy"]
+
+
+def test_stopping_keeps_iterates_so_far_and_the_start(scene, mb, trefoil):
+    """What Esc does in the modal operator: stop(), then finish() keyframes what was done."""
+    start = _points(trefoil)
+    run = mb.ObjectRelaxation(trefoil, max_iterations=50, tolerance=0.0)
+    for _ in range(3):
+        assert run.step()
+    run.stop("cancelled by the user (Esc)")
+    assert not run.step()
+    result = run.finish(scene)
+    assert result.nit == 3 and result.message == "cancelled by the user (Esc)"
+    assert mb.keyed_frames(trefoil) == [1.0, 2.0, 3.0, 4.0]
+    scene.frame_set(1)
+    np.testing.assert_allclose(_points(trefoil), start, atol=1e-6)
+    # clear_animation goes back to the start shape
+    scene.frame_set(4)
+    assert bpy.ops.moebius.clear_animation() == {"FINISHED"}
+    assert mb.keyed_frames(trefoil) == [] and trefoil.data.animation_data.action is None
+    np.testing.assert_allclose(_points(trefoil), start, atol=1e-6)
+
+
+def test_callback_stops_the_run(scene, mb, trefoil):
+    result = mb.relax_object(trefoil, max_iterations=50, tolerance=0.0,
+                             callback=lambda run: run.nit >= 2)
+    assert result.nit == 2 and result.success and "callback" in result.message
+    assert len(mb.keyed_frames(trefoil)) == 3
+
+
+def test_apply_frame_then_relax_again(scene, mb, trefoil):
+    scene.moebius.max_iterations = 4
+    bpy.ops.moebius.relax()
+    scene.frame_set(3)
+    mid = _points(trefoil)
+    assert bpy.ops.moebius.apply_frame() == {"FINISHED"}
+    assert mb.keyed_frames(trefoil) == []
+    scene.frame_set(1)  # no animation any more: the frame-3 shape stays
+    np.testing.assert_allclose(_points(trefoil), mid, atol=1e-7)
+    assert trefoil["moebius_energy"] == pytest.approx(mb.energy([mid]), rel=1e-9)
+    bpy.ops.moebius.relax()
+    scene.frame_set(scene.frame_start)
+    np.testing.assert_allclose(_points(trefoil), mid, atol=1e-6)
+
+
+def test_other_animation_is_left_alone(scene, mb, trefoil):
+    trefoil.keyframe_insert("location", frame=1)
+    scene.moebius.max_iterations = 2
+    bpy.ops.moebius.relax()
+    bpy.ops.moebius.clear_animation()
+    fcurves = _fcurves(trefoil)
+    assert sorted(fc.data_path for fc in fcurves) == ["location"] * 3
+
+
+def test_link_relaxes_both_components(scene, mb):
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    a = np.column_stack([np.cos(t), np.sin(t), 0 * t])
+    b = np.column_stack([1 + np.cos(t), 0 * t, np.sin(t)])
+    poly_curve("Hopf", [a, b])
+    scene.moebius.edges = 40
+    bpy.ops.moebius.convert()
+    link = bpy.context.active_object
+    scene.moebius.max_iterations = 3
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    assert len(_fcurves(link.data)) == 3 * 80
+    assert scene.moebius.last_energy_end < scene.moebius.last_energy_start
+
+
+def test_failed_setup_keeps_the_previous_flow(scene, mb, trefoil):
+    scene.moebius.max_iterations = 2
+    bpy.ops.moebius.relax()
+    before = scene_state()
+    frames = mb.keyed_frames(trefoil)
+    with pytest.raises(ValueError, match="armijo must lie"):
+        mb.ObjectRelaxation(trefoil, armijo=1.5)
+    assert scene_state() == before and mb.keyed_frames(trefoil) == frames
