@@ -32,14 +32,15 @@ from .polygon import check_polygon
 
 HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
 
-# Deterministic refactorization rule (see SaddlePointSolver): one exact factorization costs
-# about as much as N / _FACTOR_PER_ITER preconditioned Krylov iterations (measured on the
-# benchmark machine: 1.1 s against 15 ms per iteration at N = 3000).
+# Deterministic refactorization rule (see SaddlePointSolver): one factorization costs about as
+# much as N / _FACTOR_PER_ITER preconditioned Krylov iterations (measured here at N = 3000:
+# ~1.1 s against ~15 ms per iteration).
 _FACTOR_PER_ITER = 40.0
-_AUTO_REUSE_FROM = 400
+# From this many vertices on, a single-precision factorization refined by GMRES pays.
+_AUTO_SINGLE_FROM = 400
 # A run that stops moving with a projected gradient above this many times tol is jammed, not
 # converged (near the minimum Armijo fails on round-off with sqrt(<g,u>) ≈ 1e-8, DESIGN.md).
-_STALL_FACTOR = 1e3  # below this many vertices exact factorization every iteration is cheap
+_STALL_FACTOR = 1e3
 
 
 @dataclass
@@ -105,9 +106,13 @@ class Relaxation:
         "keep": the start's own edge lengths are the targets.
     check : bool
         Run :func:`check_polygon` on the start (disable only for inputs checked already).
-    reuse_factorization : {"auto", True, False}
-        Reuse the saddle-point factorization as a preconditioner across iterations (fast for
-        large N); False factors every iterate exactly.
+    reuse_factorization : bool
+        Reuse the saddle-point factorization as a GMRES preconditioner across iterations
+        instead of factoring every iterate (pays only late in a flow, see docs/benchmarks.md).
+    precision : {"auto", "double", "single"}
+        Precision of the factorization; "single" is refined to double precision by GMRES on
+        the exact system (same iterates up to the solver tolerance, cheaper factorization);
+        "auto" uses it from 400 vertices on.
     """
 
     def __init__(
@@ -129,7 +134,8 @@ class Relaxation:
         barycenter: bool = True,
         target_lengths: str = "equal",
         check: bool = True,
-        reuse_factorization="auto",
+        reuse_factorization: bool = False,
+        precision: str = "auto",
     ):
         if metric not in METRICS:
             raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
@@ -178,10 +184,15 @@ class Relaxation:
         else:
             lengths0 = ln.copy()
         self.con: Constraints = make_constraints(Xn, layout, lengths0, edge_lengths, barycenter)
-        reuse = layout.n >= _AUTO_REUSE_FROM if reuse_factorization == "auto" else bool(
-            reuse_factorization
+        if precision not in ("auto", "double", "single"):
+            raise ValueError("precision must be 'auto', 'double' or 'single'")
+        if precision == "auto":
+            precision = "single" if layout.n >= _AUTO_SINGLE_FROM else "double"
+        self.solver = SaddlePointSolver(
+            reuse=bool(reuse_factorization),
+            factor_cost=layout.n / _FACTOR_PER_ITER,
+            dtype=np.float32 if precision == "single" else np.float64,
         )
-        self.solver = SaddlePointSolver(reuse=reuse, factor_cost=layout.n / _FACTOR_PER_ITER)
         self.eps = 1e-3 * float(lengths0.mean())  # contact distance
         self.X = Xn
         self.tau = float(initial_step) / self.growth
@@ -362,7 +373,8 @@ def relax(
     **options
         See :class:`Relaxation` (``energy_target``, ``ftol``, ``max_seconds``, ``initial_step``,
         ``armijo``, ``growth``, ``backproject_iter``, ``backproject_tol``, ``edge_lengths``,
-        ``barycenter``, ``target_lengths``, ``check``, ``reuse_factorization``).
+        ``barycenter``, ``target_lengths``, ``check``, ``reuse_factorization``,
+        ``precision``).
 
     Returns
     -------

@@ -140,3 +140,13 @@ def test_bad_inputs_raise_with_advice(trefoil300):
     bad[10] = np.inf
     with pytest.raises(ValueError, match="NaN or infinite"):
         relax(bad)
+
+
+def test_single_precision_factorization_gives_the_double_precision_flow():
+    P = resample(trefoil(900), 420)
+    double = relax(P, max_iter=5, precision="double")
+    single = relax(P, max_iter=5, precision="single")
+    np.testing.assert_allclose(single.history["energy"], double.history["energy"], rtol=1e-9)
+    np.testing.assert_allclose(single.x, double.x, atol=1e-7)
+    assert max(single.history["constraint_residual"][1:]) <= 1e-10
+    assert all(k >= 2 for k in single.stats["krylov_iterations"])  # refined, not raw float32
