@@ -1,0 +1,506 @@
+"""Catalogue of closed curves to relax: circles, torus knots, every prime knot up to 8 crossings
+(as closed braids), and unknots that are hard to untangle.
+
+Conventions shared by every generator:
+
+* The result is a closed polygon, an ``(n, 3)`` float64 array of ``n`` vertices with equal edges
+  (a dense sample of the curve passed through :func:`moebius_addon.core.polygon.resample`). A
+  curve with several components (a link: a braid whose closure has several components, a torus
+  link) is a list of such arrays; the ``n`` vertices are split between the components in
+  proportion to their lengths, so all edges have nearly the same length.
+* Centred and scaled to the unit ball: the mean of all vertices is the origin and the farthest
+  vertex lies at distance 1 (a circle has radius 1). For an equilateral polygon the vertex mean
+  is also the length-weighted barycentre that the relaxation keeps fixed.
+* Every generator has a default ``n`` that passes the coarseness rule of DESIGN.md (checked by
+  :func:`moebius_addon.core.check_polygon`: vertices at least 4 apart along the curve are more
+  than one mean edge length apart in space) with a wide margin: the ``contact_ratio`` at the
+  default is 2.5 to 4 (1.2 for the FHW unknot, whose strands nearly touch). The last column
+  is the smallest ``n`` that still passes (ratio >= 1), measured; the relaxation is more robust
+  some way above it.
+
+======================  ================================  ===================================
+generator               default ``n``                     smallest ``n`` passing
+======================  ================================  ===================================
+``circle``              64                                4 (no vertex pairs 4 apart below 8)
+``torus_knot(p, q)``    ``40 (|p| + |q|)``                about ``5 (|p| + |q|)``: 18 for
+                                                          T(2,3), 35 for T(3,4) and T(2,5)
+``figure_eight``        200                               36
+``braid_closure``       2.5 vertices per strand spacing   0.4 × the default: 3_1 27, 4_1 52,
+``named``               of length, at least 100           7_2 136, 8_1 and 8_3 197
+``freedman_unknot``     600                               470 (ratio 1.2 at 600)
+``helix_unknot``        300                               61 (6 turns)
+``random_unknot``       400                               about 50-100 (draws are kept only
+                                                          with ratio >= 2 at 400)
+======================  ================================  ===================================
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from functools import cache
+from pathlib import Path
+
+import numba as nb
+import numpy as np
+
+from .objio import read_obj
+from .polygon import contact_ratio, resample
+
+__all__ = [
+    "braid_closure",
+    "circle",
+    "figure_eight",
+    "freedman_unknot",
+    "helix_unknot",
+    "info",
+    "named",
+    "names",
+    "random_unknot",
+    "torus_knot",
+]
+
+_DATA = Path(__file__).resolve().parent / "data"
+
+Curve = np.ndarray | list[np.ndarray]
+
+
+# --------------------------------------------------------------------------------------------
+# Simple closed curves
+
+
+def circle(n: int = 64) -> np.ndarray:
+    """The regular ``n``-gon inscribed in the unit circle of the xy-plane."""
+    n = _check_n(n, 1)
+    t = 2.0 * np.pi * np.arange(n) / n
+    return np.stack([np.cos(t), np.sin(t), np.zeros(n)], axis=1)
+
+
+def torus_knot(p: int, q: int, n: int | None = None, R: float = 2.0, r: float = 1.0) -> Curve:
+    """The torus knot ``T(p, q)``: ``p`` turns around the z-axis, ``q`` around the tube.
+
+    ``((R + r cos qt) cos pt, (R + r cos qt) sin pt, -r sin qt)`` for positive ``p``, ``q``
+    (a positive knot: ``T(2, 3)`` is the positive trefoil 3_1 of :func:`named`, ``T(3, 4)`` is
+    8_19); a negative ``p`` or ``q`` gives the mirror image. When ``d = gcd(p, q) > 1`` the
+    result is the torus link of ``d`` parallel components, a list of arrays. ``R`` and ``r``
+    (tube radius) set the proportions only; the curve is then scaled into the unit ball.
+
+    Default ``n``: ``40 (|p| + |q|)``; with ``R/r = 2`` the coarseness rule holds down to about
+    ``5 (|p| + |q|)``.
+    """
+    p, q = int(p), int(q)
+    if p == 0 or q == 0:
+        raise ValueError(f"torus_knot({p}, {q}): p and q must be nonzero integers")
+    if not 0 < r < R:
+        raise ValueError(f"torus_knot needs 0 < r < R (got R={R}, r={r})")
+    d = math.gcd(p, q)
+    n = _check_n(40 * (abs(p) + abs(q)) if n is None else n, d)
+    m = _dense_count(n // d)
+    t = 2.0 * np.pi * np.arange(m) / m
+    curves = []
+    for k in range(d):
+        # Component k is component 0 turned around the tube by 2πk/|p|: evenly between the
+        # passes of component 0 through the half-plane φ = 0.
+        phi = (p // d) * t
+        psi = (q // d) * t + 2.0 * np.pi * k / abs(p)
+        rho = R + r * np.cos(psi)
+        # -sin: with +sin the knot would be the negative one (the mirror of the braid σ1³).
+        curves.append(np.stack([rho * np.cos(phi), rho * np.sin(phi), -r * np.sin(psi)], axis=1))
+    return _finish(curves, n)
+
+
+def figure_eight(n: int = 200) -> np.ndarray:
+    """The figure-eight knot 4_1, ``((2 + cos 2t) cos 3t, (2 + cos 2t) sin 3t, sin 4t)``."""
+    n = _check_n(n, 1)
+    m = _dense_count(n)
+    t = 2.0 * np.pi * np.arange(m) / m
+    rho = 2.0 + np.cos(2.0 * t)
+    return _finish([np.stack([rho * np.cos(3 * t), rho * np.sin(3 * t), np.sin(4 * t)], axis=1)], n)
+
+
+# --------------------------------------------------------------------------------------------
+# Closed braids and the knot table
+
+# Layout of a closed braid (units of the strand spacing): strand k runs around the z-axis at
+# radius r0 + k, the word's generators take equal angular slots, and a crossing lifts the over
+# strand to +_HZ and the under strand to -_HZ while they swap radii.
+_HZ = 0.6
+_SLOT = 2.5  # arc length of a slot at the innermost radius (sets r0)
+_PER_SLOT = 48  # dense samples per slot and strand
+
+
+def braid_closure(word: Sequence[int], n: int | None = None, strands: int | None = None) -> Curve:
+    """The closure of a braid, laid around the z-axis as a smooth embedded space curve.
+
+    Parameters
+    ----------
+    word : sequence of nonzero int
+        Generators ``σ_i`` as ``i`` and ``σ_i⁻¹`` as ``-i`` (1-based, KnotInfo's convention:
+        ``σ_i`` is a positive crossing, so ``[1, 1, 1]`` is the positive trefoil and the
+        closure of ``[1, 1]`` has linking number +1).
+    n : int, optional
+        Total number of vertices; default 2.5 per strand spacing of length (at least 100), which
+        keeps neighbouring strands 2.5 edges apart; down to 0.4 times that count they stay one
+        edge apart.
+    strands : int, optional
+        Number of strands, at least ``max|i| + 1`` (the default).
+
+    Returns
+    -------
+    (n, 3) array for a knot, or a list of arrays (one per component, in the order of their
+    lowest starting strand) when the closure is a link.
+
+    Strand ``k`` runs counter-clockwise (seen from +z) around the z-axis at radius ``R0 + k``
+    (in strand spacings); each generator gets an equal angular slot in which its two strands
+    swap radii along a smooth step while the over strand rises and the under strand sinks, so
+    that at every crossing they pass 1.2 spacings apart vertically.
+    """
+    word = [int(g) for g in word]
+    if any(g == 0 for g in word):
+        raise ValueError(f"braid word {word}: generators are nonzero integers ±i (σ_i^±1)")
+    need = max((abs(g) for g in word), default=0) + 1
+    strands = need if strands is None else int(strands)
+    if strands < need:
+        raise ValueError(f"braid word {word} needs at least {need} strands, got {strands}")
+    curves = _braid_curves(word, strands)
+    if n is None:
+        n = _braid_default_n(curves)
+    n = _check_n(n, len(curves))
+    return _finish(curves, n)
+
+
+def _braid_curves(word: list[int], strands: int) -> list[np.ndarray]:
+    """Dense samples of each component of the closed braid, before scaling."""
+    slots = max(len(word), 3)  # fewer slots would make a lonely crossing span a whole turn
+    r0 = max(_SLOT * slots / (2.0 * np.pi), 1.5)
+    u = (np.arange(_PER_SLOT) + 0.5) / _PER_SLOT  # slot-local parameter, open at both ends
+    step = u - np.sin(2.0 * np.pi * u) / (2.0 * np.pi)  # 0 → 1, flat at both ends
+    bump = np.sin(np.pi * u) ** 2  # 0 → 1 → 0, flat at both ends
+    gens = word + [0] * (slots - len(word))
+    seen = [False] * strands
+    curves = []
+    for start in range(strands):
+        if seen[start]:
+            continue
+        pos, pieces = start, []
+        while True:  # one lap per pass, until the strand is back where it started
+            seen[pos] = True
+            for j, g in enumerate(gens):
+                theta = 2.0 * np.pi * (j + u) / slots
+                lo = abs(g) - 1
+                if g and pos in (lo, lo + 1):
+                    up = pos == lo  # moving outwards
+                    target = lo + 1 if up else lo
+                    rad = r0 + pos + (target - pos) * step
+                    # Positive σ_i: the strand moving outwards crosses over (toward +z);
+                    # with both strands running counter-clockwise that makes the crossing sign
+                    # (t_over × t_under)·ẑ positive.
+                    z = (_HZ if up == (g > 0) else -_HZ) * bump
+                    pos = target
+                else:
+                    rad = np.full_like(u, r0 + pos)
+                    z = np.zeros_like(u)
+                pieces.append(np.stack([rad * np.cos(theta), rad * np.sin(theta), z], axis=1))
+            if pos == start:
+                break
+        curves.append(np.concatenate(pieces))
+    return curves
+
+
+def _braid_default_n(curves: list[np.ndarray]) -> int:
+    # Edges of 0.4 strand spacings: the closest strands (one spacing apart) stay 2.5 edges apart.
+    total = sum(_length(c) for c in curves)
+    return max(100, 10 * math.ceil(total / 0.4 / 10))
+
+
+@cache
+def _table() -> dict:
+    with open(_DATA / "knot_table.json", encoding="utf-8") as f:
+        return json.load(f)["knots"]
+
+
+_ALIASES = {
+    "unknot": "0_1",
+    "trefoil": "3_1",
+    "figure_eight": "4_1",
+    "figure-eight": "4_1",
+    "figure eight": "4_1",
+    "figure8": "4_1",
+}
+
+
+def names() -> list[str]:
+    """Names of the shipped knot table, ``["0_1", "3_1", "4_1", …, "8_21"]``."""
+    return list(_table())
+
+
+def info(name: str) -> dict:
+    """The table entry of a knot: ``braid`` (KnotInfo braid word), ``crossings``,
+    ``alternating``, ``braid_index``, ``unknotting_number``, ``genus``, ``determinant``,
+    ``symmetry`` and a one-line ``description``; ``name`` holds the table name."""
+    key = _lookup(name)
+    return {"name": key, **_table()[key]}
+
+
+def named(name: str, n: int | None = None) -> Curve:
+    """A prime knot of the table by name, ``"3_1"`` … ``"8_21"``, as the closure of KnotInfo's
+    braid word (:func:`braid_closure`). Also accepts ``"0_1"``/``"unknot"`` (a circle),
+    ``"trefoil"``, ``"figure_eight"``/``"figure-eight"``.
+
+    ``n=None`` is :func:`braid_closure`'s default, which grows with the braid: 3_1 gets 100,
+    4_1 140, 7_2 340, 8_1 500; the coarseness rule holds down to 0.4 times that count.
+    """
+    key = _lookup(name)
+    if key == "0_1":
+        return circle(64 if n is None else n)
+    return braid_closure(_table()[key]["braid"], n)
+
+
+def _lookup(name: str) -> str:
+    key = str(name).strip().lower()
+    key = _ALIASES.get(key, key)
+    if key not in _table():
+        raise ValueError(
+            f"unknown knot {name!r}; valid names: {', '.join(names())}, "
+            f"or {', '.join(repr(a) for a in _ALIASES)}"
+        )
+    return key
+
+
+# --------------------------------------------------------------------------------------------
+# Unknots that look knotted
+
+
+def freedman_unknot(n: int = 600) -> np.ndarray:
+    """The Freedman–He–Wang "difficult" unknot (DESIGN.md, "Inputs the paper used").
+
+    The 1184-vertex polygon published with Repulsive Curves (``data/freedman_unknot_1184.obj``,
+    MIT licence), resampled to ``n`` vertices. Below 470 vertices two strands come closer than
+    an edge length (contact ratio 1.2 at 600, 0.71 at 300).
+    """
+    n = _check_n(n, 1)
+    return _finish(_freedman(), n)
+
+
+@cache
+def _freedman() -> list[np.ndarray]:
+    return read_obj(_DATA / "freedman_unknot_1184.obj")
+
+
+def helix_unknot(n: int = 300, turns: int = 6) -> np.ndarray:
+    """A coil closed through itself: an unknot that looks knotted (the paper's Fig. 5).
+
+    A helix of ``turns`` turns (radius 1, pitch 0.8) around the z-axis; at each end a half
+    circle in the plane through the axis leads to the axis, and the return strand runs straight
+    down the axis, through the coil. The curve lies over a simple closed loop in the half-plane
+    (distance to the axis, height) and the axis part has a single point per height, so turning
+    the coil back (rotating each height about the axis) is an isotopy to a flat loop: it is an
+    unknot. The closest strands are one pitch (0.8) apart.
+    """
+    n = _check_n(n, 1)
+    turns = int(turns)
+    if turns < 1:
+        raise ValueError(f"helix_unknot needs at least one turn, got {turns}")
+    a, pitch = 1.0, 0.8
+    half = turns * pitch / 2.0
+    m = _dense_count(n)
+    # Split the dense samples by arc length (roughly) between helix, caps and axis.
+    helix_len = turns * math.hypot(2.0 * np.pi * a, pitch)
+    cap_len = np.pi * a / 2.0 * 1.5
+    total = helix_len + 2.0 * cap_len + 2.0 * half
+    k_helix, k_cap = int(m * helix_len / total), int(m * cap_len / total) + 8
+    k_axis = max(m - k_helix - 2 * k_cap, 8)
+    # Helix, φ ∈ [0, 2π·turns), z from -half to half.
+    s = np.arange(k_helix) / k_helix
+    phi_end = 2.0 * np.pi * turns
+    omega = phi_end / (2.0 * half)  # dφ/dz on the helix
+    helix = _cyl(a, phi_end * s, -half + 2.0 * half * s)
+    # Top cap: half circle of radius a/2 in the (ρ, z) half-plane, from (a, half) to (0, half);
+    # φ keeps turning at first so that the tangent is continuous, and stops at the axis.
+    b = np.pi * np.arange(k_cap) / k_cap
+    turn = omega * (a / 2.0) * (b - b**2 / (2.0 * np.pi))
+    top = _cyl(a / 2.0 * (1.0 + np.cos(b)), phi_end + turn, half + a / 2.0 * np.sin(b))
+    # Axis, from half down to -half.
+    z = half - 2.0 * half * np.arange(k_axis) / k_axis
+    axis = np.stack([np.zeros(k_axis), np.zeros(k_axis), z], axis=1)
+    # Bottom cap: the same half circle continued, from (0, -half) back to (a, -half) at φ = 0.
+    b = b + np.pi
+    w = 2.0 * np.pi - b
+    turn = -omega * (a / 2.0) * (w - w**2 / (2.0 * np.pi))
+    bottom = _cyl(a / 2.0 * (1.0 + np.cos(b)), turn, -half + a / 2.0 * np.sin(b))
+    return _finish([np.concatenate([helix, top, axis, bottom])], n)
+
+
+def random_unknot(n: int = 400, seed: int = 0, laps: int = 4) -> np.ndarray:
+    """A seeded random tangle that is an unknot: a crumpled loop drawn as a descending diagram.
+
+    The projection is a random closed curve whose tangent turns ``laps`` times plus a random
+    smooth wiggle (bounded curvature, about ``3 * laps`` crossings, more for more laps). Its
+    height falls steadily from a base point, so that every crossing is first met from above
+    (a descending diagram: an unknot however tangled it looks), climbs back on a stretch that
+    crosses nothing, and is then crumpled by random smooth heights as far as every crossing
+    keeps half of its vertical gap. Draws that come closer to themselves than 2 edge lengths
+    or bend by more than 0.35 rad per edge at 400 vertices are redrawn. Everything comes from
+    ``numpy.random.default_rng(seed)``, so the curve depends on ``seed`` and ``laps`` only (not
+    on ``n``). A final random rotation hides the vertical layering.
+    """
+    n = _check_n(n, 1)
+    laps = int(laps)
+    if laps < 2:
+        raise ValueError(f"random_unknot needs at least 2 laps, got {laps}")
+    rng = np.random.default_rng(seed)
+    for _ in range(1000):
+        curve = _descending_loop(rng, laps)
+        if curve is not None:
+            return _finish([curve @ _random_rotation(rng).T], n)
+    raise RuntimeError(f"random_unknot(seed={seed}, laps={laps}) found no valid draw")
+
+
+# --------------------------------------------------------------------------------------------
+# Helpers
+
+
+def _check_n(n, components: int) -> int:
+    if isinstance(n, bool) or not isinstance(n, int | np.integer):
+        raise TypeError(f"n must be an int, got {n!r}")
+    n = int(n)
+    if n < 4 * components:
+        raise ValueError(f"n = {n} is too small: need at least 4 vertices per component")
+    return n
+
+
+def _dense_count(n: int) -> int:
+    """Samples of the smooth curve before resampling to ``n``: fine enough that the resampled
+    vertices lie on the curve to well below an edge length."""
+    return max(16 * n, 4096)
+
+
+def _length(c: np.ndarray) -> float:
+    return float(np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1).sum())
+
+
+def _split(n: int, lengths: list[float]) -> list[int]:
+    """``n`` vertices split in proportion to ``lengths``, each >= 4, summing to ``n``."""
+    share = np.asarray(lengths) / sum(lengths) * n
+    counts = np.maximum(np.floor(share).astype(int), 4)
+    while counts.sum() != n:  # a few rounds: give to the most short-changed, take from the most
+        excess = counts - share  # over-served that can spare a vertex
+        if counts.sum() < n:
+            counts[np.argmin(excess)] += 1
+        else:
+            counts[np.argmax(np.where(counts > 4, excess, -np.inf))] -= 1
+    return counts.tolist()
+
+
+def _finish(curves: list[np.ndarray], n: int) -> Curve:
+    """Resample dense closed curves to ``n`` vertices in all, centre, scale into the unit ball."""
+    counts = [n] if len(curves) == 1 else _split(n, [_length(c) for c in curves])
+    polys = resample(curves, counts, closed=True)
+    allv = np.concatenate(polys)
+    centre = allv.mean(axis=0)
+    scale = np.linalg.norm(allv - centre, axis=1).max()
+    polys = [(P - centre) / scale for P in polys]
+    return polys[0] if len(polys) == 1 else polys
+
+
+def _cyl(rho, phi, z) -> np.ndarray:
+    return np.stack([rho * np.cos(phi), rho * np.sin(phi), np.broadcast_to(z, np.shape(phi))], 1)
+
+
+def _random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q if np.linalg.det(q) > 0 else -q
+
+
+_SAMPLES_PER_LAP = 200  # dense samples per lap of random_unknot's projection
+_WIGGLE = 0.6  # amplitude (radians, per lap) of the random part of its turning angle
+_CLEAR = 2.0  # its smallest clearance (in edge lengths) at 400 vertices
+_BEND = 0.35  # and its largest turning angle per edge there (radians)
+
+
+def _descending_loop(rng: np.random.Generator, laps: int) -> np.ndarray | None:
+    """One draw of :func:`random_unknot` before rotation and scaling, or None if rejected."""
+    m = _SAMPLES_PER_LAP * laps
+    s = np.arange(m) / m
+    # Projection: a closed curve whose tangent turns `laps` times plus a random smooth wiggle,
+    # so that its curvature is bounded (no cusps) while the laps cross each other.
+    theta = 2.0 * np.pi * laps * s + _random_wave(rng, s, 3, _WIGGLE * laps)
+    velocity = np.exp(1j * theta)
+    if abs(velocity.mean()) > 0.5:  # closing it would slow it down too much somewhere
+        return None
+    xy = np.cumsum(velocity - velocity.mean()) / m
+    xy = np.column_stack([xy.real, xy.imag])
+    seg = np.linalg.norm(np.roll(xy, -1, axis=0) - xy, axis=1)
+    arc = np.concatenate(([0.0], np.cumsum(seg[:-1])))
+    length = arc[-1] + seg[-1]
+    cross = _planar_crossings(xy)  # (c, 2) sample indices of the two passes
+    if len(cross) < 2 * laps:
+        return None
+    # Descend from the end of the longest stretch without a crossing and climb back on it:
+    # every crossing is first met from above (a descending diagram), hence an unknot.
+    passes = np.sort(arc[cross].ravel())
+    gaps = np.diff(np.append(passes, passes[0] + length))
+    g = int(np.argmax(gaps))
+    u = (arc - passes[(g + 1) % len(passes)] + 0.25 * gaps[g]) % length  # descent from u = 0
+    down = length - 0.5 * gaps[g]  # the climb takes the middle half of the stretch
+    top = np.ptp(xy, axis=0).max()  # about as tall as wide
+    z = top * (1.0 - u / down)
+    w = (u[u >= down] - down) / (length - down)  # climb: cubic Hermite matching the slopes
+    z[u >= down] = top * (3 * w**2 - 2 * w**3 - (length - down) / down * (2 * w**3 - 3 * w**2 + w))
+    # Crumple the staircase with random smooth heights, as far as every crossing keeps half of
+    # its vertical gap: only the order of the strands at the crossings decides the knot type.
+    noise = top * _random_wave(rng, s, 4, 1.0)
+    first = np.where(u[cross[:, 0]] < u[cross[:, 1]], cross[:, 0], cross[:, 1])
+    second = cross.sum(axis=1) - first
+    gap, gap_noise = z[first] - z[second], noise[first] - noise[second]
+    worse = gap_noise < gap
+    mix = min(0.6, float(np.min(0.5 * gap[worse] / (gap[worse] - gap_noise[worse]), initial=1)))
+    curve = np.column_stack([xy, (1.0 - mix) * z + mix * noise])
+    # Keep the draw only if it is clear of itself and bends gently at 400 vertices.
+    P = resample(curve, 400, closed=True)
+    if contact_ratio(P) < _CLEAR or _max_turn(P) > _BEND:
+        return None
+    return curve
+
+
+def _random_wave(rng: np.random.Generator, s: np.ndarray, terms: int, scale: float) -> np.ndarray:
+    """Random 1-periodic smooth function of ``s``: ``terms`` sines with amplitudes ~ scale/k."""
+    k = np.arange(1, terms + 1)[:, None]
+    amp = rng.normal(size=(terms, 1)) * scale / k
+    phase = rng.uniform(0.0, 2.0 * np.pi, size=(terms, 1))
+    return (amp * np.sin(2.0 * np.pi * k * s + phase)).sum(axis=0)
+
+
+@nb.njit(cache=True)
+def _planar_crossings(xy: np.ndarray) -> np.ndarray:
+    """Self-crossings of a closed planar polygon: ``(c, 2)`` int array, the indices of the two
+    crossing edges (edge ``i`` joins vertex ``i`` to ``i + 1``), one row per crossing."""
+    m = xy.shape[0]
+    found = [(0, 0) for _ in range(0)]
+    for i in range(m):
+        ax, ay = xy[i, 0], xy[i, 1]
+        dx, dy = xy[(i + 1) % m, 0] - ax, xy[(i + 1) % m, 1] - ay
+        for j in range(i + 2, m if i > 0 else m - 1):  # skip neighbours (edge m-1 touches 0)
+            bx, by = xy[j, 0], xy[j, 1]
+            ex, ey = xy[(j + 1) % m, 0] - bx, xy[(j + 1) % m, 1] - by
+            den = dx * ey - dy * ex
+            if den == 0.0:
+                continue
+            qx, qy = bx - ax, by - ay
+            a = (qx * ey - qy * ex) / den
+            b = (qx * dy - qy * dx) / den
+            if 0.0 <= a < 1.0 and 0.0 <= b < 1.0:
+                found.append((i, j))
+    out = np.empty((len(found), 2), dtype=np.int64)
+    for k, (i, j) in enumerate(found):
+        out[k, 0], out[k, 1] = i, j
+    return out
+
+
+def _max_turn(P: np.ndarray) -> float:
+    """Largest angle (radians) between consecutive edges of the closed polygon ``P``."""
+    e = np.roll(P, -1, axis=0) - P
+    e /= np.linalg.norm(e, axis=1, keepdims=True)
+    return float(np.arccos(np.clip((e * np.roll(e, 1, axis=0)).sum(axis=1), -1.0, 1.0)).max())

@@ -1,0 +1,250 @@
+"""The knot catalogue: every curve is equilateral, centred, in the unit ball, fine enough for the
+flow at its default size, and has the knot type it claims (checked independently with topoly's
+HOMFLY-PT polynomial)."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from moebius_addon.core import check_polygon, contact_ratio, knots
+from tests.conftest import random_rotation
+
+topoly = pytest.importorskip("topoly")
+
+ROOT = Path(__file__).resolve().parents[2]
+TABLE = ROOT / "moebius_addon" / "core" / "data" / "knot_table.json"
+ROTATION = random_rotation(np.random.default_rng(2024))  # topoly can hang on flat input
+
+
+def homfly(P, chiral=False) -> str:
+    """topoly's name for the knot type of a closed polygon, e.g. '3_1', '0_1', '10_132|5_1'
+    (knots it cannot tell apart), with chiral=True '+3_1' or '-3_1'."""
+    return topoly.homfly(
+        (P @ ROTATION.T).tolist(),
+        closure=topoly.Closure.CLOSED,
+        max_cross=60,
+        translate=topoly.Translate.PIU,
+        minimal=False,
+        chiral=chiral,
+    )
+
+
+def knot_names(P) -> set[str]:
+    return set(homfly(P).split("|"))
+
+
+def unsigned(chiral_name: str) -> set[str]:
+    return {k.lstrip("+-") for k in chiral_name.split("|")}
+
+
+def linking_number(A, B) -> float:
+    """Gauss linking integral, midpoint rule on edges."""
+    ea, eb = np.roll(A, -1, axis=0) - A, np.roll(B, -1, axis=0) - B
+    d = (A + ea / 2)[:, None] - (B + eb / 2)[None]
+    cross = np.cross(ea[:, None], eb[None])
+    return float(((d * cross).sum(-1) / np.linalg.norm(d, axis=2) ** 3).sum() / (4 * np.pi))
+
+
+def assert_catalogue_polygon(P, n, min_ratio=2.0):
+    comps = P if isinstance(P, list) else [P]
+    assert sum(len(c) for c in comps) == n
+    allv = np.concatenate(comps)
+    assert allv.dtype == np.float64 and allv.shape[1] == 3
+    np.testing.assert_allclose(allv.mean(axis=0), 0.0, atol=1e-12)
+    assert np.linalg.norm(allv, axis=1).max() == pytest.approx(1.0, abs=1e-12)
+    for c in comps:
+        edges = np.linalg.norm(np.roll(c, -1, axis=0) - c, axis=1)
+        assert edges.max() / edges.min() - 1 < 1e-9
+    check_polygon(P)  # embedded and fine enough for the flow
+    assert contact_ratio(P) >= min_ratio
+
+
+# --------------------------------------------------------------------------------------------
+# The table
+
+
+def test_table_lists_the_prime_knots_up_to_8_crossings():
+    names = knots.names()
+    assert names[:3] == ["0_1", "3_1", "4_1"] and names[-1] == "8_21"
+    assert len(names) == 36
+    for name in names:
+        entry = knots.info(name)
+        assert entry["crossings"] == int(name.split("_")[0])
+        assert entry["braid_index"] == max((abs(g) for g in entry["braid"]), default=0) + 1
+        assert entry["description"]
+    assert knots.info("Trefoil")["name"] == "3_1"
+    assert not knots.info("8_19")["alternating"]
+
+
+def test_shipped_table_is_what_the_build_tool_makes(tmp_path):
+    pytest.importorskip("database_knotinfo")
+    spec = importlib.util.spec_from_file_location("bkt", ROOT / "tools" / "build_knot_table.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    shipped = json.loads(TABLE.read_text())
+    assert tool.build()["knots"] == shipped["knots"]
+
+
+@pytest.mark.parametrize("name", knots.names()[1:])
+def test_named_knot_has_its_type(name):
+    P = knots.named(name)
+    assert_catalogue_polygon(P, len(P))
+    assert name in knot_names(P)
+
+
+def test_names_aliases_and_unknown_names():
+    np.testing.assert_array_equal(knots.named("trefoil", 120), knots.named("3_1", 120))
+    np.testing.assert_array_equal(knots.named(" Figure-Eight ", 150), knots.named("4_1", 150))
+    np.testing.assert_array_equal(knots.named("figure_eight", 150), knots.named("4_1", 150))
+    np.testing.assert_array_equal(knots.named("unknot", 32), knots.circle(32))
+    with pytest.raises(ValueError, match=r"unknown knot '9_1'; valid names: 0_1, 3_1, .*8_21"):
+        knots.named("9_1")
+
+
+# --------------------------------------------------------------------------------------------
+# Closed braids: the crossing sign convention (σ_i positive) and links
+
+
+@pytest.mark.parametrize("word, lk", [([1, 1], 1), ([-1, -1], -1), ([1, 1, 1, 1], 2)])
+def test_braid_closure_link_and_sign_convention(word, lk):
+    A, B = knots.braid_closure(word, 300)
+    assert len(A) + len(B) == 300
+    assert linking_number(A, B) == pytest.approx(lk, abs=1e-2)
+    check_polygon([A, B])
+
+
+def test_braid_closure_chirality_matches_torus_knots():
+    right = homfly(knots.named("3_1"), chiral=True)
+    assert right == homfly(knots.torus_knot(2, 3), chiral=True)
+    assert right == homfly(knots.braid_closure([1, 2, 1, 2], 200), chiral=True)  # T(3, 2)
+    assert right != homfly(knots.braid_closure([-1, -1, -1], 200), chiral=True)
+
+
+def test_braid_closure_degenerate_words_and_errors():
+    assert knot_names(knots.braid_closure([1, 2], 100)) == {"0_1"}
+    circle = knots.braid_closure([], 50)
+    assert_catalogue_polygon(circle, 50)
+    unlink = knots.braid_closure([], 100, strands=3)
+    assert len(unlink) == 3 and sum(map(len, unlink)) == 100
+    with pytest.raises(ValueError, match="nonzero"):
+        knots.braid_closure([1, 0, 1])
+    with pytest.raises(ValueError, match="needs at least 3 strands"):
+        knots.braid_closure([1, 2], strands=2)
+
+
+# --------------------------------------------------------------------------------------------
+# Torus knots and the figure eight
+
+
+@pytest.mark.parametrize(
+    "p, q, name", [(2, 3, "3_1"), (3, 2, "3_1"), (2, 5, "5_1"), (3, 4, "8_19")]
+)
+def test_torus_knot(p, q, name):
+    P = knots.torus_knot(p, q)
+    assert_catalogue_polygon(P, 40 * (p + q))
+    chiral = homfly(P, chiral=True)
+    assert name in unsigned(chiral)
+    assert chiral == homfly(knots.named(name), chiral=True)  # both positive knots
+
+
+def test_torus_link_and_mirror():
+    A, B = knots.torus_knot(2, 4, 400)
+    assert linking_number(A, B) == pytest.approx(2.0, abs=1e-2)
+    A, B = knots.torus_knot(2, -4, 400)
+    assert linking_number(A, B) == pytest.approx(-2.0, abs=1e-2)
+    assert homfly(knots.torus_knot(-2, 3, 200), chiral=True) != homfly(
+        knots.torus_knot(2, 3, 200), chiral=True
+    )
+    with pytest.raises(ValueError, match="0 < r < R"):
+        knots.torus_knot(2, 3, R=1.0, r=1.0)
+
+
+def test_figure_eight_and_circle():
+    P = knots.figure_eight()
+    assert_catalogue_polygon(P, 200)
+    assert knot_names(P) == {"4_1"}
+    C = knots.circle(64)
+    assert_catalogue_polygon(C, 64)
+    np.testing.assert_allclose(np.linalg.norm(C, axis=1), 1.0)
+
+
+# --------------------------------------------------------------------------------------------
+# Unknots that look knotted
+
+
+def test_freedman_unknot():
+    P = knots.freedman_unknot()
+    assert_catalogue_polygon(P, 600, min_ratio=1.1)
+    assert knot_names(P) == {"0_1"}
+
+
+@pytest.mark.parametrize("turns", [2, 6, 12])
+def test_helix_unknot(turns):
+    n = 300 if turns <= 6 else 600
+    P = knots.helix_unknot(n, turns=turns)
+    assert_catalogue_polygon(P, n)
+    assert knot_names(P) == {"0_1"}
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_random_unknot(seed):
+    P = knots.random_unknot(seed=seed)
+    assert_catalogue_polygon(P, 400)
+    assert knot_names(P) == {"0_1"}
+
+
+def test_random_unknot_is_deterministic_and_tangled():
+    np.testing.assert_array_equal(
+        knots.random_unknot(300, seed=7), knots.random_unknot(300, seed=7)
+    )
+    assert not np.allclose(knots.random_unknot(300, seed=7), knots.random_unknot(300, seed=8))
+    assert knot_names(knots.random_unknot(seed=1, laps=6)) == {"0_1"}
+
+
+# --------------------------------------------------------------------------------------------
+# The documented smallest vertex counts pass the coarseness rule
+
+
+@pytest.mark.parametrize(
+    "make, n",
+    [
+        (knots.figure_eight, 36),
+        (lambda n: knots.torus_knot(2, 3, n), 18),
+        (lambda n: knots.torus_knot(3, 4, n), 35),
+        (lambda n: knots.named("3_1", n), 27),
+        (lambda n: knots.named("7_2", n), 136),
+        (lambda n: knots.named("8_1", n), 197),
+        (knots.freedman_unknot, 470),
+        (knots.helix_unknot, 61),
+    ],
+)
+def test_documented_smallest_n(make, n):
+    check_polygon(make(n))
+    with pytest.raises(ValueError, match="too coarse"):
+        check_polygon(make(n - 3))
+
+
+def test_planar_crossings_kernel_matches_numpy(rng):
+    xy = np.cumsum(rng.normal(size=(60, 2)), axis=0)
+    xy -= np.linspace(0, 1, 60)[:, None] * (xy[-1] - xy[0])  # close the walk
+    d = np.roll(xy, -1, axis=0) - xy
+    expected = set()
+    for i in range(60):
+        for j in range(i + 2, 60 - (i == 0)):
+            A = np.column_stack([d[i], -d[j]])
+            if abs(np.linalg.det(A)) > 0:
+                a, b = np.linalg.solve(A, xy[j] - xy[i])
+                if 0 <= a < 1 and 0 <= b < 1:
+                    expected.add((i, j))
+    assert len(expected) > 10
+    assert set(map(tuple, knots._planar_crossings(xy).tolist())) == expected
+
+
+def test_bad_vertex_counts():
+    with pytest.raises(ValueError, match="at least 4 vertices per component"):
+        knots.torus_knot(2, 4, 7)
+    with pytest.raises(TypeError, match="n must be an int"):
+        knots.circle(10.0)
