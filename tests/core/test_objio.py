@@ -91,9 +91,9 @@ def test_shuffled_pairs_single_line_and_blender_clutter(tmp_path, rng):
     np.testing.assert_array_equal(Q, P)
 
 
-def test_negative_indices_and_slashes(tmp_path):
+def test_negative_indices_slashes_crlf_and_continued_lines(tmp_path):
     P = trefoil(5)
-    (Q,) = read_obj(_write(tmp_path, _verts(P) + "l -5/1 -4/2 -3 -2 -1 -5\n"))
+    (Q,) = read_obj(_write(tmp_path, _verts(P) + "l -5/1 -4/2 -3 \\\r\n -2 -1 -5\r\n"))
     np.testing.assert_array_equal(Q, P)
 
 
