@@ -659,6 +659,10 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
                 scene: bpy.types.Scene | None = None) -> Path:
     """Export the keyframed curve over the scene's frame range as Alembic or USD.
 
+    The centre line is exported (one cyclic linear curve per spline, positions sampled on every
+    frame); the bevel, which Blender 5.0's exporters would write as a second curve object, is
+    switched off for the export and restored afterwards.
+
     Parameters
     ----------
     obj : bpy.types.Object
@@ -678,6 +682,8 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
     active = bpy.context.view_layer.objects.active
     _select_only(bpy.context, obj)
     frame = scene.frame_current
+    bevel = obj.data.bevel_depth
+    obj.data.bevel_depth = 0.0
     try:
         suffix = path.suffix.lower()
         if suffix == ".abc":
@@ -689,6 +695,7 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
         else:
             raise ValueError(f"unknown export format '{suffix}'; use .abc or .usd/.usda/.usdc")
     finally:
+        obj.data.bevel_depth = bevel
         obj.select_set(False)
         for o in selected:
             o.select_set(True)

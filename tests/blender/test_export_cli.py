@@ -1,0 +1,114 @@
+"""Alembic/USD round trips of the keyframed flow, the gradient fields, the CLI command, panel."""
+
+import bpy
+import numpy as np
+import pytest
+from conftest import points_at
+
+
+@pytest.fixture
+def relaxed(scene, mb):
+    bpy.ops.moebius.add_knot(kind="3_1", edges=60)
+    obj = bpy.context.active_object
+    obj.location = (0.5, -1.0, 2.0)  # exports must carry the transform too
+    obj.rotation_euler = (0.2, 0.0, 0.4)
+    scene.moebius.max_iterations = 5
+    scene.moebius.tolerance = 0.0
+    bpy.ops.moebius.relax()
+    assert scene.frame_end - scene.frame_start == 5
+    return obj
+
+
+def _imported_points(frame):
+    """World positions of the one imported curves object at ``frame``."""
+    scene = bpy.context.scene
+    scene.frame_set(frame)
+    objs = [o for o in scene.objects if o.type == "CURVES"]
+    assert len(objs) == 1, [(o.name, o.type) for o in scene.objects]
+    (obj,) = objs
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    ev = obj.evaluated_get(depsgraph)
+    assert obj.type == "CURVES"
+    pos = ev.data.attributes["position"]
+    X = np.empty(3 * len(pos.data))
+    pos.data.foreach_get("vector", X)
+    X = X.reshape(-1, 3)
+    M = np.array(ev.matrix_world)
+    return X @ M[:3, :3].T + M[:3, 3], ev.data
+
+
+@pytest.mark.parametrize("suffix", [".abc", ".usda"])
+def test_export_round_trip(relaxed, mb, tmp_path, suffix):
+    scene = bpy.context.scene
+    frames = [scene.frame_start, scene.frame_start + 2, scene.frame_end]
+    expected = {f: points_at(relaxed, f) for f in frames}
+    assert np.abs(expected[frames[0]] - expected[frames[-1]]).max() > 1e-3
+    path = mb.export_flow(relaxed, tmp_path / f"flow{suffix}")
+    assert path.stat().st_size > 0
+    bpy.ops.wm.read_homefile(use_empty=True)
+    if suffix == ".abc":
+        bpy.ops.wm.alembic_import(filepath=str(path))
+    else:
+        bpy.ops.wm.usd_import(filepath=str(path))
+    for f in frames:
+        X, curves = _imported_points(f)
+        assert len(X) == 60
+        np.testing.assert_allclose(X, expected[f], atol=1e-5)
+    assert bool(curves.attributes["cyclic"].data[0].value)
+
+
+def test_show_gradient_arrows(scene, mb, core):
+    bpy.ops.moebius.add_knot(kind="3_1", edges=60)
+    knot = bpy.context.active_object
+    assert bpy.ops.moebius.show_gradient(length=0.2) == {"FINISHED"}
+    P = mb.curve_polygons(knot)[0]
+    diagonal = np.linalg.norm(np.ptp(P, axis=0))
+    for metric in ("l2", "hs_pure", "hs"):
+        arrows = bpy.data.objects[f"{knot.name}.grad.{metric}"]
+        mesh = arrows.data
+        assert arrows.parent == knot and len(mesh.edges) == 60 and len(mesh.vertices) == 120
+        V = np.array([v.co[:] for v in mesh.vertices])
+        D = V[60:] - V[:60]
+        G = core.sobolev_gradient(P, metric=metric, projected=True)
+        scale = arrows["moebius_arrow_scale"]
+        np.testing.assert_allclose(D, scale * G, atol=1e-5 * diagonal)
+        assert np.linalg.norm(D, axis=1).max() == pytest.approx(0.2 * diagonal, rel=1e-5)
+    # running it again replaces, not duplicates
+    bpy.context.view_layer.objects.active = knot
+    bpy.ops.moebius.show_gradient(l2=False, hs_pure=False)
+    assert len([o for o in bpy.data.objects if ".grad." in o.name]) == 3
+
+
+def test_cli_command(scene, mb, tmp_path):
+    from importlib import import_module
+
+    cli = import_module(mb.__name__ + ".cli")
+    assert cli._handle is not None  # registered with bpy.utils.register_cli_command
+    blend, abc = tmp_path / "knot.blend", tmp_path / "knot.abc"
+    rc = cli.main(["--knot", "3_1", "--edges", "60", "--max-iterations", "3",
+                   "--save", str(blend), "--export", str(abc)])
+    assert rc == 0 and blend.stat().st_size > 0 and abc.stat().st_size > 0
+    bpy.ops.wm.read_homefile(use_empty=True)
+    rc = cli.main(["--open", str(blend), "--object", "Knot 3_1", "--max-iterations", "2",
+                   "--frame-start", "5", "--save", str(blend)])
+    assert rc == 0
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    assert (bpy.context.scene.frame_start, bpy.context.scene.frame_end) == (5, 7)
+    assert mb.keyed_frames(bpy.data.objects["Knot 3_1"]) == [5.0, 6.0, 7.0]
+    assert cli.main(["--object", "Nope"]) == 1
+    assert cli.main(["--knot", "no_such_knot"]) == 1
+    assert cli.main(["--bogus"]) == 2
+
+
+def test_panels_registered(mb):
+    for name in ("VIEW3D_PT_moebius", "VIEW3D_PT_moebius_polygon", "VIEW3D_PT_moebius_flow",
+                 "VIEW3D_PT_moebius_keyframes", "VIEW3D_PT_moebius_advanced"):
+        panel = getattr(bpy.types, name)
+        assert panel.bl_category == "Möbius" and panel.bl_space_type == "VIEW_3D"
+    settings = bpy.types.Scene.bl_rna.properties["moebius"].fixed_type
+    for prop in ("metric", "edges", "max_iterations", "tolerance", "frame_start",
+                 "keyframe_stride", "initial_step", "armijo", "backproject_iter",
+                 "backproject_tol", "keep_edge_lengths", "keep_barycenter"):
+        assert prop in settings.properties, prop
+    for stat in ("last_iterations", "last_energy_start", "last_energy_end", "last_message"):
+        assert settings.properties[stat].is_readonly, stat
