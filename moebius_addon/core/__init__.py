@@ -5,11 +5,13 @@ Möbius energy of polygons and links, the metrics of the paper, the constraints,
 projected Sobolev-gradient flow with collision-bounded Armijo steps. See ``docs/api.md``.
 """
 
+from . import knots
 from .collision import max_collision_free_step
 from .constraints import Constraints
 from .energy import moebius_energy, moebius_gradient
 from .flow import IterationState, Relaxation, RelaxResult, relax, sobolev_gradient
 from .metrics import METRICS, gram_matrix
+from .objio import read_obj, write_obj
 from .polygon import check_polygon, contact_ratio, resample, suggest_edge_count
 
 __all__ = [
@@ -21,11 +23,14 @@ __all__ = [
     "check_polygon",
     "contact_ratio",
     "gram_matrix",
+    "knots",
     "max_collision_free_step",
     "moebius_energy",
     "moebius_gradient",
+    "read_obj",
     "relax",
     "resample",
     "sobolev_gradient",
     "suggest_edge_count",
+    "write_obj",
 ]

@@ -155,11 +155,14 @@ def resample(points, n, closed: bool = True):
 
 
 def _split_count(parts, n):
-    """Distribute ``n`` vertices over link components proportionally to their lengths."""
+    """Distribute ``n`` vertices over link components proportionally to their lengths
+    (largest remainder, so the counts add up to ``n``; at least 4 each)."""
     lengths = np.array([np.linalg.norm(np.diff(np.vstack([p, p[:1]]), axis=0), axis=1).sum()
                         for p in map(np.asarray, parts)])
-    ns = np.maximum(MIN_VERTICES, np.round(n * lengths / lengths.sum()).astype(int))
-    return list(ns)
+    share = n * lengths / lengths.sum()
+    ns = np.floor(share).astype(int)
+    ns[np.argsort(ns - share)[: n - ns.sum()]] += 1
+    return list(np.maximum(MIN_VERTICES, ns))
 
 
 def contact_ratio(P, min_gap: int = CONTACT_GAP) -> float:

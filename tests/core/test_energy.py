@@ -30,7 +30,8 @@ def slow_energy(P) -> float:
             if gap < 2:
                 continue
             ti, tj = ei / li, ej / lj
-            F = (ti - tj) @ (ti - tj) / (2 * r2) + 2 * (ti @ tj) / r2 - 2 * (d @ ti) * (d @ tj) / r2**2
+            F = ((ti - tj) @ (ti - tj) / (2 * r2) + 2 * (ti @ tj) / r2
+                 - 2 * (d @ ti) * (d @ tj) / r2**2)
             total += li * lj * F
     return total
 

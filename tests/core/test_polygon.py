@@ -66,7 +66,7 @@ def test_check_messages():
     P[5] = P[4]
     with pytest.raises(ValueError, match="repeats a point: vertex 4"):
         check_polygon(P)
-    with pytest.raises(ValueError, match="component 1 .*repeats|repeats a point: vertex 2 of component 1"):
+    with pytest.raises(ValueError, match="repeats a point: vertex 2 of component 1"):
         Q = ngon(10)
         Q[3] = Q[2]
         check_polygon([ngon(10), Q + [5, 0, 0]])
