@@ -27,10 +27,12 @@ lint: $(STAMP)
 	$(PY) -m ruff check moebius_addon tests bench
 
 demo: $(STAMP)
-	$(PY) bench/demo_core.py --out out
+	$(PY) bench/demo_blender.py --out out
 
 bench: $(STAMP)
 	$(PY) bench/core_bench.py
 
 clean:
 	rm -rf $(VENV) out dist build
+
+include mk/blender.mk

@@ -1,7 +1,7 @@
 # Blender extension targets; included from the main Makefile (`include mk/blender.mk`).
 # Uses PY and STAMP from the main Makefile.
 
-.PHONY: extension extension-linux test-blender demo-blender
+.PHONY: extension extension-linux test-blender demo-core
 
 # Per-platform extension zips in dist/ (downloads the pinned numba/llvmlite wheels into wheels/).
 extension: $(STAMP)
@@ -14,6 +14,6 @@ extension-linux: $(STAMP)
 test-blender: $(STAMP)
 	$(PY) -m pytest -q -m "not slow" tests/blender
 
-# Headless Blender demo: FHW unknot -> convert -> relax -> out/demo.blend, out/flow.abc, PNGs.
-demo-blender: $(STAMP)
-	$(PY) bench/demo_blender.py --out out
+# The core-only demo (numpy + matplotlib, no Blender); `make demo` is the Blender one.
+demo-core: $(STAMP)
+	$(PY) bench/demo_core.py --out out

@@ -27,12 +27,18 @@ from .api import (
     show_gradients,
 )
 from .geometry import curve_polygons, object_polylines, write_polygons
-from .keyframes import ENERGY_PROP, keyed_frames, remove_flow_keyframes, write_flow_keyframes
+from .keyframes import (
+    ENERGY_PROP,
+    keyed_energies,
+    keyed_frames,
+    remove_flow_keyframes,
+    write_flow_keyframes,
+)
 
 __all__ = [
     "EDGE_LIMIT", "ENERGY_PROP", "ObjectRelaxation", "add_knot", "apply_conversion",
     "apply_frame", "clear_animation", "convert_object", "curve_polygons", "energy", "export_flow",
-    "keyed_frames", "knot_polygons", "make_curve_object", "object_polylines",
+    "keyed_energies", "keyed_frames", "knot_polygons", "make_curve_object", "object_polylines",
     "prepare_conversion", "relax_object", "relax_settings", "remove_flow_keyframes",
     "show_gradients", "write_flow_keyframes", "write_polygons",
 ]

@@ -142,14 +142,23 @@ def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.n
     return range(frame_start, frame_start + len(iterates))
 
 
-def keyed_frames(obj: bpy.types.Object) -> list[float]:
-    """Frames at which the energy of ``obj`` is keyed (empty when it has no flow keys)."""
+def keyed_energies(obj: bpy.types.Object) -> tuple[np.ndarray, np.ndarray]:
+    """Frames and energies keyed on ``obj`` by the last relaxation.
+
+    Returns
+    -------
+    frames, energies : (K,) float arrays
+        Empty when the object has no flow keys.
+    """
     fcurves = _fcurves(obj, create=False)
-    if fcurves is None:
-        return []
-    fc = fcurves.find(ENERGY_PATH, index=0)
+    fc = None if fcurves is None else fcurves.find(ENERGY_PATH, index=0)
     if fc is None:
-        return []
+        return np.empty(0), np.empty(0)
     co = np.empty(2 * len(fc.keyframe_points))
     fc.keyframe_points.foreach_get("co", co)
-    return co[0::2].tolist()
+    return co[0::2], co[1::2]
+
+
+def keyed_frames(obj: bpy.types.Object) -> list[float]:
+    """Frames at which the energy of ``obj`` is keyed (empty when it has no flow keys)."""
+    return keyed_energies(obj)[0].tolist()
