@@ -20,17 +20,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _lapack
 from .constraints import Jacobian
 
 
-def triangular_inverse(L: np.ndarray) -> np.ndarray:
-    """Inverse of a lower-triangular matrix by blocked recursion (BLAS-3, about N³/3 flops)."""
+def _numpy_triangular_inverse(L: np.ndarray) -> np.ndarray:
+    """Inverse of a lower-triangular matrix by blocked recursion on BLAS-3 products."""
     n = L.shape[0]
     if n <= 128:
         return np.tril(np.linalg.inv(L))
     h = n // 2
-    X11 = triangular_inverse(L[:h, :h])
-    X22 = triangular_inverse(L[h:, h:])
+    X11 = _numpy_triangular_inverse(L[:h, :h])
+    X22 = _numpy_triangular_inverse(L[h:, h:])
     out = np.zeros_like(L)
     out[:h, :h] = X11
     out[h:, h:] = X22
@@ -38,9 +39,21 @@ def triangular_inverse(L: np.ndarray) -> np.ndarray:
     return out
 
 
+def triangular_inverse(L: np.ndarray) -> np.ndarray:
+    """Inverse of a lower-triangular matrix (LAPACK ``trtri`` when available, N³/3 flops)."""
+    out = _lapack.triangular_inverse(L)
+    return out if out is not None else _numpy_triangular_inverse(L)
+
+
 def spd_inverse(A: np.ndarray) -> np.ndarray:
-    """Inverse of a symmetric positive definite matrix via Cholesky (raises LinAlgError)."""
-    Li = triangular_inverse(np.linalg.cholesky(A))
+    """Inverse of a symmetric positive definite matrix via Cholesky (raises LinAlgError).
+
+    LAPACK ``potrf`` + ``potri`` (N³ flops) where numpy's own LAPACK can be reached, else
+    Cholesky, a blocked triangular inverse and ``LᵀL`` (2 N³ flops)."""
+    out = _lapack.spd_inverse(A)
+    if out is not None:
+        return out
+    Li = _numpy_triangular_inverse(np.linalg.cholesky(A))
     return Li.T @ Li  # numpy routes XᵀX to BLAS syrk
 
 

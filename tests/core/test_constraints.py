@@ -112,3 +112,21 @@ def test_reused_factorization_gives_the_current_solution(rng):
     u_ref, lam_ref = Factorization(A, jac).solve(g, np.zeros(con.size))
     np.testing.assert_allclose(u, u_ref, rtol=1e-7, atol=1e-9 * np.abs(u_ref).max())
     assert np.abs(jac.matvec(u)).max() < 1e-8 * np.abs(u).max()
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_lapack_and_numpy_fallback_agree(dtype, rng):
+    from moebius_addon.core import _lapack
+    from moebius_addon.core.linalg import _numpy_triangular_inverse
+
+    n = 260
+    B = rng.standard_normal((n, n))
+    A = (B @ B.T + n * np.eye(n)).astype(dtype)
+    L = np.linalg.cholesky(A)
+    ref = _numpy_triangular_inverse(L)
+    tol = 1e-12 if dtype == np.float64 else 1e-4
+    np.testing.assert_allclose(triangular_inverse(L), ref, atol=tol * np.abs(ref).max())
+    np.testing.assert_allclose(spd_inverse(A), ref.T @ ref, atol=tol * np.abs(ref).max() ** 2)
+    if _lapack.available():  # numpy's own OpenBLAS was found (PyPI wheels)
+        with pytest.raises(np.linalg.LinAlgError):
+            _lapack.spd_inverse(-A)
