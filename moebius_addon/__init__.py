@@ -9,6 +9,19 @@ to ``bl_ext.<repo>.moebius_addon``, so everything inside uses relative imports).
 import os
 import sys
 
+# Read only when installed the classic way (Preferences ▸ Add-ons ▸ Install… with a zip of this
+# folder) in Blender 3.4–4.1; Blender 4.2+ installs the extension and uses blender_manifest.toml
+# instead (it drops this dict). See docs/ui-testing.md.
+bl_info = {
+    "name": "Möbius Energy Relaxation",
+    "author": "moebius_addon developers",
+    "version": (0, 1, 0),
+    "blender": (3, 4, 0),
+    "location": "View3D ▸ Sidebar ▸ Möbius; Add ▸ Curve ▸ Knot",
+    "description": "Untangle knotted curves by Sobolev flow of the Möbius energy",
+    "category": "Add Curve",
+}
+
 
 def _use_extension_numba_cache() -> None:
     """Cache numba's compiled kernels in the extension's user directory.
@@ -23,7 +36,9 @@ def _use_extension_numba_cache() -> None:
         return
     try:
         path = bpy.utils.extension_path_user(__package__, path="numba_cache", create=True)
-    except ValueError:  # not installed as an extension (e.g. a legacy add-on checkout)
+    except (AttributeError, ValueError):  # Blender < 4.2, or installed as a legacy add-on
+        print("moebius_addon: legacy add-on, so numba caches its kernels next to the add-on's "
+              "files (set NUMBA_CACHE_DIR to choose another directory)")
         return
     os.environ["NUMBA_CACHE_DIR"] = path
     config = sys.modules.get("numba.core.config")
