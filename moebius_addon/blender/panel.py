@@ -22,7 +22,10 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
         obj = context.active_object
         col = layout.column(align=True)
         if s.running:
-            col.progress(factor=s.progress, text=f"Iteration {s.live_iteration}")
+            if hasattr(col, "progress"):  # Blender 4.0+
+                col.progress(factor=s.progress, text=f"Iteration {s.live_iteration}")
+            else:
+                col.label(text=f"Iteration {s.live_iteration} ({100 * s.progress:.0f} %)")
             col.label(text=f"Energy {s.live_energy:.6g}", icon="SORTTIME")
             col.label(text="Esc in the viewport stops (keeps the iterates)")
         elif obj is not None and ENERGY_PROP in obj:
