@@ -5,7 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+DATA = Path(__file__).resolve().parents[1] / "moebius_addon" / "core" / "data"
 
 
 def trefoil(n: int) -> np.ndarray:
@@ -42,4 +42,4 @@ def rng():
 @pytest.fixture(scope="session")
 def fhw_raw() -> np.ndarray:
     """The Freedman–He–Wang unknot as published (1184 vertices)."""
-    return read_obj_vertices(SHARED / "data" / "repulsive-curves" / "freedman_unknot_1184.obj")
+    return read_obj_vertices(DATA / "freedman_unknot_1184.obj")
