@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 DATA = Path(__file__).resolve().parents[1] / "moebius_addon" / "core" / "data"
+# the project's shared folder (beside the checkout, as in CI): more curves for the OBJ tests
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 
 
 def trefoil(n: int) -> np.ndarray:
