@@ -78,9 +78,12 @@ def _curve_polylines(obj: bpy.types.Object) -> list[tuple]:
             out.append((co.reshape(-1, 4)[:, :3].copy(), bool(s.use_cyclic_u)))
         return out
     # Bezier/NURBS: let Blender evaluate the splines on a bare copy (no bevel, extrusion or
-    # modifiers, so the evaluated mesh is just the centre line), then read its edges.
+    # modifiers, so the evaluated mesh is just the centre line), then read its edges. The copy
+    # lives in a scratch scene: adding and removing objects in the user's view layer leaves its
+    # object list stale for the rest of the operator (and iterating it then crashes Blender 5.0).
     tmp_curve = curve.copy()
     tmp_obj = None
+    tmp_scene = bpy.data.scenes.new("_moebius_read")
     try:
         tmp_curve.dimensions = "3D"
         tmp_curve.bevel_depth = 0.0
@@ -91,8 +94,9 @@ def _curve_polylines(obj: bpy.types.Object) -> list[tuple]:
         tmp_curve.offset = 1.0
         tmp_curve.resolution_u = max(curve.resolution_u, READ_RESOLUTION)
         tmp_obj = bpy.data.objects.new("_moebius_read", tmp_curve)
-        bpy.context.scene.collection.objects.link(tmp_obj)
-        depsgraph = bpy.context.evaluated_depsgraph_get()
+        tmp_scene.collection.objects.link(tmp_obj)
+        with bpy.context.temp_override(scene=tmp_scene, view_layer=tmp_scene.view_layers[0]):
+            depsgraph = bpy.context.evaluated_depsgraph_get()
         evaluated = tmp_obj.evaluated_get(depsgraph)
         mesh = evaluated.to_mesh()
         try:
@@ -103,6 +107,7 @@ def _curve_polylines(obj: bpy.types.Object) -> list[tuple]:
         if tmp_obj is not None:
             bpy.data.objects.remove(tmp_obj)
         bpy.data.curves.remove(tmp_curve)
+        bpy.data.scenes.remove(tmp_scene)
     return _mesh_polylines(vertices, edges, obj.name)
 
 

@@ -132,7 +132,10 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
             area.tag_redraw()
 
     def _fail(self, context, err):
-        api.geometry.write_polygons(self._run.obj.data, self._run.start)
+        try:
+            api.geometry.write_polygons(self._run.obj.data, self._run.start)
+        except ReferenceError:  # the object was deleted while the flow ran
+            pass
         if getattr(self, "_timer", None) is not None:
             self._cleanup(context)
         self.report({"ERROR"}, f"Relaxation failed, curve restored: {err}")
@@ -151,9 +154,9 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         try:
             while more and time.perf_counter() - t0 < self.TICK_BUDGET:
                 more = self._run.step()
-        except Exception as err:  # noqa: BLE001
+            self._run.show()
+        except Exception as err:  # noqa: BLE001 - also a curve deleted mid-run
             return self._fail(context, err)
-        self._run.show()
         settings = context.scene.moebius
         settings.live_iteration = self._run.nit
         settings.live_energy = self._run.energy

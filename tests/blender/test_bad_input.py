@@ -3,7 +3,7 @@
 import bpy
 import numpy as np
 import pytest
-from conftest import poly_curve, scene_state
+from bpy_helpers import poly_curve, scene_state
 
 
 def _refused(op, match, **kwargs):

@@ -3,7 +3,7 @@
 import bpy
 import numpy as np
 import pytest
-from conftest import points_at
+from bpy_helpers import points_at
 
 
 @pytest.fixture

@@ -6,7 +6,7 @@ import tomllib
 import zipfile
 
 import bpy
-from conftest import EXT_MODULE, ROOT
+from bpy_helpers import EXT_MODULE, ROOT
 
 
 def test_zip_contents_and_manifest(extension_zip):

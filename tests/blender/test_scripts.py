@@ -4,7 +4,7 @@ import os
 import subprocess
 import sys
 
-from conftest import ROOT
+from bpy_helpers import ROOT
 
 
 def _run(args, tmp_path):

@@ -1,0 +1,64 @@
+"""Helpers for the Blender tests (imported by name; ``conftest`` is ambiguous in this tree).
+
+Import only after ``conftest.py`` has pointed ``BLENDER_USER_RESOURCES`` at a throw-away
+directory (pytest loads the conftest first).
+"""
+
+from pathlib import Path
+
+import bpy
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+EXT_MODULE = "bl_ext.user_default.moebius_addon"
+
+
+def poly_curve(name: str, polygons, cyclic: bool = True, spline_type: str = "POLY"):
+    """Link a new curve object with one spline per ``(n, 3)`` point array and select it."""
+    curve = bpy.data.curves.new(name, "CURVE")
+    curve.dimensions = "3D"
+    for P in polygons:
+        P = np.asarray(P, dtype=float)
+        spline = curve.splines.new(spline_type)
+        spline.points.add(len(P) - 1)
+        spline.points.foreach_set("co", np.column_stack([P, np.ones(len(P))]).ravel())
+        spline.use_cyclic_u = cyclic
+    obj = bpy.data.objects.new(name, curve)
+    bpy.context.scene.collection.objects.link(obj)
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    return obj
+
+
+def scene_state() -> dict:
+    """Everything a failed operator must leave alone: data-blocks, visibility, geometry."""
+    state = {
+        "objects": sorted(o.name for o in bpy.data.objects),
+        "curves": sorted(c.name for c in bpy.data.curves),
+        "meshes": sorted(m.name for m in bpy.data.meshes),
+        "actions": sorted(a.name for a in bpy.data.actions),
+        "hidden": sorted(o.name for o in bpy.data.objects if o.hide_get() or o.hide_render),
+        "frames": (bpy.context.scene.frame_start, bpy.context.scene.frame_end),
+    }
+    for c in bpy.data.curves:
+        for k, s in enumerate(c.splines):
+            pts = s.bezier_points if s.type == "BEZIER" else s.points
+            co = np.empty(len(pts) * (3 if s.type == "BEZIER" else 4))
+            pts.foreach_get("co", co)
+            state[f"{c.name}/{k}"] = co.round(12).tolist()
+    return state
+
+
+def points_at(obj, frame: int):
+    """World-space spline points of ``obj`` at ``frame`` as one ``(N, 3)`` array."""
+    bpy.context.scene.frame_set(frame)
+    M = np.array(obj.matrix_world)
+    X = []
+    for s in obj.data.splines:
+        co = np.empty(4 * len(s.points))
+        s.points.foreach_get("co", co)
+        X.append(co.reshape(-1, 4)[:, :3])
+    X = np.concatenate(X)
+    return X @ M[:3, :3].T + M[:3, 3]
