@@ -36,3 +36,4 @@ clean:
 	rm -rf $(VENV) out dist build
 
 include mk/blender.mk
+include mk/ui.mk
