@@ -107,6 +107,9 @@ def register() -> None:
     global _handle
     if hasattr(bpy.utils, "register_cli_command"):  # Blender 4.2+
         _handle = bpy.utils.register_cli_command("moebius", main)
+    else:  # a legacy add-on in Blender 3.4-4.1
+        print("moebius_addon: the `blender -c moebius` command needs Blender 4.2+; here call "
+              "main([...]) or the scripting API from `blender -b --python script.py`")
 
 
 def unregister() -> None:
