@@ -112,6 +112,10 @@ class Session:
             "PYTHONNOUSERSITE": "1",
             "PYTHONPATH": "",
         })
+        # Blender's temporary files (quit.blend, autosaves) stay in the test's folder too.
+        tmp = home / "tmp"
+        tmp.mkdir(parents=True, exist_ok=True)
+        env.update({"TMPDIR": str(tmp), "TEMP": str(tmp), "TMP": str(tmp)})
         # Compiled numba kernels survive between runs unless --cold (what a first use costs).
         cache = (self.out / "home" / "numba-cache") if self.cold else \
             (self.out.parent / "ui-numba-cache")
@@ -612,9 +616,13 @@ def main(argv: list[str] | None = None) -> int:
               " (make ui-test installs them with apt-get)", file=sys.stderr)
         return 2
     out = args.out.resolve()
-    if out.exists():
+    if out.exists() and any(out.iterdir()):
+        if not (out / "driver.log").exists():  # never wipe a folder this script did not make
+            print(f"{out} exists and is not an earlier ui-test output; choose another --out",
+                  file=sys.stderr)
+            return 2
         shutil.rmtree(out)
-    out.mkdir(parents=True)
+    out.mkdir(parents=True, exist_ok=True)
     t_start = time.monotonic()
     logfile = open(out / "driver.log", "w")
 
