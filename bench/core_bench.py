@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
 import time
 from pathlib import Path
 
 import numpy as np
+from paper import machine  # bench/ is on sys.path when run as a script
 
 from moebius_addon import core
 from moebius_addon.core import knots
@@ -25,25 +24,6 @@ from moebius_addon.core.constraints import jacobian
 from moebius_addon.core.energy import energy_gradient_x, energy_x
 from moebius_addon.core.linalg import Factorization
 from moebius_addon.core.metrics import gram_x
-
-
-def machine() -> dict:
-    cpu = platform.processor() or platform.machine()
-    try:
-        with open("/proc/cpuinfo") as f:
-            cpu = next(line.split(":", 1)[1].strip() for line in f if line.startswith("model name"))
-    except (OSError, StopIteration):
-        pass
-    import numba
-
-    return {
-        "cpu": cpu,
-        "cores": os.cpu_count(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "numba": numba.__version__,
-        "numba_threads": numba.get_num_threads(),
-    }
 
 
 def best_of(f, repeat=5):
