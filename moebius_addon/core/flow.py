@@ -41,6 +41,13 @@ _AUTO_SINGLE_FROM = 400
 # A run that stops moving with a projected gradient above this many times tol is jammed, not
 # converged (near the minimum Armijo fails on round-off with sqrt(<g,u>) ≈ 1e-8, DESIGN.md).
 _STALL_FACTOR = 1e3
+# The modified Newton back-projection gives up on a trial step once |Φ| shrinks by less than
+# this factor per iteration (it converges linearly; slower means the step left its basin).
+_CONTRACTION = 0.5
+# Trials whose straight step breaks the constraints by more than this (max |Φ|: relative edge
+# length change) are rejected before any solve. Measured on the FHW unknot at 600 edges: every
+# back-projection that succeeded started below 0.11, most failing ones above 0.12.
+_MAX_TRIAL_RESIDUAL = 0.12
 
 
 @dataclass
@@ -113,6 +120,10 @@ class Relaxation:
         Precision of the factorization; "single" is refined to double precision by GMRES on
         the exact system (same iterates up to the solver tolerance, cheaper factorization);
         "auto" uses it from 400 vertices on.
+    interpolate : bool
+        After an Armijo failure shrink τ to the minimizer of the parabola through E(P), the
+        slope −<g,u> and E(Q), kept in [0.1, 0.5] τ, instead of halving it (fewer rejected
+        trials, but smaller accepted steps: measured more iterations on the FHW unknot).
     """
 
     def __init__(
@@ -136,6 +147,7 @@ class Relaxation:
         check: bool = True,
         reuse_factorization: bool = False,
         precision: str = "auto",
+        interpolate: bool = False,
     ):
         if metric not in METRICS:
             raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
@@ -160,6 +172,7 @@ class Relaxation:
         self.growth = float(growth)
         self.backproject_iter = int(backproject_iter)
         self.backproject_tol = float(backproject_tol)
+        self.interpolate = bool(interpolate)
 
         # Work at total length 1 around the origin (results are mapped back).
         ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
@@ -272,10 +285,15 @@ class Relaxation:
     # -- one iteration -------------------------------------------------------------------------
 
     def _backproject(self, Q: np.ndarray) -> tuple[np.ndarray, bool]:
+        prev = np.inf
         for _ in range(self.backproject_iter + 1):
             phi = residual(Q, self.con)
-            if phi.size == 0 or np.abs(phi).max() <= self.backproject_tol:
+            size = float(np.abs(phi).max()) if phi.size else 0.0
+            if size <= self.backproject_tol:
                 return Q, True
+            if not size < _CONTRACTION * prev:
+                return Q, False  # not contracting (or NaN): the step is too long
+            prev = size
             Q = Q - self.solver.pseudo_inverse(phi)
             if not np.all(np.isfinite(Q)):
                 return Q, False
@@ -291,12 +309,24 @@ class Relaxation:
         tau = min(tau0, 2.0 / 3.0 * tau_star)
         refactored = False
         for _ in range(60):
-            Q, ok = self._backproject(X - tau * u)
+            Q = X - tau * u
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r0 = float(np.abs(residual(Q, self.con)).max()) if self.con.size else 0.0
+            if r0 > _MAX_TRIAL_RESIDUAL:
+                # Φ(X − τu) grows like τ²: this trial is far outside the back-projection's
+                # basin; shrink at once, without solves, to about where it would succeed
+                self.rejected += 1
+                tau *= min(0.5, max(0.1, 0.9 * np.sqrt(_MAX_TRIAL_RESIDUAL / r0)))
+                continue
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                # a wild trial may overflow on its way to rejection; it is never accepted
+                Q, ok = self._backproject(Q)
             if not ok and not self.solver.fresh and not refactored:
                 # a stale factorization may be what failed: refactor once, same step
                 self.solver.refactor()
                 refactored = True
                 continue
+            shrink = 0.5
             if ok and contact_time_x(X, X - Q, self.layout, 1.0, self.eps) >= 1.0:
                 EQ, gQ = energy_gradient_x(Q, self.layout)
                 if EQ <= E - self.armijo * tau * gu:
@@ -306,8 +336,14 @@ class Relaxation:
                     self._record(tau)
                     self._check_stop(E)
                     return not self.done
+                if self.interpolate:
+                    # minimizer of the parabola through E, slope −<g,u> and E(Q), kept in
+                    # [0.1, 0.5] τ (safeguarded backtracking, Nocedal & Wright §3.5)
+                    curv = EQ - E + tau * gu
+                    if curv > 0:
+                        shrink = min(0.5, max(0.1, 0.5 * gu * tau / curv))
             self.rejected += 1
-            tau *= 0.5
+            tau *= shrink
             if tau * gu <= 1e-15 * abs(E):
                 break
         # No acceptable step: at the minimum the Armijo test fails on round-off
@@ -389,10 +425,12 @@ def relax(
         from .methods import make_run
 
         run = make_run(method, P, metric, max_iter, tol, **options)
-    while run.step():
-        if callback is not None and callback(run.state()):
+    while not run.done:
+        before = run.nit
+        run.step()
+        # every accepted iterate reaches the callback, the last one of the run included
+        if run.nit > before and callback is not None and callback(run.state()):
             run.stop("stopped by callback")
-            break
     return run.result()
 
 

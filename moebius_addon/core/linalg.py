@@ -6,8 +6,8 @@ of the back-projection (step 4).
 Exact solve by the Schur complement: ``A⁻¹`` from a Cholesky factor, then
 ``S = C G⁻¹ Cᵀ``. The edge rows of ``C`` are ``diag(t_k) D`` for each coordinate ``k``, so the
 edge block of ``S`` is ``(D A⁻¹ Dᵀ) ∘ (T Tᵀ)``: O(N²) once ``A⁻¹`` is known, instead of the
-3(N+3) triangular solves of a generic ``G⁻¹ Cᵀ``. Cubic cost: Cholesky of ``A`` and of ``S``,
-one triangular inverse each, one ``LᵀL`` product — about 7/3 N³ flops.
+3(N+3) triangular solves of a generic ``G⁻¹ Cᵀ``. Cubic cost: LAPACK potrf + potri for ``A⁻¹``
+(N³ flops) and potrf for ``S`` (N³/3); ``S⁻¹`` is applied by triangular solves.
 
 ``SaddlePointSolver`` reuses that factorization across iterations as a preconditioner for GMRES
 on the current system (the metric and the constraints change little from one iterate to the
@@ -18,6 +18,7 @@ recursion on BLAS-3 products.
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from . import _lapack
@@ -57,6 +58,19 @@ def spd_inverse(A: np.ndarray) -> np.ndarray:
     return Li.T @ Li  # numpy routes XᵀX to BLAS syrk
 
 
+@nb.njit(cache=True, parallel=True)
+def _edge_schur(Ainv, nxt, inv_l, T, S):
+    """``S[I, J] = (D A⁻¹ Dᵀ)_IJ <t_I, t_J>`` for the edge rows, with
+    ``(Du)_I = (u[nxt I] − u[I]) / l_I``: one pass over ``A⁻¹``, no N × N temporaries."""
+    n = nxt.shape[0]
+    for i in nb.prange(n):
+        i1 = nxt[i]
+        for j in range(n):
+            j1 = nxt[j]
+            y = (Ainv[i1, j1] - Ainv[i1, j] - Ainv[i, j1] + Ainv[i, j]) * inv_l[i] * inv_l[j]
+            S[i, j] = y * (T[i, 0] * T[j, 0] + T[i, 1] * T[j, 1] + T[i, 2] * T[j, 2])
+
+
 class Factorization:
     """Solver of the saddle-point system at one iterate (A, C fixed).
 
@@ -78,25 +92,27 @@ class Factorization:
         ne = m - nb
         if ne:
             T, inv_l = jac.edge_fields()
-            T = T.astype(self.dtype)
-            inv_l = inv_l.astype(self.dtype)
-            # Y = D A⁻¹ Dᵀ with (Du)_I = (u[nxt I] − u[I]) / l_I, then S_ee = Y ∘ (T Tᵀ)
-            Y = (self.Ainv[lay.nxt] - self.Ainv) * inv_l[:, None]
-            Y = (Y[:, lay.nxt] - Y) * inv_l[None, :]
-            S[:ne, :ne] = Y * (T @ T.T)
+            _edge_schur(self.Ainv, lay.nxt, inv_l.astype(self.dtype), T.astype(self.dtype), S)
         if nb:
             F = jac.barycenter_fields()  # (nb, N, 3)
             cols = np.stack([jac.matvec(self.ginv(F[r])) for r in range(nb)], axis=1)
             S[:, ne:] = cols
             S[ne:, :] = cols.T
-        # S⁻¹ is applied as L⁻ᵀ(L⁻¹ v): the triangular inverse is enough, no LᵀL product
-        self.LSi = triangular_inverse(np.linalg.cholesky(S)) if m else np.zeros((0, 0))
+        # S⁻¹ is applied by two triangular solves with its Cholesky factor (LAPACK potrf and
+        # potrs: N³/3 flops); without LAPACK, as L⁻ᵀ(L⁻¹ v) with a triangular inverse.
+        self.LS = _lapack.cholesky(S, overwrite=True) if m else None
+        self.LSi = None
+        if self.LS is None:
+            self.LSi = triangular_inverse(np.linalg.cholesky(S)) if m else np.zeros((0, 0))
 
     def ginv(self, U: np.ndarray) -> np.ndarray:
         """``G⁻¹ U`` for a field (N, 3) (``A⁻¹`` on every coordinate)."""
         return (self.Ainv @ U.astype(self.dtype, copy=False)).astype(np.float64, copy=False)
 
     def sinv(self, v: np.ndarray) -> np.ndarray:
+        """``S⁻¹ v`` for the Schur complement ``S = C G⁻¹ Cᵀ``."""
+        if self.LS is not None:
+            return _lapack.cho_solve(self.LS, v).astype(np.float64, copy=False)
         w = self.LSi @ v.astype(self.dtype, copy=False)
         return (self.LSi.T @ w).astype(np.float64, copy=False)
 
@@ -159,7 +175,15 @@ class SaddlePointSolver:
         self.last = 0.0
 
     def refactor(self) -> None:
-        self.fac = Factorization(self.A, self.jac, self.dtype)
+        try:
+            self.fac = Factorization(self.A, self.jac, self.dtype)
+        except np.linalg.LinAlgError:
+            if self.dtype == np.float64:
+                raise
+            # single precision lost definiteness (h2 at many vertices has κ(A) beyond 1e7):
+            # factor in double precision from now on
+            self.dtype = np.float64
+            self.fac = Factorization(self.A, self.jac, self.dtype)
         self.fresh = True
         self.spent = 0.0
         self.iterates = 0

@@ -130,3 +130,24 @@ def test_lapack_and_numpy_fallback_agree(dtype, rng):
     if _lapack.available():  # numpy's own OpenBLAS was found (PyPI wheels)
         with pytest.raises(np.linalg.LinAlgError):
             _lapack.spd_inverse(-A)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_lapack_cholesky_solve(dtype, rng):
+    from moebius_addon.core import _lapack
+
+    if not _lapack.available():
+        pytest.skip("numpy's OpenBLAS not found: the numpy fallback is used instead")
+    n = 300  # odd block sizes and the 64-tile mirror of spd_inverse
+    B = rng.standard_normal((n, n))
+    A = (B @ B.T + n * np.eye(n)).astype(dtype)
+    b = rng.standard_normal(n)
+    x = _lapack.cho_solve(_lapack.cholesky(A), b)
+    ref = np.linalg.solve(A.astype(np.float64), b)
+    tol = 1e-12 if dtype == np.float64 else 1e-5
+    np.testing.assert_allclose(x, ref, atol=tol * np.abs(ref).max())
+    Ai = _lapack.spd_inverse(A)
+    np.testing.assert_array_equal(Ai, Ai.T)
+    np.testing.assert_allclose(Ai @ A.astype(np.float64), np.eye(n), atol=100 * tol)
+    with pytest.raises(np.linalg.LinAlgError):
+        _lapack.cholesky(-A)

@@ -75,6 +75,24 @@ def test_callback_stops_cleanly(trefoil300):
     assert seen[-1][1] == r.fun and seen[-1][2] == (300, 3)
 
 
+def test_callback_sees_the_last_iterate(trefoil300):
+    # the run ends on the energy target at an accepted iterate: the callback sees that one too
+    seen = []
+    r = relax(trefoil300, max_iter=50, energy_target=75.0, callback=lambda s: seen.append(s))
+    assert r.success and "target" in r.message
+    assert [s.nit for s in seen] == list(range(1, r.nit + 1))
+    assert seen[-1].energy == r.fun <= 75.0
+
+
+def test_single_precision_falls_back_to_double_when_it_is_not_definite():
+    # h2 at 600 vertices has κ(A) beyond single precision: float32 Cholesky fails, the run
+    # must switch to double precision instead of raising
+    P = resample(trefoil(1200), 600)
+    with np.errstate(all="raise"):  # and no overflow warnings from wild trial steps
+        r = relax(P, metric="h2", max_iter=2, precision="single")
+    assert r.nit == 2 and r.fun < r.history["energy"][0]
+
+
 def test_stepper_and_stop(trefoil300):
     run = Relaxation(trefoil300, max_iter=100)
     energies = [run.energy]
