@@ -7,6 +7,7 @@ exactly the code the panel runs. Numerics come from :mod:`moebius_addon.core`.
 
 from __future__ import annotations
 
+import inspect
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -31,6 +32,49 @@ METRICS = (
     ("h1", "H¹", "First-order Sobolev metric (too weak: step sizes shrink with N)"),
     ("l2", "L²", "Plain L² gradient descent (needs tiny steps; for comparison only)"),
 )
+
+#: Default optimizer: the paper's explicit projected gradient (``core.Relaxation``).
+DEFAULT_METHOD = "projected_gradient"
+
+#: Default weight α of the edge-stretch penalty of the penalty methods (the core's default).
+DEFAULT_PENALTY = float(inspect.signature(core.methods.NonlinearCG).parameters["alpha"].default)
+
+_METHOD_TEXT = {
+    "projected_gradient": (
+        "Projected Gradient",
+        "The paper's explicit projected Sobolev gradient with Armijo steps: keeps edge lengths "
+        "and barycenter exactly (default)"),
+    "projected_gradient_implicit": (
+        "Implicit Gradient",
+        "Backward Euler on the projected flow, solved by Newton–Krylov: keeps edge lengths and "
+        "barycenter exactly; fewer but costlier iterations"),
+    "trust_region": (
+        "Trust Region",
+        "Subspace trust-region method with Hessian products: keeps edge lengths and barycenter "
+        "exactly"),
+    "ncg": (
+        "Nonlinear CG (penalty)",
+        "Polak–Ribière conjugate gradients; edge lengths held only by a penalty (they may "
+        "stretch), barycenter free"),
+    "lbfgs": (
+        "L-BFGS (penalty)",
+        "Limited-memory BFGS; edge lengths held only by a penalty (they may stretch), "
+        "barycenter free"),
+    "nesterov": (
+        "Nesterov (penalty)",
+        "Nesterov's accelerated gradient; edge lengths held only by a penalty (they may "
+        "stretch), barycenter free"),
+}
+
+#: Optimizers offered for the flow, as ``(core name, label, description)``: exactly
+#: ``core.METHODS``, in its order (a method without a text here gets its name as label).
+METHODS = tuple(
+    (m, *_METHOD_TEXT.get(m, (m.replace("_", " ").title(), f"core.methods '{m}'")))
+    for m in core.METHODS
+)
+
+#: Methods that replace the edge-length constraints by a penalty of weight α.
+PENALTY_METHODS = core.methods.INFEASIBLE
 
 #: Catalogue entries besides the named knots of ``core.knots.names()``.
 SPECIAL_KNOTS = (
@@ -58,7 +102,8 @@ def _as_link(x) -> list[np.ndarray]:
 
 
 def energy(polygons: Sequence[np.ndarray]) -> float:
-    """Möbius energy of one polygon or of a link (summed over components).
+    """Möbius energy of one polygon, or one total of a link (components and their cross
+    energy, as ``core.moebius_energy``).
 
     Parameters
     ----------
@@ -288,26 +333,66 @@ def apply_conversion(obj: bpy.types.Object, polygons: Sequence[np.ndarray],
 
 
 def relax_settings(settings) -> dict:
-    """Keyword arguments for :func:`relax_object` from the ``scene.moebius`` settings."""
+    """Keyword arguments for :func:`relax_object` from the ``scene.moebius`` settings.
+
+    Only the options that mean something to the chosen method are passed: the Armijo constant
+    is the explicit method's (the implicit one keeps its own, see ``core.methods``), the step
+    growth the two projected gradients', back-projection and constraint toggles the methods
+    that keep the constraints, the penalty weight the penalty methods'.
+    """
+    method = settings.method
     kwargs = dict(
         metric=settings.metric,
+        method=method,
         max_iterations=settings.max_iterations,
         tolerance=settings.tolerance,
         frame_start=settings.frame_start,
         keyframe_stride=settings.keyframe_stride,
         initial_step=settings.initial_step,
-        armijo=settings.armijo,
-        growth=settings.growth,
-        backproject_iter=settings.backproject_iter,
-        backproject_tol=settings.backproject_tol,
-        edge_lengths=settings.keep_edge_lengths,
-        barycenter=settings.keep_barycenter,
     )
+    if method == DEFAULT_METHOD:
+        kwargs["armijo"] = settings.armijo
+    if method in (DEFAULT_METHOD, "projected_gradient_implicit"):
+        kwargs["growth"] = settings.growth
+    if method in PENALTY_METHODS:
+        kwargs["penalty"] = settings.penalty
+    else:
+        kwargs.update(
+            backproject_iter=settings.backproject_iter,
+            backproject_tol=settings.backproject_tol,
+            edge_lengths=settings.keep_edge_lengths,
+            barycenter=settings.keep_barycenter,
+        )
     if settings.use_energy_target:
         kwargs["energy_target"] = settings.energy_target
     if settings.max_seconds > 0:
         kwargs["max_seconds"] = settings.max_seconds
     return kwargs
+
+
+def _check_method(method: str, penalty: float | None) -> dict:
+    """Validate ``method`` and ``penalty``; the extra options for ``core.make_run``."""
+    if method not in core.METHODS:
+        raise ValueError(f"unknown method '{method}'; choose one of {', '.join(core.METHODS)}")
+    if method not in PENALTY_METHODS:
+        if penalty is not None:
+            raise ValueError(
+                f"a penalty weight applies only to the penalty methods "
+                f"({', '.join(PENALTY_METHODS)}); method '{method}' keeps the edge lengths "
+                f"exactly, so leave penalty unset"
+            )
+        return {}
+    alpha = DEFAULT_PENALTY if penalty is None else penalty
+    try:
+        alpha = float(alpha)
+    except (TypeError, ValueError):
+        alpha = float("nan")
+    if not (np.isfinite(alpha) and alpha > 0):
+        raise ValueError(
+            f"penalty weight must be a positive, finite number, got {penalty!r}; the default "
+            f"is {DEFAULT_PENALTY:g} (larger keeps the edge lengths closer to their start)"
+        )
+    return {"alpha": alpha}
 
 
 class ObjectRelaxation:
@@ -326,27 +411,38 @@ class ObjectRelaxation:
         ``"hs"``, ``"hs_pure"``, ``"h2"``, ``"h1"`` or ``"l2"``.
     max_iterations : int
     tolerance : float
-        Stop once the projected gradient is this small (``tol`` of ``core.relax``).
+        Stop once the gradient norm in the metric is this small (``tol`` of ``core.relax``;
+        projected onto the constraints for the feasible methods).
     frame_start : int
         Frame of the start shape.
     keyframe_stride : int
         Keyframe every this many iterates (1 = all).
+    method : str
+        Optimizer, one of ``core.METHODS`` (run by ``core.make_run``); the default
+        ``"projected_gradient"`` is the paper's explicit method, ``core.Relaxation``.
+    penalty : float, optional
+        Weight α of the edge-stretch penalty, for the penalty methods ``"ncg"``, ``"lbfgs"``
+        and ``"nesterov"`` only (None: the core's default, 1e4); positive and finite.
     **options
-        Passed on to ``core.Relaxation`` (``initial_step``, ``armijo``, ``growth``,
+        Passed on to the core's run (``initial_step``, ``armijo``, ``growth``,
         ``backproject_iter``, ``backproject_tol``, ``edge_lengths``, ``barycenter``,
-        ``energy_target``, ``ftol``, ``max_seconds``).
+        ``energy_target``, ``ftol``, ``max_seconds``, and the method's own options); the
+        penalty methods ignore the options that need hard constraints.
 
     Raises
     ------
     ValueError
-        If the curve is not a closed poly curve or the core refuses it (touching itself, ...).
+        If the curve is not a closed poly curve, the core refuses it (touching itself, ...), or
+        the method or penalty is invalid; nothing is changed then.
     """
 
     def __init__(self, obj: bpy.types.Object, metric: str = "hs", max_iterations: int = 200,
                  tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
+                 method: str = DEFAULT_METHOD, penalty: float | None = None,
                  **options) -> None:
         if keyframe_stride < 1:
             raise ValueError(f"keyframe_stride must be at least 1, got {keyframe_stride}")
+        options.update(_check_method(method, penalty))
         polygons = geometry.curve_polygons(obj)
         total = sum(len(p) for p in polygons)
         if total > EDGE_LIMIT and not options.pop("allow_large", False):
@@ -361,10 +457,13 @@ class ObjectRelaxation:
             raise ValueError(f"'{obj.name}': {err}") from None
         options.setdefault("target_lengths", "keep")
         self.obj = obj
+        self.method = method
         self.frame_start = int(frame_start)
         self.stride = int(keyframe_stride)
-        self.run = core.Relaxation(_as_input(polygons), metric=metric, max_iter=max_iterations,
-                                   tol=tolerance, **options)
+        # make_run("projected_gradient", ...) is core.Relaxation itself: the default is the
+        # same run as before methods existed
+        self.run = core.make_run(method, _as_input(polygons), metric=metric,
+                                 max_iter=max_iterations, tol=tolerance, **options)
         self.start = [p.copy() for p in polygons]
         self.x = [p.copy() for p in polygons]
         self.energy = float(np.sum(self.run.energy))
@@ -409,8 +508,8 @@ class ObjectRelaxation:
         Returns
         -------
         result
-            The object returned by ``core.Relaxation.result()`` (``x``, ``fun``, ``nit``,
-            ``success``, ``message``, ``history``).
+            The core run's ``result()`` (``x``, ``fun``, ``nit``, ``success``, ``message``,
+            ``history``; the penalty methods' history also has ``penalized_energy``).
         """
         scene = scene or bpy.context.scene
         result = self.run.result()
@@ -428,12 +527,14 @@ class ObjectRelaxation:
         stats = getattr(scene, "moebius", None)
         if stats is not None:
             stats.store_run(self.obj.name, self.nit, self.energies[0], self.energies[-1],
-                            time.perf_counter() - self.t0, str(result.message), len(frames))
+                            time.perf_counter() - self.t0, str(result.message), len(frames),
+                            self.method)
         return result
 
 
 def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: int = 200,
                  tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
+                 method: str = DEFAULT_METHOD, penalty: float | None = None,
                  callback: Callable | None = None, scene: bpy.types.Scene | None = None,
                  **options):
     """Relax a converted curve by the Möbius-energy flow and keyframe every iterate.
@@ -444,6 +545,11 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
         Curve of cyclic poly splines (see :func:`convert_object`).
     metric, max_iterations, tolerance, frame_start, keyframe_stride, **options
         See :class:`ObjectRelaxation`.
+    method : str
+        Optimizer, one of ``core.METHODS``; default the paper's explicit projected gradient.
+    penalty : float, optional
+        Penalty weight α of ``"ncg"``, ``"lbfgs"``, ``"nesterov"`` (None: 1e4); refused for
+        the other methods.
     callback : callable, optional
         ``callback(run)`` after every accepted iterate with the :class:`ObjectRelaxation`
         (``run.nit``, ``run.x``, ``run.energy``); returning True stops the run cleanly.
@@ -459,10 +565,12 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
     Raises
     ------
     ValueError
-        If the curve cannot be relaxed; nothing is changed then.
+        If the curve cannot be relaxed or the method or penalty is invalid; nothing is changed
+        then.
     """
     run = ObjectRelaxation(obj, metric=metric, max_iterations=max_iterations, tolerance=tolerance,
-                           frame_start=frame_start, keyframe_stride=keyframe_stride, **options)
+                           frame_start=frame_start, keyframe_stride=keyframe_stride,
+                           method=method, penalty=penalty, **options)
     while run.step():
         if callback is not None and callback(run):
             run.stop("stopped by callback")

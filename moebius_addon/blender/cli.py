@@ -4,6 +4,7 @@ Examples::
 
     blender -c moebius --knot fhw --edges 150 --save out/fhw.blend --export out/fhw.abc
     blender -c moebius --open scene.blend --object Knot --edges 200 --save relaxed.blend
+    blender -c moebius --knot 7_2 --method lbfgs --penalty 1e5 --save out/7_2.blend
 
 The same function is callable from Python as :func:`main` (it returns the exit status).
 """
@@ -38,6 +39,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--pq", type=int, nargs=2, default=(2, 3), metavar=("P", "Q"),
                    help="p and q of --knot torus")
     p.add_argument("--metric", default="hs", choices=[m for m, *_ in api.METRICS])
+    p.add_argument("--method", default=api.DEFAULT_METHOD, choices=[m for m, *_ in api.METHODS],
+                   help="optimizer (default: the paper's explicit projected gradient); ncg, "
+                        "lbfgs and nesterov hold the edge lengths by a penalty")
+    p.add_argument("--penalty", type=float, default=None, metavar="ALPHA",
+                   help="penalty weight of ncg, lbfgs and nesterov (default "
+                        f"{api.DEFAULT_PENALTY:g}; larger keeps edge lengths closer)")
     p.add_argument("--max-iterations", type=int, default=200)
     p.add_argument("--tolerance", type=float, default=1e-6)
     p.add_argument("--frame-start", type=int, default=1)
@@ -64,6 +71,7 @@ def main(argv: list[str]) -> int:
     except SystemExit as exit_:
         return int(exit_.code or 0)
     try:
+        api._check_method(args.method, args.penalty)  # refuse before touching anything
         if args.open:
             bpy.ops.wm.open_mainfile(filepath=args.open)
         if args.knot:
@@ -81,12 +89,14 @@ def main(argv: list[str]) -> int:
               f"energy {obj[api.ENERGY_PROP]:.6g}")
         if not args.no_relax:
             t0 = time.perf_counter()
-            result = api.relax_object(obj, metric=args.metric, max_iterations=args.max_iterations,
+            result = api.relax_object(obj, metric=args.metric, method=args.method,
+                                      penalty=args.penalty, max_iterations=args.max_iterations,
                                       tolerance=args.tolerance, frame_start=args.frame_start,
                                       keyframe_stride=args.stride)
             scene = bpy.context.scene
-            print(f"moebius: {result.nit} iterations in {time.perf_counter() - t0:.2f} s, "
-                  f"energy {result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, "
+            print(f"moebius: {args.method}, {result.nit} iterations in "
+                  f"{time.perf_counter() - t0:.2f} s, energy "
+                  f"{result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, "
                   f"frames {scene.frame_start}-{scene.frame_end} ({result.message})")
         if args.save:
             bpy.ops.wm.save_as_mainfile(filepath=args.save)

@@ -22,6 +22,17 @@ _GROUP = "Möbius flow"
 _LINEAR = 1  # index of 'LINEAR' in Keyframe.interpolation (CONSTANT, LINEAR, BEZIER, ...)
 
 
+def _action_name(idblock: bpy.types.ID) -> str:
+    """``<name>Action`` for an object, ``<name>CurveAction`` for its curve data.
+
+    A converted curve and its data share one name, so one pattern for both would give
+    ``<name>Action`` and ``<name>Action.001``.
+    """
+    # the RNA class name, not ID.id_type: Blender 3.4 (the legacy install) has no id_type
+    kind = "" if isinstance(idblock, bpy.types.Object) else type(idblock).bl_rna.identifier
+    return f"{idblock.name}{kind}Action"
+
+
 def _fcurves(idblock: bpy.types.ID, create: bool):
     """The F-curve collection of ``idblock``'s action (channelbag on 4.4+), or None."""
     adt = idblock.animation_data
@@ -29,7 +40,7 @@ def _fcurves(idblock: bpy.types.ID, create: bool):
         if not create:
             return None
         adt = adt or idblock.animation_data_create()
-        adt.action = bpy.data.actions.new(f"{idblock.name}Action")
+        adt.action = bpy.data.actions.new(_action_name(idblock))
     action = adt.action
     if not hasattr(action, "layers"):  # Blender 4.2-4.3: legacy actions
         return action.fcurves

@@ -94,7 +94,8 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
     def _report_result(self, result):
         run = self._run
         kind = "WARNING" if not result.success else "INFO"
-        self.report({kind}, f"'{run.obj.name}': {run.nit} iterations, energy "
+        how = "" if run.method == api.DEFAULT_METHOD else f" ({run.method})"
+        self.report({kind}, f"'{run.obj.name}'{how}: {run.nit} iterations, energy "
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
                             f"({result.message})")

@@ -1,10 +1,37 @@
-"""Sidebar panel View3D ▸ Sidebar ▸ Möbius, with Polygon / Flow / Keyframes / Advanced."""
+"""Sidebar panel View3D ▸ Sidebar ▸ Möbius, with Polygon / Flow / Keyframes / Advanced.
+
+The sidebar is narrow (about 30 characters of label text at its default width), so fields are
+drawn full width with their name inside (no property split), long texts are wrapped, and
+enums get their label on a line of their own.
+"""
 
 from __future__ import annotations
 
+import textwrap
+
 import bpy
 
+from . import api
 from .keyframes import ENERGY_PROP, keyed_frames
+
+_METHOD_LABELS = {key: label for key, label, _ in api.METHODS}
+
+
+def wrap_text(text: str, width_px: float, ui_scale: float = 1.0) -> list[str]:
+    """Lines of ``text`` that fit a panel ``width_px`` pixels wide (Blender does not wrap labels).
+
+    About 7 px per character at UI scale 1 (in a Blender window, lines of 26 characters with
+    digits or dashes were cut off in the default sidebar, 24 were not), less a box's margins.
+    """
+    chars = max(16, int((width_px / max(ui_scale, 0.1) - 40) / 7))
+    return textwrap.wrap(text, chars) or [""]
+
+
+def _wrapped_label(layout, context, text: str) -> None:
+    region = getattr(context, "region", None)
+    width = region.width if region is not None else 220
+    for line in wrap_text(text, width, context.preferences.system.ui_scale):
+        layout.label(text=line)
 
 
 class _MoebiusPanel:
@@ -27,32 +54,39 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
             else:
                 col.label(text=f"Iteration {s.live_iteration} ({100 * s.progress:.0f} %)")
             col.label(text=f"Energy {s.live_energy:.6g}", icon="SORTTIME")
-            col.label(text="Esc in the viewport stops (keeps the iterates)")
+            col.label(text="Esc stops, keeps the iterates")
         elif obj is not None and ENERGY_PROP in obj:
-            col.label(text=f"{obj.name}: energy {obj[ENERGY_PROP]:.6g}", icon="CURVE_DATA")
+            col.label(text=obj.name, icon="CURVE_DATA")
+            col.label(text=f"Energy {obj[ENERGY_PROP]:.6g}")
             frames = keyed_frames(obj)
             if frames:
-                col.label(text=f"Flow keyed on frames {frames[0]:.0f}–{frames[-1]:.0f}")
+                col.label(text=f"Keyed frames {frames[0]:.0f}–{frames[-1]:.0f}")
         elif obj is not None and obj.type in {"CURVE", "MESH"}:
-            col.label(text=f"{obj.name}: not converted yet", icon="INFO")
+            col.label(text=obj.name, icon="INFO")
+            col.label(text="Not converted yet")
         else:
-            col.label(text="Select a curve, or add a knot", icon="INFO")
+            col.label(text="Select a curve object", icon="INFO")
+            col.label(text="or add a knot (Polygon)")
         row = layout.row(align=True)
         row.scale_y = 1.4
         row.operator("moebius.relax", icon="PLAY")
-        if s.last_object:
+        # the statistics of the previous run would be mistaken for the running one's
+        if s.last_object and not s.running:
             box = layout.box()
-            box.label(text=f"Last run: {s.last_object}")
-            grid = box.grid_flow(columns=2, align=True)
-            grid.label(text="Iterations")
-            grid.label(text=str(s.last_iterations))
-            grid.label(text="Energy")
-            grid.label(text=f"{s.last_energy_start:.5g} → {s.last_energy_end:.5g}")
-            grid.label(text="Time")
-            grid.label(text=f"{s.last_seconds:.2f} s")
-            grid.label(text="Keyed frames")
-            grid.label(text=str(s.last_keyframes))
-            box.label(text=s.last_message)
+            col = box.column(align=True)
+            col.label(text="Last Run", icon="TIME")
+            col.label(text=s.last_object)
+            col.label(text=_METHOD_LABELS.get(s.last_method, s.last_method))
+            for name, value in (
+                ("Iterations", str(s.last_iterations)),
+                ("Energy", f"{s.last_energy_start:.5g} → {s.last_energy_end:.5g}"),
+                ("Time", f"{s.last_seconds:.2f} s"),
+                ("Keyed", f"{s.last_keyframes} frames"),
+            ):
+                split = col.split(factor=0.38)
+                split.label(text=name)
+                split.label(text=value)
+            _wrapped_label(box.column(align=True), context, s.last_message)
 
 
 class VIEW3D_PT_moebius_polygon(_MoebiusPanel, bpy.types.Panel):
@@ -61,13 +95,13 @@ class VIEW3D_PT_moebius_polygon(_MoebiusPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        layout.use_property_split = True
         s = context.scene.moebius
-        layout.prop(s, "use_edge_length")
+        col = layout.column(align=True)
+        col.prop(s, "use_edge_length")
         if s.use_edge_length:
-            layout.prop(s, "edge_length")
+            col.prop(s, "edge_length")
         else:
-            layout.prop(s, "edges")
+            col.prop(s, "edges")
         layout.prop(s, "close_open")
         layout.operator("moebius.convert", icon="MOD_CURVE")
         layout.operator_menu_enum("moebius.add_knot", "kind", text="Add Knot", icon="ADD")
@@ -79,16 +113,18 @@ class VIEW3D_PT_moebius_flow(_MoebiusPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        layout.use_property_split = True
         s = context.scene.moebius
-        layout.prop(s, "metric")
-        layout.prop(s, "max_iterations")
-        layout.prop(s, "tolerance")
-        row = layout.row(heading="Energy Target")
+        col = layout.column(align=True)
+        col.label(text="Metric")
+        col.prop(s, "metric", text="")
+        col = layout.column(align=True)
+        col.prop(s, "max_iterations")
+        col.prop(s, "tolerance")
+        row = layout.row(align=True)
         row.prop(s, "use_energy_target", text="")
-        sub = row.row()
+        sub = row.row(align=True)
         sub.active = s.use_energy_target
-        sub.prop(s, "energy_target", text="")
+        sub.prop(s, "energy_target", text="Energy Target")
         layout.prop(s, "max_seconds")
 
 
@@ -98,13 +134,13 @@ class VIEW3D_PT_moebius_keyframes(_MoebiusPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        layout.use_property_split = True
         s = context.scene.moebius
-        layout.prop(s, "frame_start")
-        layout.prop(s, "keyframe_stride")
-        row = layout.row(align=True)
-        row.operator("moebius.apply_frame", icon="CHECKMARK")
-        row.operator("moebius.clear_animation", icon="X")
+        col = layout.column(align=True)
+        col.prop(s, "frame_start")
+        col.prop(s, "keyframe_stride")
+        row = layout.row(align=True)  # no icons: half the sidebar is too narrow for them
+        row.operator("moebius.apply_frame", text="Apply Frame")
+        row.operator("moebius.clear_animation", text="Clear Flow")
 
 
 class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
@@ -114,16 +150,31 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        layout.use_property_split = True
         s = context.scene.moebius
-        col = layout.column(heading="Line Search")
+        penalty = s.method in api.PENALTY_METHODS
+        col = layout.column(align=True)
+        col.label(text="Method")
+        col.prop(s, "method", text="")
+        if penalty:
+            col.prop(s, "penalty")
+        # settings a method does not use stay visible, greyed out (tooltips say which use them)
+        col = layout.column(align=True)
+        col.label(text="Line Search")
         col.prop(s, "initial_step")
-        col.prop(s, "armijo")
-        col.prop(s, "growth")
-        col = layout.column(heading="Back-projection")
+        sub = col.column(align=True)
+        sub.active = s.method == api.DEFAULT_METHOD
+        sub.prop(s, "armijo")
+        sub = col.column(align=True)
+        sub.active = s.method in (api.DEFAULT_METHOD, "projected_gradient_implicit")
+        sub.prop(s, "growth")
+        col = layout.column(align=True)
+        col.active = not penalty
+        col.label(text="Back-projection")
         col.prop(s, "backproject_iter", text="Iterations")
         col.prop(s, "backproject_tol", text="Tolerance")
-        col = layout.column(heading="Constraints")
+        col = layout.column(align=True)
+        col.active = not penalty
+        col.label(text="Constraints")
         col.prop(s, "keep_edge_lengths")
         col.prop(s, "keep_barycenter")
         layout.operator("moebius.show_gradient", icon="ORIENTATION_NORMAL")

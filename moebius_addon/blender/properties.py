@@ -53,7 +53,8 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     )
     tolerance: FloatProperty(
         name="Tolerance", default=1e-6, min=0.0, precision=8,
-        description="Stop once the projected gradient is smaller than this",
+        description="Stop once the gradient norm in the metric (projected onto the "
+                    "constraints for the exact-constraint methods) is smaller than this",
     )
     # Keyframes
     frame_start: IntProperty(
@@ -66,33 +67,53 @@ class MoebiusSettings(bpy.types.PropertyGroup):
                     "guarantee that in-between frames never pass the curve through itself",
     )
     # Advanced
+    method: EnumProperty(
+        name="Method", default=api.DEFAULT_METHOD,
+        items=[(key, label, desc) for key, label, desc in api.METHODS],
+        description="Optimizer of the paper's comparison. The three penalty methods let edge "
+                    "lengths stretch a little and the barycenter drift",
+    )
+    penalty: FloatProperty(
+        name="Penalty α", default=api.DEFAULT_PENALTY, min=0.0, soft_min=1.0, soft_max=1e7,
+        precision=1,
+        description="Penalty methods only: weight α of the edge-stretch penalty "
+                    "α Σ l0 log(l/l0)² (curve scaled to length 1). Larger keeps the edge "
+                    "lengths closer to their start; must be positive",
+    )
     initial_step: FloatProperty(
         name="Initial Step", default=1.0, min=1e-12, precision=4,
-        description="First trial step size of the line search",
+        description="First trial step size of the line search (trust region: initial radius, "
+                    "relative to the gradient norm)",
     )
     armijo: FloatProperty(
         name="Armijo Constant", default=0.5, min=1e-6, max=0.999, precision=3,
-        description="Sufficient-decrease constant σ of the line search",
+        description="Sufficient-decrease constant σ of the explicit projected gradient's line "
+                    "search (the paper's 1/2; the other methods use their own)",
     )
     growth: FloatProperty(
         name="Step Growth", default=1.5, min=1.0, soft_max=10.0,
-        description="Largest factor by which the step may grow from one iteration to the next",
+        description="Largest factor by which the step may grow from one iteration to the next "
+                    "(explicit and implicit projected gradient)",
     )
     backproject_iter: IntProperty(
         name="Back-projection Iterations", default=10, min=1, max=100,
-        description="Newton iterations that restore the constraints after each step",
+        description="Newton iterations that restore the constraints after each step (methods "
+                    "with exact constraints)",
     )
     backproject_tol: FloatProperty(
         name="Back-projection Tolerance", default=1e-10, min=1e-16, max=1e-2, precision=12,
-        description="Constraint residual at which back-projection stops",
+        description="Constraint residual at which back-projection stops (methods with exact "
+                    "constraints)",
     )
     keep_edge_lengths: BoolProperty(
         name="Keep Edge Lengths", default=True,
-        description="Constrain every edge to keep its length (the curve's length is fixed)",
+        description="Constrain every edge to keep its length (the curve's length is fixed); "
+                    "the penalty methods penalize stretching instead",
     )
     keep_barycenter: BoolProperty(
         name="Keep Barycenter", default=True,
-        description="Constrain the barycenter so the curve does not drift",
+        description="Constrain the barycenter so the curve does not drift (not with the "
+                    "penalty methods)",
     )
     use_energy_target: BoolProperty(
         name="Energy Target", default=False,
@@ -120,14 +141,17 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     last_seconds: FloatProperty(name="Seconds", get=_stat("seconds", 0.0))
     last_message: StringProperty(name="Stopped Because", get=_stat("message", ""))
     last_keyframes: IntProperty(name="Keyed Frames", get=_stat("keyframes", 0))
+    last_method: StringProperty(name="Method", get=_stat("method", ""))
 
     def store_run(self, obj_name: str, iterations: int, energy_start: float, energy_end: float,
-                  seconds: float, message: str, keyed: int) -> None:
+                  seconds: float, message: str, keyed: int,
+                  method: str = api.DEFAULT_METHOD) -> None:
         """Record the statistics of a finished run (shown read-only in the panel)."""
         self["_stats"] = {
             "object": obj_name, "iterations": int(iterations),
             "energy_start": float(energy_start), "energy_end": float(energy_end),
             "seconds": float(seconds), "message": message, "keyframes": int(keyed),
+            "method": method,
         }
 
 
