@@ -551,8 +551,9 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
         Penalty weight α of ``"ncg"``, ``"lbfgs"``, ``"nesterov"`` (None: 1e4); refused for
         the other methods.
     callback : callable, optional
-        ``callback(run)`` after every accepted iterate with the :class:`ObjectRelaxation`
-        (``run.nit``, ``run.x``, ``run.energy``); returning True stops the run cleanly.
+        ``callback(run)`` after every accepted iterate, the last one included, with the
+        :class:`ObjectRelaxation` (``run.nit``, ``run.x``, ``run.energy``); returning True stops
+        the run cleanly.
     scene : bpy.types.Scene, optional
         Scene whose frame range is set; defaults to ``bpy.context.scene``.
 
@@ -571,8 +572,13 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
     run = ObjectRelaxation(obj, metric=metric, max_iterations=max_iterations, tolerance=tolerance,
                            frame_start=frame_start, keyframe_stride=keyframe_stride,
                            method=method, penalty=penalty, **options)
-    while run.step():
-        if callback is not None and callback(run):
+    more = True
+    while more:
+        before = run.nit
+        more = run.step()
+        # every accepted iterate reaches the callback, the last one of the run included (as in
+        # core.relax); a True returned for the last one changes nothing
+        if run.nit > before and callback is not None and callback(run):
             run.stop("stopped by callback")
             break
     return run.finish(scene)

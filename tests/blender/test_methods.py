@@ -123,6 +123,11 @@ def test_callback_and_esc_stop_every_method(scene, mb, core, trefoil, method):
         assert np.all(np.diff(result.history["penalized_energy"]) <= 0)
     else:
         assert np.all(np.diff(result.history["energy"]) <= 0)
+    # progress reaches the iterate that ends the run too
+    seen.clear()
+    result = mb.relax_object(trefoil, method=method, max_iterations=2, tolerance=0.0,
+                             callback=progress, **kw)
+    assert [n for n, _ in seen] == [1, 2] and "maximum number of iterations" in result.message
     # what Esc does in the modal operator: stop(), then finish() keys the iterates so far
     scene.frame_set(3)
     mid = _points(trefoil)
