@@ -89,10 +89,12 @@ def bench_ratio(n, iters=8):
         run.step()
     t = time.perf_counter()
     k0 = run.nit
+    r0 = run.rejected
     for _ in range(iters):
         if not run.step():
             break
     per_iter = (time.perf_counter() - t) / (run.nit - k0)
+    rejected = (run.rejected - r0) / (run.nit - k0)
     X, lay = run.X, run.layout
     A = gram_x("hs", X, lay)
     jac = jacobian(X, run.con)
@@ -108,11 +110,12 @@ def bench_ratio(n, iters=8):
     parts["preconditioner_apply"] = best_of(lambda: fac.solve(run.g, np.zeros(run.con.size)))
     ratio = per_iter / parts["energy_gradient"]
     print(f"  N={n:5d}: iteration {1e3 * per_iter:8.1f} ms = {ratio:5.1f} x energy+gradient "
-          f"({1e3 * parts['energy_gradient']:.2f} ms); "
+          f"({1e3 * parts['energy_gradient']:.2f} ms), {rejected:.1f} rejected trials/it; "
           + ", ".join(f"{k} {1e3 * v:.1f} ms" for k, v in parts.items() if k != "energy_gradient"),
           flush=True)
     return {"edges": n, "seconds_per_iteration": per_iter, "ratio": ratio,
             "parts_seconds": parts, "precision": np.dtype(dtype).name,
+            "rejected_trials_per_iteration": rejected,
             "krylov_per_iteration": float(np.mean(run.solver.krylov_its[-iters:]))}
 
 

@@ -103,7 +103,10 @@ class Relaxation:
     max_seconds : float, optional
         Wall-time budget.
     initial_step, armijo, growth : float
-        First trial step, Armijo constant σ (paper: 1/2), cap on the step growth per iteration.
+        First trial step, Armijo constant σ (paper: 1/2), cap on the step growth per iteration:
+        the first trial is ``min(growth · τ_prev, 2/3 τ*)``. The paper starts at ``2/3 τ*``
+        alone; a cap of 8 keeps the contact search bounded and measured fewer iterations
+        than 1.5 or 4 on the FHW unknot (docs/benchmarks.md).
     backproject_iter, backproject_tol : int, float
         Modified Newton iterations and tolerance on ``max |Φ|`` (dimensionless).
     edge_lengths, barycenter : bool
@@ -138,7 +141,7 @@ class Relaxation:
         max_seconds: float | None = None,
         initial_step: float = 1.0,
         armijo: float = 0.5,
-        growth: float = 1.5,
+        growth: float = 8.0,
         backproject_iter: int = 10,
         backproject_tol: float = 1e-10,
         edge_lengths: bool = True,
