@@ -352,8 +352,7 @@ def relax_settings(settings) -> dict:
     )
     if method == DEFAULT_METHOD:
         kwargs["armijo"] = settings.armijo
-    if method in (DEFAULT_METHOD, "projected_gradient_implicit"):
-        kwargs["growth"] = settings.growth
+        kwargs["growth"] = settings.growth  # the implicit method keeps its own (1.5)
     if method in PENALTY_METHODS:
         kwargs["penalty"] = settings.penalty
     else:

@@ -91,9 +91,10 @@ class MoebiusSettings(bpy.types.PropertyGroup):
                     "search (the paper's 1/2; the other methods use their own)",
     )
     growth: FloatProperty(
-        name="Step Growth", default=1.5, min=1.0, soft_max=10.0,
+        name="Step Growth", default=8.0, min=1.0, soft_max=10.0,
         description="Largest factor by which the step may grow from one iteration to the next "
-                    "(explicit and implicit projected gradient)",
+                    "(explicit projected gradient; the first trial is also kept below 2/3 of "
+                    "the first contact)",
     )
     backproject_iter: IntProperty(
         name="Back-projection Iterations", default=10, min=1, max=100,

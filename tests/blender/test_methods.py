@@ -50,7 +50,8 @@ def test_settings_pass_each_method_only_its_options(scene, mb):
               "edge_lengths", "barycenter"}
     assert set(mb.relax_settings(s)) == legacy | {"method"}  # the default: as before
     s.method = "projected_gradient_implicit"
-    assert "armijo" not in mb.relax_settings(s)  # it keeps its own σ = 1e-4
+    # it keeps its own σ = 1e-4 and growth 1.5
+    assert not {"armijo", "growth"} & set(mb.relax_settings(s))
     s.method = "trust_region"
     assert not {"armijo", "growth", "penalty"} & set(mb.relax_settings(s))
     s.method = "lbfgs"
