@@ -76,16 +76,12 @@ def _dims(n):
 
 def spd_inverse(A: np.ndarray):
     """Inverse of an SPD matrix (potrf + potri) or None if LAPACK is unavailable."""
-    M = _prepare(A)
+    M = cholesky(A)
     if M is None:
         return None
-    n = M.shape[0]
     uplo = ctypes.byref(ctypes.c_char(b"U"))
-    nn, lda = _dims(n)
-    ptr = M.ctypes.data_as(ctypes.c_void_p)
-    if _call("potrf", M.dtype, uplo, nn, ptr, lda) != 0:
-        raise np.linalg.LinAlgError("Matrix is not positive definite")
-    if _call("potri", M.dtype, uplo, nn, ptr, lda) != 0:
+    nn, lda = _dims(M.shape[0])
+    if _call("potri", M.dtype, uplo, nn, M.ctypes.data_as(ctypes.c_void_p), lda) != 0:
         raise np.linalg.LinAlgError("Singular matrix")
     # 'U' in column-major = lower triangle in row-major: mirror it to the full matrix
     _mirror_lower(M)
