@@ -20,7 +20,7 @@ import numpy as np
 from moebius_addon.core import _lapack, knots
 from moebius_addon.core.constraints import jacobian
 from moebius_addon.core.flow import Relaxation
-from moebius_addon.core.linalg import Factorization, triangular_inverse
+from moebius_addon.core.linalg import Factorization
 from moebius_addon.core.metrics import gram_x
 
 
@@ -50,7 +50,10 @@ def previous(A, jac, dtype):
                     axis=1)
     S[:, ne:] = cols
     S[ne:, :] = cols.T
-    return triangular_inverse(np.linalg.cholesky(S))
+    L = _lapack.cholesky(S, overwrite=True)  # then trtri of the factor, as before
+    _lapack._call("trtri", L.dtype, uplo, ctypes.byref(ctypes.c_char(b"N")), *_lapack._dims(m),
+                  L.ctypes.data_as(ctypes.c_void_p), _lapack._dims(m)[1])
+    return np.tril(L)
 
 
 def main():

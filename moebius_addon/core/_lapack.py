@@ -1,8 +1,9 @@
 """LAPACK routines numpy does not expose, taken from the OpenBLAS that numpy itself ships.
 
-numpy has Cholesky but no triangular inverse or solve; scipy is not available at run time
-(Blender ships numpy only). numpy's wheels bundle OpenBLAS with the whole LAPACK, ILP64 with
-the ``_64_`` symbol suffix; we call ``potrf``/``potri``/``trtri`` from it through ctypes. Where
+numpy has Cholesky (double precision, always a copy) but no inverse from a Cholesky factor;
+scipy is not available at run time (Blender ships numpy only). numpy's wheels bundle OpenBLAS
+with the whole LAPACK, ILP64 with the ``_64_`` symbol suffix; we call ``potrf``/``potri``
+from it through ctypes. Where
 the library cannot be found (another numpy build) every function returns None and the callers
 fall back to numpy-only code.
 """
@@ -37,7 +38,7 @@ def _load():
                               ("_64", ctypes.c_int64), ("_", ctypes.c_int32),
                               ("", ctypes.c_int32)):
             names = [
-                f"{p}{r}{suffix}" for p in "ds" for r in ("potrf", "potri", "potrs", "trtri")
+                f"{p}{r}{suffix}" for p in "ds" for r in ("potrf", "potri", "trtri")
             ]
             if all(hasattr(lib, n) for n in names):
                 _lib, _int, _suffix = lib, itype, suffix
@@ -122,31 +123,3 @@ def cholesky(A: np.ndarray, overwrite: bool = False):
     if _call("potrf", M.dtype, uplo, nn, M.ctypes.data_as(ctypes.c_void_p), lda) != 0:
         raise np.linalg.LinAlgError("Matrix is not positive definite")
     return M
-
-
-def cho_solve(F: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``A⁻¹ b`` for a vector ``b`` from the factor ``F`` of :func:`cholesky` (potrs)."""
-    x = np.array(b, dtype=F.dtype, copy=True)
-    n = F.shape[0]
-    uplo = ctypes.byref(ctypes.c_char(b"U"))
-    nn, lda = _dims(n)
-    nrhs = ctypes.byref(_int(1))
-    if _call("potrs", F.dtype, uplo, nn, nrhs, F.ctypes.data_as(ctypes.c_void_p), lda,
-             x.ctypes.data_as(ctypes.c_void_p), lda) != 0:
-        raise np.linalg.LinAlgError("potrs failed")
-    return x
-
-
-def triangular_inverse(L: np.ndarray):
-    """Inverse of a lower-triangular matrix (trtri) or None if LAPACK is unavailable."""
-    M = _prepare(L)
-    if M is None:
-        return None
-    n = M.shape[0]
-    # row-major lower = column-major upper
-    uplo = ctypes.byref(ctypes.c_char(b"U"))
-    diag = ctypes.byref(ctypes.c_char(b"N"))
-    nn, lda = _dims(n)
-    if _call("trtri", M.dtype, uplo, diag, nn, M.ctypes.data_as(ctypes.c_void_p), lda) != 0:
-        raise np.linalg.LinAlgError("Singular matrix")
-    return np.tril(M)

@@ -94,9 +94,27 @@ def _pair_contact(X, U, i, i1, j, j1, tau_max, eps):
 @nb.njit(cache=True, parallel=True)
 def _contact_rows(X, U, nxt, starts, comp, tau_max, eps, nchunks):
     n = X.shape[0]
-    speed = np.empty(n)
-    for p in range(n):
-        speed[p] = np.sqrt(U[p, 0] ** 2 + U[p, 1] ** 2 + U[p, 2] ** 2)
+    # per edge: midpoint, half length and the larger endpoint speed, so that the pruning
+    # test of a pair costs one squared distance
+    mid = np.empty((n, 3))
+    vel = np.empty((n, 3))  # mean velocity of the edge
+    spread = np.empty(n)  # half the difference of its endpoint velocities
+    half = np.empty(n)
+    vmax = np.empty(n)
+    for i in nb.prange(n):
+        i1 = nxt[i]
+        s0 = np.sqrt(U[i, 0] ** 2 + U[i, 1] ** 2 + U[i, 2] ** 2)
+        s1 = np.sqrt(U[i1, 0] ** 2 + U[i1, 1] ** 2 + U[i1, 2] ** 2)
+        vmax[i] = max(s0, s1)
+        spread[i] = 0.5 * np.sqrt(
+            (U[i1, 0] - U[i, 0]) ** 2 + (U[i1, 1] - U[i, 1]) ** 2 + (U[i1, 2] - U[i, 2]) ** 2
+        )
+        for k in range(3):
+            mid[i, k] = 0.5 * (X[i, k] + X[i1, k])
+            vel[i, k] = 0.5 * (U[i, k] + U[i1, k])
+        half[i] = 0.5 * np.sqrt(
+            (X[i1, 0] - X[i, 0]) ** 2 + (X[i1, 1] - X[i, 1]) ** 2 + (X[i1, 2] - X[i, 2]) ** 2
+        )
     best = np.full(nchunks, tau_max)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
@@ -104,33 +122,32 @@ def _contact_rows(X, U, nxt, starts, comp, tau_max, eps, nchunks):
         for i in range(ch, n, nchunks):
             i1 = nxt[i]
             c = comp[i]
-            vi = max(speed[i], speed[i1])
-            mix = 0.5 * (X[i, 0] + X[i1, 0])
-            miy = 0.5 * (X[i, 1] + X[i1, 1])
-            miz = 0.5 * (X[i, 2] + X[i1, 2])
-            hi_ = 0.5 * np.sqrt(
-                (X[i1, 0] - X[i, 0]) ** 2 + (X[i1, 1] - X[i, 1]) ** 2 + (X[i1, 2] - X[i, 2]) ** 2
-            )
+            vi = vmax[i]
+            mix, miy, miz = mid[i, 0], mid[i, 1], mid[i, 2]
+            reach = half[i] + eps
             end_same = starts[c + 1] - 1 if i == starts[c] else starts[c + 1]
             for j in range(i + 2, n):
                 if j >= end_same and j < starts[c + 1]:
                     continue
-                j1 = nxt[j]
-                v = vi + max(speed[j], speed[j1])
-                if v == 0.0:
+                v = vi + vmax[j]
+                # the segments stay eps apart until tb unless the midpoints are closer than
+                # the half lengths + eps + the distance both can travel
+                r = reach + half[j] + tb * v
+                dx = mix - mid[j, 0]
+                dy = miy - mid[j, 1]
+                dz = miz - mid[j, 2]
+                d2 = dx * dx + dy * dy + dz * dz
+                if v == 0.0 or d2 >= r * r:
                     continue
-                dx = mix - 0.5 * (X[j, 0] + X[j1, 0])
-                dy = miy - 0.5 * (X[j, 1] + X[j1, 1])
-                dz = miz - 0.5 * (X[j, 2] + X[j1, 2])
-                hj = 0.5 * np.sqrt(
-                    (X[j1, 0] - X[j, 0]) ** 2
-                    + (X[j1, 1] - X[j, 1]) ** 2
-                    + (X[j1, 2] - X[j, 2]) ** 2
-                )
-                lower = np.sqrt(dx * dx + dy * dy + dz * dz) - hi_ - hj  # ≤ segment distance
-                if lower - eps >= tb * v:
+                # tighter: relative speed ≤ |mean velocity difference| + both spreads, which
+                # is small for strands moving together
+                wx = vel[i, 0] - vel[j, 0]
+                wy = vel[i, 1] - vel[j, 1]
+                wz = vel[i, 2] - vel[j, 2]
+                w = np.sqrt(wx * wx + wy * wy + wz * wz) + spread[i] + spread[j]
+                if np.sqrt(d2) - reach - half[j] >= tb * w:
                     continue
-                t = _pair_contact(X, U, i, i1, j, j1, tb, eps)
+                t = _pair_contact(X, U, i, i1, j, nxt[j], tb, eps)
                 if t < tb:
                     tb = t
         best[ch] = tb

@@ -25,7 +25,7 @@ import numpy as np
 from ._layout import as_layout
 from .collision import contact_time_x
 from .constraints import Constraints, jacobian, make_constraints, residual
-from .energy import energy_gradient_x
+from .energy import energy_gradient_x, energy_x
 from .linalg import Factorization, SaddlePointSolver
 from .metrics import METRICS, gram_x
 from .polygon import check_polygon
@@ -330,21 +330,26 @@ class Relaxation:
                 refactored = True
                 continue
             shrink = 0.5
-            if ok and contact_time_x(X, X - Q, self.layout, 1.0, self.eps) >= 1.0:
+            # Armijo on the energy alone first (a rejected trial needs no gradient), then the
+            # contact test of the path P → Q, then Armijo again on the energy that comes with
+            # the gradient (the two kernels sum in different orders)
+            target = E - self.armijo * tau * gu
+            EQ = energy_x(Q, self.layout) if ok else np.inf
+            if EQ <= target and contact_time_x(X, X - Q, self.layout, 1.0, self.eps) >= 1.0:
                 EQ, gQ = energy_gradient_x(Q, self.layout)
-                if EQ <= E - self.armijo * tau * gu:
+                if EQ <= target:
                     self.tau = tau
                     self.nit += 1
                     self._prepare(Q, EQ, gQ)
                     self._record(tau)
                     self._check_stop(E)
                     return not self.done
-                if self.interpolate:
-                    # minimizer of the parabola through E, slope −<g,u> and E(Q), kept in
-                    # [0.1, 0.5] τ (safeguarded backtracking, Nocedal & Wright §3.5)
-                    curv = EQ - E + tau * gu
-                    if curv > 0:
-                        shrink = min(0.5, max(0.1, 0.5 * gu * tau / curv))
+            elif ok and self.interpolate:
+                # minimizer of the parabola through E, slope −<g,u> and E(Q), kept in
+                # [0.1, 0.5] τ (safeguarded backtracking, Nocedal & Wright §3.5)
+                curv = EQ - E + tau * gu
+                if curv > 0:
+                    shrink = min(0.5, max(0.1, 0.5 * gu * tau / curv))
             self.rejected += 1
             tau *= shrink
             if tau * gu <= 1e-15 * abs(E):

@@ -163,9 +163,20 @@ def _add_barycenter_term(A: np.ndarray, ln: np.ndarray, layout: Layout, total: f
     # b bᵀ · N / L⁴: the factor N puts the constant mode's eigenvalue (|b|² ~ L²/N) next to the
     # lowest shape modes (~1/L²) instead of far below them, which keeps A well conditioned.
     b = _barycenter_weights(ln, layout) * np.sqrt(len(ln)) / total**2
-    for c in range(layout.k):
-        s = slice(layout.starts[c], layout.starts[c + 1])
-        A[s, s] += np.outer(b[s], b[s])
+    _add_outer_blocks(A, b, layout.starts)
+
+
+@nb.njit(cache=True, parallel=True)
+def _add_outer_blocks(A, b, starts):
+    """``A[s, s] += b[s] b[s]ᵀ`` for every component block ``s``, in place (np.outer plus
+    the addition cost 8 ms at 1648 vertices, as much as a third of the Gram assembly)."""
+    for p in nb.prange(A.shape[0]):
+        c = 0
+        while starts[c + 1] <= p:
+            c += 1
+        bp = b[p]
+        for j in range(starts[c], starts[c + 1]):
+            A[p, j] += bp * b[j]
 
 
 def _sparse_to_dense(n: int, rows, cols, vals) -> np.ndarray:

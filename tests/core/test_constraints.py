@@ -6,10 +6,11 @@ import pytest
 from moebius_addon.core._layout import as_layout
 from moebius_addon.core.constraints import jacobian, make_constraints, residual
 from moebius_addon.core.linalg import (
+    CholeskySolve,
     Factorization,
     SaddlePointSolver,
+    field_product,
     spd_inverse,
-    triangular_inverse,
 )
 from moebius_addon.core.metrics import gram_x
 from tests.conftest import ngon, trefoil
@@ -69,13 +70,20 @@ def test_barycenter_rows_are_scale_free():
         np.testing.assert_allclose(phi[25:], [1e-4, 0.0, 0.0], rtol=1e-8, atol=1e-14)
 
 
-def test_triangular_and_spd_inverse(rng):
-    n = 300  # beyond the recursion's base size
+@pytest.mark.parametrize("n", [5, 256, 300, 700])  # one block, exactly one, partial, several
+def test_blocked_cholesky_solve_and_spd_inverse(n, rng):
     B = rng.standard_normal((n, n))
     A = B @ B.T + n * np.eye(n)
-    L = np.linalg.cholesky(A)
-    np.testing.assert_allclose(triangular_inverse(L) @ L, np.eye(n), atol=1e-12)
+    F = np.linalg.cholesky(A) + np.triu(rng.standard_normal((n, n)), 1)  # upper part ignored
+    v = rng.standard_normal(n)
+    np.testing.assert_allclose(A @ CholeskySolve(F)(v), v, rtol=0, atol=1e-10 * np.abs(v).max())
     np.testing.assert_allclose(spd_inverse(A) @ A, np.eye(n), atol=1e-10)
+
+
+def test_field_product_is_the_matrix_product(rng):
+    M = rng.standard_normal((50, 50))
+    U = rng.standard_normal((50, 3))
+    np.testing.assert_allclose(field_product(M, U), M @ U, rtol=1e-13, atol=1e-13)
 
 
 @pytest.mark.parametrize("metric", ["hs", "h1"])
@@ -125,7 +133,7 @@ def test_lapack_and_numpy_fallback_agree(dtype, rng):
     L = np.linalg.cholesky(A)
     ref = _numpy_triangular_inverse(L)
     tol = 1e-12 if dtype == np.float64 else 1e-4
-    np.testing.assert_allclose(triangular_inverse(L), ref, atol=tol * np.abs(ref).max())
+    np.testing.assert_allclose(ref @ L, np.eye(n), atol=tol * 10)
     np.testing.assert_allclose(spd_inverse(A), ref.T @ ref, atol=tol * np.abs(ref).max() ** 2)
     if _lapack.available():  # numpy's own OpenBLAS was found (PyPI wheels)
         with pytest.raises(np.linalg.LinAlgError):
@@ -133,7 +141,7 @@ def test_lapack_and_numpy_fallback_agree(dtype, rng):
 
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
-def test_lapack_cholesky_solve(dtype, rng):
+def test_lapack_cholesky_and_blocked_solve(dtype, rng):
     from moebius_addon.core import _lapack
 
     if not _lapack.available():
@@ -142,7 +150,7 @@ def test_lapack_cholesky_solve(dtype, rng):
     B = rng.standard_normal((n, n))
     A = (B @ B.T + n * np.eye(n)).astype(dtype)
     b = rng.standard_normal(n)
-    x = _lapack.cho_solve(_lapack.cholesky(A), b)
+    x = CholeskySolve(_lapack.cholesky(A))(b)  # LAPACK's factor, upper part not zeroed
     ref = np.linalg.solve(A.astype(np.float64), b)
     tol = 1e-12 if dtype == np.float64 else 1e-5
     np.testing.assert_allclose(x, ref, atol=tol * np.abs(ref).max())
