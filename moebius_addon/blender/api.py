@@ -358,7 +358,7 @@ def relax_settings(settings) -> dict:
     else:
         kwargs.update(
             backproject_iter=settings.backproject_iter,
-            backproject_tol=settings.backproject_tol,
+            backproject_tol=10.0 ** -settings.backproject_digits,
             edge_lengths=settings.keep_edge_lengths,
             barycenter=settings.keep_barycenter,
         )

@@ -108,7 +108,15 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
                 pass
         except Exception as err:  # noqa: BLE001 - any core failure: restore and report
             return self._fail(context, err)
-        self._report_result(self._run.finish(context.scene))
+        return self._finish(context)
+
+    def _finish(self, context):
+        """Keyframe the iterates; if that fails, restore the curve like any other failure."""
+        try:
+            result = self._run.finish(context.scene)
+        except Exception as err:  # noqa: BLE001 - e.g. the object was deleted during the run
+            return self._fail(context, err)
+        self._report_result(result)
         return {"FINISHED"}
 
     def invoke(self, context, event):
@@ -127,6 +135,7 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
 
     def _cleanup(self, context):
         context.window_manager.event_timer_remove(self._timer)
+        self._timer = None
         context.workspace.status_text_set(None)
         context.scene.moebius.running = False
         for area in context.screen.areas:
@@ -146,8 +155,7 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         if event.type == "ESC" and event.value == "PRESS":
             self._run.stop("cancelled by the user (Esc)")
             self._cleanup(context)
-            self._report_result(self._run.finish(context.scene))
-            return {"FINISHED"}
+            return self._finish(context)
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         t0 = time.perf_counter()
@@ -171,8 +179,7 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         if more:
             return {"RUNNING_MODAL"}
         self._cleanup(context)
-        self._report_result(self._run.finish(context.scene))
-        return {"FINISHED"}
+        return self._finish(context)
 
 
 def _knot_items():

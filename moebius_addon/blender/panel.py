@@ -171,7 +171,7 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
         col.active = not penalty
         col.label(text="Back-projection")
         col.prop(s, "backproject_iter", text="Iterations")
-        col.prop(s, "backproject_tol", text="Tolerance")
+        col.prop(s, "backproject_digits", text="Digits")
         col = layout.column(align=True)
         col.active = not penalty
         col.label(text="Constraints")

@@ -101,10 +101,12 @@ class MoebiusSettings(bpy.types.PropertyGroup):
         description="Newton iterations that restore the constraints after each step (methods "
                     "with exact constraints)",
     )
-    backproject_tol: FloatProperty(
-        name="Back-projection Tolerance", default=1e-10, min=1e-16, max=1e-2, precision=12,
-        description="Constraint residual at which back-projection stops (methods with exact "
-                    "constraints)",
+    # an exponent, not a float: a number field shows at most six decimals, so 1e-10 read
+    # "0.000000" (and the property stores single precision anyway)
+    backproject_digits: IntProperty(
+        name="Back-projection Digits", default=10, min=2, max=14,
+        description="Back-projection stops once every constraint holds to 10^-digits "
+                    "(relative edge length; methods with exact constraints)",
     )
     keep_edge_lengths: BoolProperty(
         name="Keep Edge Lengths", default=True,

@@ -108,7 +108,7 @@ def test_panels_registered(mb):
     settings = bpy.types.Scene.bl_rna.properties["moebius"].fixed_type
     for prop in ("metric", "method", "penalty", "edges", "max_iterations", "tolerance",
                  "frame_start", "keyframe_stride", "initial_step", "armijo", "backproject_iter",
-                 "backproject_tol", "keep_edge_lengths", "keep_barycenter"):
+                 "backproject_digits", "keep_edge_lengths", "keep_barycenter"):
         assert prop in settings.properties, prop
     for stat in ("last_iterations", "last_energy_start", "last_energy_end", "last_message",
                  "last_method"):

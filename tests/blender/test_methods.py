@@ -49,6 +49,10 @@ def test_settings_pass_each_method_only_its_options(scene, mb):
               "initial_step", "armijo", "growth", "backproject_iter", "backproject_tol",
               "edge_lengths", "barycenter"}
     assert set(mb.relax_settings(s)) == legacy | {"method"}  # the default: as before
+    # the tolerance is set as digits (a number field shows only six decimals)
+    assert mb.relax_settings(s)["backproject_tol"] == pytest.approx(1e-10, rel=1e-12)
+    s.backproject_digits = 8
+    assert mb.relax_settings(s)["backproject_tol"] == pytest.approx(1e-8, rel=1e-12)
     s.method = "projected_gradient_implicit"
     # it keeps its own σ = 1e-4 and growth 1.5
     assert not {"armijo", "growth"} & set(mb.relax_settings(s))

@@ -169,3 +169,23 @@ def test_failed_setup_keeps_the_previous_flow(scene, mb, trefoil):
     with pytest.raises(ValueError, match="armijo must lie"):
         mb.ObjectRelaxation(trefoil, armijo=1.5)
     assert scene_state() == before and mb.keyed_frames(trefoil) == frames
+
+
+def test_failure_while_keyframing_restores_the_curve(scene, mb, trefoil, monkeypatch):
+    """The end of a run (writing the keyframes) can fail too, e.g. when the object was
+    deleted during a modal run: the operator restores the curve and reports, like any
+    other failure, instead of raising out of the operator."""
+    import sys
+
+    keyframes = sys.modules[mb.__name__ + ".keyframes"]
+
+    def broken(*args, **kwargs):
+        raise ReferenceError("StructRNA of type Object has been removed")
+
+    monkeypatch.setattr(keyframes, "write_flow_keyframes", broken)
+    scene.moebius.max_iterations = 3
+    before = scene_state()
+    with pytest.raises(RuntimeError, match="Relaxation failed, curve restored: StructRNA"):
+        bpy.ops.moebius.relax()
+    assert scene_state() == before
+    assert trefoil.data.animation_data is None or trefoil.data.animation_data.action is None
