@@ -28,7 +28,7 @@ generator               default ``n``                     smallest ``n`` passing
 ``braid_closure``       2.5 vertices per strand spacing   0.4 × the default: 3_1 27, 4_1 52,
 ``named``               of length, at least 100           7_2 136, 8_1 and 8_3 197
 ``freedman_unknot``     600                               470 (ratio 1.2 at 600)
-``helix_unknot``        300                               61 (6 turns)
+``helix_unknot``        300                               62 (6 turns)
 ``random_unknot``       400                               about 50-100 (draws are kept only
                                                           with ratio >= 2 at 400)
 ======================  ================================  ===================================

@@ -21,6 +21,11 @@ from .collision import closest_pairs
 CONTACT_GAP = 4
 CONTACT_RATIO = 1.0
 MIN_VERTICES = 4
+# Chord lengths probed (evenly below the mean arc per edge) for sign changes of the closing
+# condition before bisecting.
+_SCAN = 64
+# Start points tried along a closed curve when no equal-chord polygon starts at its first point.
+_SHIFTS = 16
 
 
 @nb.njit(cache=True)
@@ -87,6 +92,27 @@ def _resample_one(P: np.ndarray, n: int, closed: bool) -> np.ndarray:
     if len(seg) == 0:
         raise ValueError("all points coincide: there is no curve to resample")
     cum = np.concatenate(([0.0], np.cumsum(seg)))
+    out, equal = _equal_chords(P, cum, n, closed)
+    if not equal and closed:
+        # Coarse counts on curves with sharp turns can leave no equal-chord polygon through
+        # the first point (the march jumps where a chord cuts a corner); start elsewhere.
+        total = cum[-1]
+        for k in range(1, _SHIFTS):
+            x0, i = _point_at(P, cum, total * k / _SHIFTS)
+            Q = np.vstack([x0[None], P[i + 1 :], P[1 : i + 1], x0[None]])
+            seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
+            Q = np.ascontiguousarray(Q[np.concatenate(([True], seg > 0))])
+            shifted, equal = _equal_chords(Q, np.concatenate(([0.0], np.cumsum(seg[seg > 0]))),
+                                           n, True)
+            if equal:
+                return shifted
+    # without equal chords: the closest march, its last (closing) edge off (as documented)
+    return out
+
+
+def _equal_chords(P, cum, n, closed):
+    """Vertices marched along the polyline P (cumulative arc lengths cum) with chord h, for the
+    h at which the last chord (closed: back to the start) is h too, and whether it is."""
     total = cum[-1]
     steps = n if closed else n - 1
     end = P[-1]
@@ -99,26 +125,40 @@ def _resample_one(P: np.ndarray, n: int, closed: bool) -> np.ndarray:
         # must be the polyline's end. Positive when h is too short.
         return np.linalg.norm(end - pts[-1]) - h, pts
 
-    # The chord length lies below the mean arc length per edge; bracket and bisect.
-    hi = total / steps
-    lo = 0.0
-    best = None
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        err, pts = closing_error(mid)
-        if err > 0:
-            lo = mid
-            best = pts
-        else:
-            hi = mid
-        if hi - lo <= 4e-16 * hi:
-            break
-    if best is None:
+    def bisect(lo, hi):
+        """Root of closing_error between lo (> 0) and hi (≤ 0): h and the points at lo."""
+        pts = None
+        for _ in range(200):
+            mid = 0.5 * (lo + hi)
+            err, cand = closing_error(mid)
+            if err > 0:
+                lo, pts = mid, cand
+            else:
+                hi = mid
+            if hi - lo <= 4e-16 * hi:
+                break
+        if pts is None:
+            return None, False
+        pts = pts if closed else np.vstack([pts, end[None, :]])
+        return pts, abs(np.linalg.norm(end - pts[-1 if closed else -2]) - lo) <= 5e-11 * lo
+
+    # The chord length lies below the mean arc length per edge. The closing condition can
+    # have several roots: a polyline through its start point twice (a lemniscate started
+    # at its crossing) also closes after one lobe, and a coarse march jumps where a chord
+    # cuts a sharp corner. The wanted root is the largest one at which the closing chord
+    # really is h, so scan downward from the top and bisect each sign change.
+    top = total / steps
+    grid = top * np.arange(_SCAN, -1, -1) / _SCAN
+    signs = [closing_error(h)[0] > 0 for h in grid[:-1]] + [True]
+    for k in range(_SCAN):
+        if not signs[k] and signs[k + 1]:
+            pts, equal = bisect(grid[k + 1], grid[k])
+            if equal:
+                return pts, True
+    pts, equal = bisect(0.0, top)
+    if pts is None:
         raise ValueError("could not resample this curve: it is too short for the edge count")
-    err, pts = closing_error(lo)
-    if closed:
-        return pts
-    return np.vstack([pts, end[None, :]])
+    return pts, equal
 
 
 def resample(points, n, closed: bool = True):
@@ -138,7 +178,11 @@ def resample(points, n, closed: bool = True):
     -------
     (n, 3) array or list of arrays
         Vertices on the polyline, consecutive ones at equal distance (chords equal to 1e-10
-        relative, the closing chord included when ``closed``), in the polyline's order.
+        relative, the closing chord included when ``closed``), in the polyline's order,
+        starting at its first point. Exception: at coarse counts a polyline with sharp turns
+        (over 90°) may have no such polygon through its first point; then the march starts
+        at another point of a closed curve, and if none works either, the closing chord is
+        left unequal (``Relaxation`` says so; use more edges or ``target_lengths="keep"``).
     """
     if isinstance(points, (list, tuple)):
         ns = list(n) if np.ndim(n) else _split_count(points, int(n))

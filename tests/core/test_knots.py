@@ -218,7 +218,7 @@ def test_random_unknot_is_deterministic_and_tangled():
         (lambda n: knots.named("7_2", n), 136),
         (lambda n: knots.named("8_1", n), 197),
         (knots.freedman_unknot, 470),
-        (knots.helix_unknot, 61),
+        (knots.helix_unknot, 62),
     ],
 )
 def test_documented_smallest_n(make, n):

@@ -90,3 +90,27 @@ def test_too_coarse_start_names_an_edge_count_that_works(fhw_raw):
     check_polygon(resample(fhw_raw, k))
     assert suggest_edge_count(P) == k
     assert contact_ratio(resample(fhw_raw, 600)) > 1.1
+
+
+def test_resample_through_its_start_twice_keeps_both_lobes():
+    # a lemniscate started at its crossing passes through the start point halfway: the
+    # closing condition also holds after one lobe, which is not the resampling asked for
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False) + np.pi / 2
+    raw = np.c_[np.cos(t), np.sin(t) * np.cos(t), 0 * t] / (1 + np.sin(t) ** 2)[:, None]
+    for n in (50, 101, 200):
+        P = resample(raw, n)
+        ln = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
+        assert ln.max() / ln.min() - 1 < 1e-10
+        assert P[:, 0].min() < -0.99 and P[:, 0].max() > 0.99  # both lobes
+        assert ln.sum() > 0.998 * np.linalg.norm(np.roll(raw, -1, axis=0) - raw, axis=1).sum()
+
+
+@pytest.mark.parametrize("n", [40, 57])
+def test_resample_of_sharp_corners_is_equilateral(n):
+    # a crossing and 135° corners: these counts came back with one long edge (it was 69%
+    # longer at 40, 103% at 57); starting the march elsewhere on the curve finds equal edges
+    bowtie = np.array([[0, 0, 0], [1, 1, 0], [1, 0, 0], [0, 1, 0]], dtype=float)
+    P = resample(bowtie, n)
+    ln = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
+    assert ln.max() / ln.min() - 1 < 1e-10
+    assert _distance_to_polyline(P, bowtie).max() < 1e-12
