@@ -36,8 +36,9 @@ HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
 # much as N / _FACTOR_PER_ITER preconditioned Krylov iterations (measured here at N = 3000:
 # ~1.1 s against ~15 ms per iteration).
 _FACTOR_PER_ITER = 40.0
-# From this many vertices on, a single-precision factorization refined by GMRES pays.
-_AUTO_SINGLE_FROM = 400
+# From this many vertices on, a single-precision factorization refined by GMRES pays (FHW flow,
+# ms per iteration single/double, session 3: 500: 28/21–23, 600: 27–34/32–34, 700: 42/49).
+_AUTO_SINGLE_FROM = 600
 # A run that stops moving with a projected gradient above this many times tol is jammed, not
 # converged (near the minimum Armijo fails on round-off with sqrt(<g,u>) ≈ 1e-8, DESIGN.md).
 _STALL_FACTOR = 1e3
@@ -122,7 +123,7 @@ class Relaxation:
     precision : {"auto", "double", "single"}
         Precision of the factorization; "single" is refined to double precision by GMRES on
         the exact system (same iterates up to the solver tolerance, cheaper factorization);
-        "auto" uses it from 400 vertices on.
+        "auto" uses it from 600 vertices on.
     interpolate : bool
         After an Armijo failure shrink τ to the minimizer of the parabola through E(P), the
         slope −<g,u> and E(Q), kept in [0.1, 0.5] τ, instead of halving it (fewer rejected
