@@ -75,9 +75,10 @@ def _dims(n):
     return ctypes.byref(_int(n)), ctypes.byref(_int(n))
 
 
-def spd_inverse(A: np.ndarray):
-    """Inverse of an SPD matrix (potrf + potri) or None if LAPACK is unavailable."""
-    M = cholesky(A)
+def spd_inverse(A: np.ndarray, overwrite: bool = False):
+    """Inverse of an SPD matrix (potrf + potri) or None if LAPACK is unavailable;
+    ``overwrite=True`` inverts a C-ordered ``A`` in place."""
+    M = cholesky(A, overwrite=overwrite)
     if M is None:
         return None
     uplo = ctypes.byref(ctypes.c_char(b"U"))

@@ -247,7 +247,9 @@ class Relaxation:
         self.E = E
         self.g = g
         self.jac = jacobian(X, self.con)
-        self.solver.update(gram_x(self.metric, X, self.layout), self.jac)
+        # the previous iterate's Gram matrix is no longer needed: its memory takes the new one
+        self._gram = gram_x(self.metric, X, self.layout, out=getattr(self, "_gram", None))
+        self.solver.update(self._gram, self.jac)
         self.u, _ = self.solver.solve(g, np.zeros(self.con.size))
         self.gu = float(np.einsum("ij,ij->", g, self.u))
         self.phi = residual(X, self.con)
