@@ -64,6 +64,30 @@ def field_product(M: np.ndarray, U: np.ndarray) -> np.ndarray:
     return out
 
 
+@nb.njit(cache=True, parallel=True)
+def _block_inverses(F, b):
+    """Inverses (float64) of the lower triangles of the diagonal b × b blocks of F, row by row
+    (b³/6 multiply–adds per block; np.linalg.inv of each block cost 6.6 ms per iterate at
+    1648 vertices)."""
+    n = F.shape[0]
+    nblocks = (n + b - 1) // b
+    out = np.zeros((nblocks, b, b))
+    for k in nb.prange(nblocks):
+        b0 = k * b
+        m = min(n, b0 + b) - b0
+        X = out[k]
+        for i in range(m):  # row i: X[i, :i] = −L[i, :i] X[:i, :i] / L[i, i]
+            for j in range(i):
+                lij = F[b0 + i, b0 + j]
+                for c in range(j + 1):
+                    X[i, c] -= lij * X[j, c]
+            d = 1.0 / F[b0 + i, b0 + i]
+            for c in range(i):
+                X[i, c] *= d
+            X[i, i] = d
+    return out
+
+
 class CholeskySolve:
     """``S⁻¹ v`` from the Cholesky factor ``L`` of ``S`` (the lower triangle of ``F``; the
     strict upper triangle is ignored) by blocked substitution: gemv on the off-diagonal
@@ -78,8 +102,8 @@ class CholeskySolve:
         self.F = F
         self.blocks = [(b0, min(n, b0 + self.BLOCK)) for b0 in range(0, n, self.BLOCK)]
         # explicit inverses lose κ(L_bb) digits: keep them (small) in double precision
-        self.dinv = [np.linalg.inv(np.tril(F[b0:b1, b0:b1]).astype(np.float64))
-                     for b0, b1 in self.blocks]
+        inv = _block_inverses(F, self.BLOCK)
+        self.dinv = [inv[k, : b1 - b0, : b1 - b0] for k, (b0, b1) in enumerate(self.blocks)]
 
     def __call__(self, v: np.ndarray) -> np.ndarray:
         F = self.F
