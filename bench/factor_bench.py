@@ -7,7 +7,8 @@ something). Prints measurements; not a test.
 "previous" is the code before commit 8a2daaa: A⁻¹ by LAPACK potrf+potri mirrored with
 ``triu_indices``, the edge Schur block from numpy temporaries, ``np.linalg.cholesky`` of S and
 a LAPACK triangular inverse. "current" is ``linalg.Factorization``: tiled numba mirror, one-pass
-numba Schur block, LAPACK potrf of S applied by potrs.
+numba Schur block, LAPACK potrf of S (applied by blocked substitution, whose diagonal-block
+inverses are part of the factorization since session 3).
 """
 
 from __future__ import annotations
@@ -51,8 +52,9 @@ def previous(A, jac, dtype):
     S[:, ne:] = cols
     S[ne:, :] = cols.T
     L = _lapack.cholesky(S, overwrite=True)  # then trtri of the factor, as before
-    _lapack._call("trtri", L.dtype, uplo, ctypes.byref(ctypes.c_char(b"N")), *_lapack._dims(m),
-                  L.ctypes.data_as(ctypes.c_void_p), _lapack._dims(m)[1])
+    nn, lda = _lapack._dims(m)
+    _lapack._call("trtri", L.dtype, uplo, ctypes.byref(ctypes.c_char(b"N")), nn,
+                  L.ctypes.data_as(ctypes.c_void_p), lda)
     return np.tril(L)
 
 

@@ -175,8 +175,8 @@ class Factorization:
         # S⁻¹ is applied by two triangular solves with its Cholesky factor (N³/3 flops)
         self.sinv = None
         if m:
-            F = _lapack.cholesky(S, overwrite=True)
-            self.sinv = CholeskySolve(F if F is not None else np.linalg.cholesky(S))
+            LS = _lapack.cholesky(S, overwrite=True)
+            self.sinv = CholeskySolve(LS if LS is not None else np.linalg.cholesky(S))
 
     def ginv(self, U: np.ndarray) -> np.ndarray:
         """``G⁻¹ U`` for a field (N, 3) (``A⁻¹`` on every coordinate)."""
