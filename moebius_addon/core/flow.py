@@ -84,7 +84,120 @@ class RelaxResult:
         )
 
 
-class Relaxation:
+def _check_names(metric: str, target_lengths: str) -> None:
+    if metric not in METRICS:
+        raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
+    if target_lengths not in ("equal", "keep"):
+        raise ValueError("target_lengths must be 'equal' or 'keep'")
+
+
+def _start(run, P, metric, max_iter, tol, energy_target, ftol, max_seconds, target_lengths,
+           check, equilateral):
+    """Set-up shared by every run (this one and those of ``methods``): the options, the start
+    checked and scaled to total length 1 around the origin (results are mapped back), and the
+    target edge lengths — "equal": the mean per component, the start refused unless it is
+    equilateral already when ``equilateral``. Returns the scaled start and the targets."""
+    run.t0 = time.perf_counter()
+    X, layout = as_layout(P)
+    if check:
+        check_polygon(P)
+    run.layout = layout
+    run.metric = metric
+    run.max_iter = int(max_iter)
+    run.tol = float(tol)
+    run.energy_target = energy_target
+    run.ftol = float(ftol)
+    run.max_seconds = max_seconds
+    ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
+    run._shift = X.mean(axis=0)
+    run._scale = float(ln.sum())
+    Xn = (X - run._shift) / run._scale
+    ln = ln / run._scale
+    if target_lengths == "keep":
+        return Xn, ln.copy()
+    lengths0 = np.empty_like(ln)
+    for c in range(layout.k):
+        s = slice(layout.starts[c], layout.starts[c + 1])
+        mean = ln[s].mean()
+        spread = float(np.abs(ln[s] / mean - 1).max())
+        if equilateral and spread > 1e-6:
+            where = f"component {c}" if layout.is_link else "the polygon"
+            raise ValueError(
+                f"{where} is not equilateral (edge lengths differ by up to "
+                f"{100 * spread:.3g}%); call core.resample(P, n) first, or pass "
+                f"target_lengths='keep' to keep its edge lengths"
+            )
+        lengths0[s] = mean
+    return Xn, lengths0
+
+
+def _give_up(run, gu: float) -> bool:
+    """End a run whose line search found no acceptable step: at the minimum the test fails on
+    round-off (DESIGN.md, step 6), which is convergence; anywhere else it is a failure worth
+    reporting (``gu``: the squared gradient norm in the metric). Returns False."""
+    gn = float(np.sqrt(max(gu, 0.0)))
+    if gn <= _STALL_FACTOR * run.tol:
+        run._finish(True, "converged: no further decrease above round-off")
+    else:
+        run._finish(False, run._stall_message(gn))
+    return False
+
+
+class _Run:
+    """What every run shares (this module's and those of ``methods``): its state as the caller
+    sees it and the stopping rules. Subclasses set the history and ``E``; ``_objective`` is
+    what the relative-change test watches, ``_GRADIENT`` how messages call the gradient norm."""
+
+    _GRADIENT = "projected gradient norm"
+
+    @property
+    def x(self):
+        """Current polygon (or list of arrays for a link) in the caller's coordinates."""
+        return self.layout.split(self.X * self._scale + self._shift)
+
+    @property
+    def energy(self) -> float:
+        return self.E
+
+    def state(self) -> IterationState:
+        h = self.history
+        return IterationState(
+            self.nit, self.x, h["energy"][-1], h["step"][-1], h["grad_norm"][-1],
+            h["constraint_residual"][-1], h["seconds"][-1],
+        )
+
+    def _objective(self) -> float:
+        return self.E
+
+    def _finish(self, success: bool, message: str) -> None:
+        self.done = True
+        self.success = success
+        self.message = message
+
+    def stop(self, message: str = "stopped by the caller") -> None:
+        """End the run cleanly after the current iterate (e.g. ESC in Blender)."""
+        if not self.done:
+            self._finish(True, message)
+
+    def _check_stop(self, prev: float | None) -> None:
+        gn = self.history["grad_norm"][-1]
+        cur = self._objective()
+        if gn <= self.tol:
+            self._finish(True, f"{self._GRADIENT} {gn:.3g} below tol {self.tol:g}")
+        elif self.energy_target is not None and self.E <= self.energy_target:
+            self._finish(True, f"energy {self.E:.10g} reached the target {self.energy_target:g}")
+        elif prev is not None and abs(prev - cur) <= self.ftol * abs(cur):
+            if gn <= _STALL_FACTOR * self.tol:
+                self._finish(True, f"relative energy change below ftol {self.ftol:g}")
+            else:
+                self._finish(False, self._stall_message(gn))
+        elif self.nit >= self.max_iter:
+            self._finish(False, f"maximum number of iterations ({self.max_iter}) reached")
+        elif self.max_seconds is not None and time.perf_counter() - self.t0 >= self.max_seconds:
+            self._finish(False, f"time budget of {self.max_seconds:g} s used up")
+
+
+class Relaxation(_Run):
     """A projected Sobolev-gradient run that advances one accepted iterate per :meth:`step`.
 
     Parameters
@@ -153,53 +266,19 @@ class Relaxation:
         precision: str = "auto",
         interpolate: bool = False,
     ):
-        if metric not in METRICS:
-            raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
-        if target_lengths not in ("equal", "keep"):
-            raise ValueError("target_lengths must be 'equal' or 'keep'")
+        _check_names(metric, target_lengths)
         if not 0 < armijo < 1:
             raise ValueError("armijo must lie in (0, 1)")
         if growth < 1 or initial_step <= 0:
             raise ValueError("growth must be >= 1 and initial_step > 0")
-        self.t0 = time.perf_counter()
-        X, layout = as_layout(P)
-        if check:
-            check_polygon(P)
-        self.layout = layout
-        self.metric = metric
-        self.max_iter = int(max_iter)
-        self.tol = float(tol)
-        self.energy_target = energy_target
-        self.ftol = float(ftol)
-        self.max_seconds = max_seconds
+        Xn, lengths0 = _start(self, P, metric, max_iter, tol, energy_target, ftol, max_seconds,
+                              target_lengths, check, equilateral=True)
+        layout = self.layout
         self.armijo = float(armijo)
         self.growth = float(growth)
         self.backproject_iter = int(backproject_iter)
         self.backproject_tol = float(backproject_tol)
         self.interpolate = bool(interpolate)
-
-        # Work at total length 1 around the origin (results are mapped back).
-        ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
-        self._shift = X.mean(axis=0)
-        self._scale = float(ln.sum())
-        Xn = (X - self._shift) / self._scale
-        ln = ln / self._scale
-        if target_lengths == "equal":
-            lengths0 = np.empty_like(ln)
-            for c in range(layout.k):
-                s = slice(layout.starts[c], layout.starts[c + 1])
-                mean = ln[s].mean()
-                spread = float(np.abs(ln[s] / mean - 1).max())
-                if spread > 1e-6:
-                    where = f"component {c}" if layout.is_link else "the polygon"
-                    raise ValueError(
-                        f"{where} is not equilateral (edge lengths differ by up to "
-                        f"{100 * spread:.3g}%); call core.resample(P, n) first, or pass "
-                        f"target_lengths='keep' to keep its edge lengths"
-                    )
-                lengths0[s] = mean
-        else:
-            lengths0 = ln.copy()
         self.con: Constraints = make_constraints(Xn, layout, lengths0, edge_lengths, barycenter)
         if precision not in ("auto", "double", "single"):
             raise ValueError("precision must be 'auto', 'double' or 'single'")
@@ -218,28 +297,13 @@ class Relaxation:
         self.success = False
         self.message = ""
         self.rejected = 0
+        self._gram = None  # the Gram matrix's memory, refilled at every iterate
         self._prepare(Xn, *energy_gradient_x(Xn, layout))
         self.history = {k: [] for k in HISTORY_KEYS}
         self._record(0.0)
         self._check_stop(None)
 
     # -- state ---------------------------------------------------------------------------------
-
-    @property
-    def x(self):
-        """Current polygon (or list of arrays for a link) in the caller's coordinates."""
-        return self.layout.split(self.X * self._scale + self._shift)
-
-    @property
-    def energy(self) -> float:
-        return self.E
-
-    def state(self) -> IterationState:
-        h = self.history
-        return IterationState(
-            self.nit, self.x, h["energy"][-1], h["step"][-1], h["grad_norm"][-1],
-            h["constraint_residual"][-1], h["seconds"][-1],
-        )
 
     def _prepare(self, X: np.ndarray, E: float, g: np.ndarray) -> None:
         """Steps 1–2 at the (feasible) polygon X."""
@@ -248,7 +312,7 @@ class Relaxation:
         self.g = g
         self.jac = jacobian(X, self.con)
         # the previous iterate's Gram matrix is no longer needed: its memory takes the new one
-        self._gram = gram_x(self.metric, X, self.layout, out=getattr(self, "_gram", None))
+        self._gram = gram_x(self.metric, X, self.layout, out=self._gram)
         self.solver.update(self._gram, self.jac)
         self.u, _ = self.solver.solve(g, np.zeros(self.con.size))
         self.gu = float(np.einsum("ij,ij->", g, self.u))
@@ -261,32 +325,6 @@ class Relaxation:
         h["grad_norm"].append(float(np.sqrt(max(self.gu, 0.0))))
         h["constraint_residual"].append(float(np.abs(self.phi).max()) if self.phi.size else 0.0)
         h["seconds"].append(time.perf_counter() - self.t0)
-
-    def _finish(self, success: bool, message: str) -> None:
-        self.done = True
-        self.success = success
-        self.message = message
-
-    def stop(self, message: str = "stopped by the caller") -> None:
-        """End the run cleanly after the current iterate (e.g. ESC in Blender)."""
-        if not self.done:
-            self._finish(True, message)
-
-    def _check_stop(self, e_prev: float | None) -> None:
-        gn = self.history["grad_norm"][-1]
-        if gn <= self.tol:
-            self._finish(True, f"projected gradient norm {gn:.3g} below tol {self.tol:g}")
-        elif self.energy_target is not None and self.E <= self.energy_target:
-            self._finish(True, f"energy {self.E:.10g} reached the target {self.energy_target:g}")
-        elif e_prev is not None and abs(e_prev - self.E) <= self.ftol * abs(self.E):
-            if gn <= _STALL_FACTOR * self.tol:
-                self._finish(True, f"relative energy change below ftol {self.ftol:g}")
-            else:
-                self._finish(False, self._stall_message(gn))
-        elif self.nit >= self.max_iter:
-            self._finish(False, f"maximum number of iterations ({self.max_iter}) reached")
-        elif self.max_seconds is not None and time.perf_counter() - self.t0 >= self.max_seconds:
-            self._finish(False, f"time budget of {self.max_seconds:g} s used up")
 
     # -- one iteration -------------------------------------------------------------------------
 
@@ -357,14 +395,7 @@ class Relaxation:
             tau *= shrink
             if tau * gu <= 1e-15 * abs(E):
                 break
-        # No acceptable step: at the minimum the Armijo test fails on round-off
-        # (DESIGN.md, step 6); anywhere else it is a failure worth reporting.
-        gn = float(np.sqrt(max(gu, 0.0)))
-        if gn <= _STALL_FACTOR * self.tol:
-            self._finish(True, "converged: no further decrease above round-off")
-        else:
-            self._finish(False, self._stall_message(gn))
-        return False
+        return _give_up(self, gu)
 
     def _stall_message(self, gn: float) -> str:
         return (

@@ -41,14 +41,20 @@ import time
 
 import numpy as np
 
-from ._layout import as_layout
 from .collision import contact_time_x
 from .constraints import jacobian, make_constraints
 from .energy import energy_gradient_x
-from .flow import HISTORY_KEYS, IterationState, Relaxation, RelaxResult
+from .flow import (
+    HISTORY_KEYS,
+    Relaxation,
+    RelaxResult,
+    _check_names,
+    _give_up,
+    _Run,
+    _start,
+)
 from .linalg import spd_inverse
-from .metrics import METRICS, gram_x
-from .polygon import check_polygon
+from .metrics import gram_x
 
 FEASIBLE = ("projected_gradient", "projected_gradient_implicit", "trust_region")
 INFEASIBLE = ("ncg", "lbfgs", "nesterov")
@@ -64,7 +70,6 @@ _FEASIBLE_ONLY = frozenset({
 # fraction of an edge length: about 1e-7 relative error against central differences (measured
 # on the trefoil and the FHW unknot), one gradient per product.
 _FD_STEP = 1e-6
-_STALL_FACTOR = 1e3
 
 
 class _OutOfTime(Exception):
@@ -185,12 +190,7 @@ class _Feasible(Relaxation):
         return not self.done
 
     def _give_up(self):
-        gn = float(np.sqrt(max(self.gu, 0.0)))
-        if gn <= _STALL_FACTOR * self.tol:
-            self._finish(True, "converged: no further decrease above round-off")
-        else:
-            self._finish(False, self._stall_message(gn))
-        return False
+        return _give_up(self, self.gu)
 
     def result(self) -> RelaxResult:
         res = super().result()
@@ -445,7 +445,7 @@ def _dot(a, b) -> float:
     return float(np.einsum("ij,ij->", a, b))
 
 
-class _PenaltyRun:
+class _PenaltyRun(_Run):
     """Common state of the infeasible methods: normalization, penalty, metric, Wolfe search.
 
     Parameters (besides ``P, metric, max_iter, tol`` as in :class:`flow.Relaxation`)
@@ -460,6 +460,8 @@ class _PenaltyRun:
         As in :class:`flow.Relaxation`; ``ftol`` applies to the penalized energy.
     """
 
+    _GRADIENT = "gradient norm"
+
     def __init__(self, P, metric="hs", max_iter=200, tol=1e-6, *, alpha: float = 1e4,
                  penalty_metric="auto", c1: float = 1e-4, c2: float = 0.9,
                  energy_target: float | None = None, ftol: float = 1e-12,
@@ -468,41 +470,19 @@ class _PenaltyRun:
         unknown = set(ignored) - _FEASIBLE_ONLY
         if unknown:
             raise TypeError(f"unknown option(s) {', '.join(sorted(unknown))}")
-        if metric not in METRICS:
-            raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
-        if target_lengths not in ("equal", "keep"):
-            raise ValueError("target_lengths must be 'equal' or 'keep'")
+        _check_names(metric, target_lengths)
         if not 0 < c1 < c2 < 1:
             raise ValueError("Wolfe constants need 0 < c1 < c2 < 1")
         if alpha < 0 or initial_step <= 0:
             raise ValueError("alpha must be >= 0 and initial_step > 0")
-        self.t0 = time.perf_counter()
-        X, layout = as_layout(P)
-        if check:
-            check_polygon(P)
-        self.layout = layout
-        self.metric = metric
-        self.max_iter = int(max_iter)
-        self.tol = float(tol)
-        self.energy_target = energy_target
-        self.ftol = float(ftol)
-        self.max_seconds = max_seconds
+        # the penalty pulls a non-equilateral start to the mean lengths: no equilateral check
+        Xn, lengths0 = _start(self, P, metric, max_iter, tol, energy_target, ftol, max_seconds,
+                              target_lengths, check, equilateral=False)
+        layout = self.layout
         self.alpha = float(alpha)
         self.penalty_in_metric = (metric != "l2") if penalty_metric == "auto" else bool(
             penalty_metric)
         self.c1, self.c2 = float(c1), float(c2)
-        ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
-        self._shift = X.mean(axis=0)
-        self._scale = float(ln.sum())
-        Xn = (X - self._shift) / self._scale
-        ln = ln / self._scale
-        if target_lengths == "equal":
-            lengths0 = np.empty_like(ln)
-            for c in range(layout.k):
-                s = slice(layout.starts[c], layout.starts[c + 1])
-                lengths0[s] = ln[s].mean()
-        else:
-            lengths0 = ln.copy()
         self.lengths0 = lengths0
         self.con = make_constraints(Xn, layout, lengths0, True, False)
         self.eps = 1e-3 * float(lengths0.mean())
@@ -553,21 +533,6 @@ class _PenaltyRun:
 
     # -- bookkeeping ----------------------------------------------------------------------------
 
-    @property
-    def x(self):
-        return self.layout.split(self.X * self._scale + self._shift)
-
-    @property
-    def energy(self) -> float:
-        return self.E
-
-    def state(self) -> IterationState:
-        h = self.history
-        return IterationState(
-            self.nit, self.x, h["energy"][-1], h["step"][-1], h["grad_norm"][-1],
-            h["constraint_residual"][-1], h["seconds"][-1],
-        )
-
     def _record(self, tau):
         h = self.history
         h["energy"].append(self.E)
@@ -577,30 +542,8 @@ class _PenaltyRun:
         h["seconds"].append(time.perf_counter() - self.t0)
         h["penalized_energy"].append(self.f)
 
-    def _finish(self, success, message):
-        self.done = True
-        self.success = success
-        self.message = message
-
-    def stop(self, message: str = "stopped by the caller") -> None:
-        if not self.done:
-            self._finish(True, message)
-
-    def _check_stop(self, f_prev):
-        gn = self.history["grad_norm"][-1]
-        if gn <= self.tol:
-            self._finish(True, f"gradient norm {gn:.3g} below tol {self.tol:g}")
-        elif self.energy_target is not None and self.E <= self.energy_target:
-            self._finish(True, f"energy {self.E:.10g} reached the target {self.energy_target:g}")
-        elif f_prev is not None and abs(f_prev - self.f) <= self.ftol * abs(self.f):
-            if gn <= _STALL_FACTOR * self.tol:
-                self._finish(True, f"relative energy change below ftol {self.ftol:g}")
-            else:
-                self._finish(False, self._stall_message(gn))
-        elif self.nit >= self.max_iter:
-            self._finish(False, f"maximum number of iterations ({self.max_iter}) reached")
-        elif self.max_seconds is not None and time.perf_counter() - self.t0 >= self.max_seconds:
-            self._finish(False, f"time budget of {self.max_seconds:g} s used up")
+    def _objective(self) -> float:
+        return self.f  # ftol applies to the penalized energy
 
     def _stall_message(self, gn):
         return (
@@ -609,12 +552,7 @@ class _PenaltyRun:
         )
 
     def _give_up(self):
-        gn = float(np.sqrt(max(self.gz, 0.0)))
-        if gn <= _STALL_FACTOR * self.tol:
-            self._finish(True, "converged: no further decrease above round-off")
-        else:
-            self._finish(False, self._stall_message(gn))
-        return False
+        return _give_up(self, self.gz)
 
     def step(self) -> bool:
         """Advance by one accepted iterate. Returns False once the run is finished."""

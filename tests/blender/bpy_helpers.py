@@ -55,10 +55,14 @@ def points_at(obj, frame: int):
     """World-space spline points of ``obj`` at ``frame`` as one ``(N, 3)`` array."""
     bpy.context.scene.frame_set(frame)
     M = np.array(obj.matrix_world)
+    return spline_points(obj) @ M[:3, :3].T + M[:3, 3]
+
+
+def spline_points(obj):
+    """Local-space points of all poly splines of ``obj``, one ``(N, 3)`` array."""
     X = []
     for s in obj.data.splines:
         co = np.empty(4 * len(s.points))
         s.points.foreach_get("co", co)
         X.append(co.reshape(-1, 4)[:, :3])
-    X = np.concatenate(X)
-    return X @ M[:3, :3].T + M[:3, 3]
+    return np.concatenate(X)

@@ -7,18 +7,9 @@ from importlib import import_module
 import bpy
 import numpy as np
 import pytest
-from bpy_helpers import scene_state
+from bpy_helpers import scene_state, spline_points
 
 from moebius_addon.core.methods import FEASIBLE, INFEASIBLE, METHODS
-
-
-def _points(obj):
-    X = []
-    for s in obj.data.splines:
-        co = np.empty(4 * len(s.points))
-        s.points.foreach_get("co", co)
-        X.append(co.reshape(-1, 4)[:, :3])
-    return np.concatenate(X)
 
 
 def _edges(X):
@@ -67,7 +58,7 @@ def test_settings_pass_each_method_only_its_options(scene, mb):
 
 @pytest.mark.parametrize("method", METHODS)
 def test_relax_each_method_keys_every_iterate(scene, mb, core, trefoil, method):
-    start = _points(trefoil)
+    start = spline_points(trefoil)
     s = scene.moebius
     s.method = method
     s.max_iterations = 3
@@ -79,7 +70,7 @@ def test_relax_each_method_keys_every_iterate(scene, mb, core, trefoil, method):
     shapes = []
     for f in range(1, 5):
         scene.frame_set(f)
-        shapes.append(_points(trefoil))
+        shapes.append(spline_points(trefoil))
     np.testing.assert_allclose(shapes[0], start, atol=1e-6)
     assert np.abs(shapes[-1] - start).max() > 1e-3
     l0 = _edges(start)
@@ -135,7 +126,7 @@ def test_callback_and_esc_stop_every_method(scene, mb, core, trefoil, method):
     assert [n for n, _ in seen] == [1, 2] and "maximum number of iterations" in result.message
     # what Esc does in the modal operator: stop(), then finish() keys the iterates so far
     scene.frame_set(3)
-    mid = _points(trefoil)
+    mid = spline_points(trefoil)
     run = mb.ObjectRelaxation(trefoil, method=method, max_iterations=50, tolerance=0.0, **kw)
     assert run.step()
     run.stop("cancelled by the user (Esc)")
@@ -144,7 +135,7 @@ def test_callback_and_esc_stop_every_method(scene, mb, core, trefoil, method):
     assert result.nit == 1 and result.message == "cancelled by the user (Esc)"
     assert mb.keyed_frames(trefoil) == [1.0, 2.0] and scene.moebius.last_method == method
     scene.frame_set(1)
-    np.testing.assert_allclose(_points(trefoil), mid, atol=1e-6)
+    np.testing.assert_allclose(spline_points(trefoil), mid, atol=1e-6)
 
 
 def test_bad_method_or_penalty_is_refused_leaving_the_scene(scene, mb, trefoil):

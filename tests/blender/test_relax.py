@@ -3,16 +3,7 @@
 import bpy
 import numpy as np
 import pytest
-from bpy_helpers import poly_curve, scene_state
-
-
-def _points(obj):
-    X = []
-    for s in obj.data.splines:
-        co = np.empty(4 * len(s.points))
-        s.points.foreach_get("co", co)
-        X.append(co.reshape(-1, 4)[:, :3])
-    return np.concatenate(X)
+from bpy_helpers import poly_curve, scene_state, spline_points
 
 
 def _fcurves(idblock):
@@ -29,7 +20,7 @@ def trefoil(scene, mb):
 
 
 def test_relax_keyframes_every_iterate(scene, mb, trefoil):
-    start = _points(trefoil)
+    start = spline_points(trefoil)
     s = scene.moebius
     s.max_iterations = 6
     s.frame_start = 10
@@ -49,9 +40,9 @@ def test_relax_keyframes_every_iterate(scene, mb, trefoil):
     assert co[1] == pytest.approx(start[7, 2], abs=1e-6)
     # frame_start shows the start; the current (last) frame the final iterate
     scene.frame_set(10)
-    np.testing.assert_allclose(_points(trefoil), start, atol=1e-6)
+    np.testing.assert_allclose(spline_points(trefoil), start, atol=1e-6)
     scene.frame_set(10 + nit)
-    final = _points(trefoil)
+    final = spline_points(trefoil)
     assert np.abs(final - start).max() > 1e-3
     # energy keyed on the object, strictly decreasing, matching the core's energy
     efc = _fcurves(trefoil).find('["moebius_energy"]')
@@ -92,13 +83,13 @@ def test_relax_api_matches_core_relax(scene, mb, core, trefoil):
     ref = core.relax(start, max_iter=4, tol=0.0, target_lengths="keep")
     assert result.nit == ref.nit == 4
     np.testing.assert_allclose(result.x, ref.x, atol=1e-12)
-    np.testing.assert_allclose(_points(trefoil), ref.x, atol=1e-6)  # last frame shown
+    np.testing.assert_allclose(spline_points(trefoil), ref.x, atol=1e-6)  # last frame shown
     assert result.history["energy"] == ref.history["energy"]
 
 
 def test_stopping_keeps_iterates_so_far_and_the_start(scene, mb, trefoil):
     """What Esc does in the modal operator: stop(), then finish() keyframes what was done."""
-    start = _points(trefoil)
+    start = spline_points(trefoil)
     run = mb.ObjectRelaxation(trefoil, max_iterations=50, tolerance=0.0)
     for _ in range(3):
         assert run.step()
@@ -108,12 +99,12 @@ def test_stopping_keeps_iterates_so_far_and_the_start(scene, mb, trefoil):
     assert result.nit == 3 and result.message == "cancelled by the user (Esc)"
     assert mb.keyed_frames(trefoil) == [1.0, 2.0, 3.0, 4.0]
     scene.frame_set(1)
-    np.testing.assert_allclose(_points(trefoil), start, atol=1e-6)
+    np.testing.assert_allclose(spline_points(trefoil), start, atol=1e-6)
     # clear_animation goes back to the start shape
     scene.frame_set(4)
     assert bpy.ops.moebius.clear_animation() == {"FINISHED"}
     assert mb.keyed_frames(trefoil) == [] and trefoil.data.animation_data.action is None
-    np.testing.assert_allclose(_points(trefoil), start, atol=1e-6)
+    np.testing.assert_allclose(spline_points(trefoil), start, atol=1e-6)
 
 
 def test_callback_stops_the_run(scene, mb, trefoil):
@@ -127,15 +118,15 @@ def test_apply_frame_then_relax_again(scene, mb, trefoil):
     scene.moebius.max_iterations = 4
     bpy.ops.moebius.relax()
     scene.frame_set(3)
-    mid = _points(trefoil)
+    mid = spline_points(trefoil)
     assert bpy.ops.moebius.apply_frame() == {"FINISHED"}
     assert mb.keyed_frames(trefoil) == []
     scene.frame_set(1)  # no animation any more: the frame-3 shape stays
-    np.testing.assert_allclose(_points(trefoil), mid, atol=1e-7)
+    np.testing.assert_allclose(spline_points(trefoil), mid, atol=1e-7)
     assert trefoil["moebius_energy"] == pytest.approx(mb.energy([mid]), rel=1e-9)
     bpy.ops.moebius.relax()
     scene.frame_set(scene.frame_start)
-    np.testing.assert_allclose(_points(trefoil), mid, atol=1e-6)
+    np.testing.assert_allclose(spline_points(trefoil), mid, atol=1e-6)
 
 
 def test_other_animation_is_left_alone(scene, mb, trefoil):
