@@ -80,10 +80,15 @@ def test_blocked_cholesky_solve_and_spd_inverse(n, rng):
     np.testing.assert_allclose(spd_inverse(A) @ A, np.eye(n), atol=1e-10)
 
 
-def test_field_product_is_the_matrix_product(rng):
-    M = rng.standard_normal((50, 50))
-    U = rng.standard_normal((50, 3))
+@pytest.mark.parametrize("n", [1, 50, 51, 53])  # the kernel takes rows four at a time
+def test_field_product_is_the_matrix_product(n, rng):
+    M = rng.standard_normal((n, n))
+    U = rng.standard_normal((n, 3))
     np.testing.assert_allclose(field_product(M, U), M @ U, rtol=1e-13, atol=1e-13)
+    # a single-precision matrix is summed in double precision: exact products of its values
+    M32 = M.astype(np.float32)
+    np.testing.assert_allclose(field_product(M32, U), M32.astype(np.float64) @ U,
+                               rtol=1e-13, atol=1e-13)
 
 
 @pytest.mark.parametrize("metric", ["hs", "h1"])
