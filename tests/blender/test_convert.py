@@ -62,6 +62,19 @@ def test_convert_poly_curve_keeps_vertices_on_the_polyline(scene, mb):
     assert (on_side[:, 0] | on_side[:, 1]).all()
 
 
+def test_convert_sharp_cornered_poly_curve_gives_equal_edges(scene, mb):
+    # a ten-pointed star has no equal-chord polygon on it at 97 edges: the conversion came back
+    # with one edge 2.27 times the others, which the flow then kept to the end
+    ang = np.arange(10) * 2 * np.pi / 10
+    r = np.where(np.arange(10) % 2 == 0, 1.0, 0.4)
+    poly_curve("Star", [np.c_[r * np.cos(ang), r * np.sin(ang), 0.05 * np.cos(3 * ang)]])
+    scene.moebius.edges = 97
+    assert bpy.ops.moebius.convert() == {"FINISHED"}
+    (P,) = _converted(bpy.context.active_object)
+    assert len(P) == 97
+    _assert_equilateral(P)
+
+
 def test_convert_mesh_edge_loop_and_edge_length(scene, mb):
     bpy.ops.mesh.primitive_circle_add(vertices=32, radius=1.0, fill_type="NOTHING")
     scene.moebius.use_edge_length = True

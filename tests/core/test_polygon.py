@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from moebius_addon.core import check_polygon, contact_ratio, resample, suggest_edge_count
+from moebius_addon.core.polygon import equalize
 from tests.conftest import ngon, trefoil
 
 
@@ -114,3 +115,37 @@ def test_resample_of_sharp_corners_is_equilateral(n):
     ln = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
     assert ln.max() / ln.min() - 1 < 1e-10
     assert _distance_to_polyline(P, bowtie).max() < 1e-12
+
+
+def _spread(P):
+    ln = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)
+    return ln.max() / ln.min() - 1, ln.mean()
+
+
+@pytest.mark.parametrize("n", [12, 31, 97, 361])
+def test_resample_is_equilateral_where_no_polygon_on_the_polyline_is(n):
+    # a ten-pointed star (turns of 130°): at these counts no march along it closes with equal
+    # chords from any start tried (before: one edge 1.5 to 3.6 times the others)
+    ang = np.arange(10) * 2 * np.pi / 10
+    r = np.where(np.arange(10) % 2 == 0, 1.0, 0.4)
+    star = np.c_[r * np.cos(ang), r * np.sin(ang), 0 * ang]
+    P = resample(star, n)
+    spread, h = _spread(P)
+    assert P.shape == (n, 3) and spread < 1e-10
+    off = _distance_to_polyline(P, star)
+    assert 1e-6 * h < off.max() < h  # off the polyline, but by less than an edge
+
+
+def test_equalize_makes_equal_edges_with_small_moves(rng):
+    P = resample(trefoil(400), 200)
+    np.testing.assert_allclose(equalize(P), P, atol=1e-14)  # equilateral already: unmoved
+    noisy = P + 1e-4 * rng.standard_normal(P.shape)
+    Q = equalize(noisy)
+    spread, h = _spread(Q)
+    assert spread < 1e-12
+    assert np.abs(Q - noisy).max() < 3e-4  # of the order of the noise, not of an edge (0.04)
+    # one edge 3 times too long: made equal in stages
+    raw = trefoil(400)
+    bad = np.vstack([raw[:1], raw[5:]])
+    spread, _ = _spread(equalize(bad))
+    assert spread < 1e-12
