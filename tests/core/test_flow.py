@@ -4,7 +4,7 @@ stopping, determinism."""
 import numpy as np
 import pytest
 
-from moebius_addon.core import METRICS, Relaxation, moebius_energy, relax, resample
+from moebius_addon.core import METRICS, Relaxation, flow, moebius_energy, relax, resample
 from tests.conftest import ngon, trefoil
 
 
@@ -111,6 +111,29 @@ def test_deterministic(trefoil300):
     b = relax(trefoil300.copy(), max_iter=6)
     np.testing.assert_array_equal(a.x, b.x)
     assert a.history["energy"] == b.history["energy"]
+
+
+def test_early_armijo_test_changes_no_iterate(monkeypatch, fhw_raw):
+    # trials that miss Armijo by far are rejected at |Φ| ≤ 1e-5, before the last Newton steps
+    # of their back-projection: the same iterates with fewer steps
+    P = resample(fhw_raw, 600)
+
+    def run():
+        r = Relaxation(P, max_iter=40)
+        calls = []
+        solve = r.solver.pseudo_inverse
+        r.solver.pseudo_inverse = lambda phi: calls.append(1) or solve(phi)
+        while r.step():
+            pass
+        return r, len(calls)
+
+    early, n_early = run()
+    monkeypatch.setattr(flow, "_EARLY", 0.0)  # back-project every trial to the end first
+    full, n_full = run()
+    assert early.nit == full.nit == 40 and early.rejected == full.rejected > 20
+    assert early.history["energy"] == full.history["energy"]
+    np.testing.assert_array_equal(early.X, full.X)
+    assert n_early < 0.85 * n_full
 
 
 def test_scale_and_position_do_not_matter(trefoil300):
