@@ -70,8 +70,12 @@ def test_barycenter_rows_are_scale_free():
         np.testing.assert_allclose(phi[25:], [1e-4, 0.0, 0.0], rtol=1e-8, atol=1e-14)
 
 
+@pytest.mark.parametrize("blocked", [False, True])
 @pytest.mark.parametrize("n", [5, 256, 300, 700])  # one block, exactly one, partial, several
-def test_blocked_cholesky_solve_and_spd_inverse(n, rng):
+def test_blocked_cholesky_solve_and_spd_inverse(n, blocked, rng, monkeypatch):
+    # the blocked substitution serves large systems, the plain one small ones: test both
+    monkeypatch.setattr(CholeskySolve, "SEQUENTIAL_BELOW", 0 if blocked else 10**9)
+    assert CholeskySolve(np.eye(n)).sequential is not blocked
     B = rng.standard_normal((n, n))
     A = B @ B.T + n * np.eye(n)
     F = np.linalg.cholesky(A) + np.triu(rng.standard_normal((n, n)), 1)  # upper part ignored
@@ -146,7 +150,7 @@ def test_lapack_and_numpy_fallback_agree(dtype, rng):
 
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
-def test_lapack_cholesky_and_blocked_solve(dtype, rng):
+def test_lapack_cholesky_and_blocked_solve(dtype, rng, monkeypatch):
     from moebius_addon.core import _lapack
 
     if not _lapack.available():
@@ -155,10 +159,13 @@ def test_lapack_cholesky_and_blocked_solve(dtype, rng):
     B = rng.standard_normal((n, n))
     A = (B @ B.T + n * np.eye(n)).astype(dtype)
     b = rng.standard_normal(n)
-    x = CholeskySolve(_lapack.cholesky(A))(b)  # LAPACK's factor, upper part not zeroed
+    F = _lapack.cholesky(A)  # LAPACK's factor, upper part not zeroed
     ref = np.linalg.solve(A.astype(np.float64), b)
     tol = 1e-12 if dtype == np.float64 else 1e-5
-    np.testing.assert_allclose(x, ref, atol=tol * np.abs(ref).max())
+    for below in (0, 10**9):  # blocked and plain substitution
+        monkeypatch.setattr(CholeskySolve, "SEQUENTIAL_BELOW", below)
+        x = CholeskySolve(F)(b)
+        np.testing.assert_allclose(x, ref, atol=tol * np.abs(ref).max())
     Ai = _lapack.spd_inverse(A)
     np.testing.assert_array_equal(Ai, Ai.T)
     np.testing.assert_allclose(Ai @ A.astype(np.float64), np.eye(n), atol=100 * tol)
