@@ -9,8 +9,8 @@ One iteration at a feasible polygon P:
 4. ``Q = P − τu``, then ``Q ← Q − G⁻¹Cᵀ(CG⁻¹Cᵀ)⁻¹Φ(Q)`` until ``|Φ(Q)|`` is below tolerance,
    else halve τ; the straight path from P to Q is tested for contact too;
 5. accept when ``E(Q) ≤ E(P) − σ τ <g, u>``, else halve τ. (A trial that misses this by more
-   than the rest of its back-projection could change E is rejected once ``|Φ| ≤ 1e-5``: the
-   same decisions with a third fewer Newton steps.)
+   than the rest of its back-projection is estimated to change E is rejected once
+   ``|Φ| ≤ 1e-5``: in every run compared, the same decisions with a third fewer Newton steps.)
 
 The run works on a copy scaled to total length 1 and centred at the origin, so tolerances mean
 the same for every size; results are mapped back.
@@ -363,9 +363,11 @@ class Relaxation(_Run):
         return Q, False
 
     def _energy_margin(self) -> float:
-        """How far the energy may still move while the back-projection finishes, generously:
-        the remaining steps shrink like the last ones (ratio ρ ≤ _CONTRACTION), and the
-        gradient along them is bounded by 20 times the norm of the current iterate's."""
+        """How far the energy may still move while the back-projection finishes: the
+        remaining steps are taken to shrink like the last one (ratio ρ ≤ _CONTRACTION) and the
+        gradient along them to stay below 20 times the norm of the current iterate's. An
+        estimate, not a proof, chosen generously: in every run compared (FHW 600 and 1648,
+        helix 1940, and the test) the decisions and iterates were the same as without it."""
         if not np.isfinite(self._bp_prev):
             return np.inf  # no step taken yet: no estimate of how far the rest goes
         rho = self._bp_size / self._bp_prev

@@ -52,7 +52,7 @@ def spd_inverse(A: np.ndarray) -> np.ndarray:
     return Li.T @ Li  # numpy routes XᵀX to BLAS syrk
 
 
-_ROWS = 4  # rows per pass of _product3: each u[j] loaded once serves 12 multiply–adds
+_ROWS = 4  # rows per pass of _product3 (its body is written out for 4): each u[j] serves 12 FMAs
 
 
 @nb.njit(cache=True, parallel=True, fastmath={"reassoc", "contract", "nsz", "arcp"})

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from moebius_addon.core import check_polygon, contact_ratio, resample, suggest_edge_count
-from moebius_addon.core.polygon import equalize
+from moebius_addon.core.polygon import _cyclic_tridiagonal_solve, equalize
 from tests.conftest import ngon, trefoil
 
 
@@ -149,3 +149,15 @@ def test_equalize_makes_equal_edges_with_small_moves(rng):
     bad = np.vstack([raw[:1], raw[5:]])
     spread, _ = _spread(equalize(bad))
     assert spread < 1e-12
+
+
+@pytest.mark.parametrize("n", [3, 4, 17])
+def test_cyclic_tridiagonal_solve(n, rng):
+    a = 2.0 + rng.random(n)
+    b = rng.uniform(-0.9, 0.9, n)
+    M = np.diag(a)
+    for i in range(n):
+        M[i, (i + 1) % n] += b[i]
+        M[(i + 1) % n, i] += b[i]
+    r = rng.standard_normal(n)
+    np.testing.assert_allclose(M @ _cyclic_tridiagonal_solve(a, b, r), r, atol=1e-12)
