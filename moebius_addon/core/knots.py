@@ -23,7 +23,7 @@ generator               default ``n``                     smallest ``n`` passing
 ======================  ================================  ===================================
 ``circle``              64                                4 (no vertex pairs 4 apart below 8)
 ``torus_knot(p, q)``    ``40 (|p| + |q|)``                about ``5 (|p| + |q|)``: 18 for
-                                                          T(2,3), 35 for T(3,4) and T(2,5)
+                                                          T(2,3), 35 for T(3,4), 33 T(2,5)
 ``figure_eight``        200                               36
 ``braid_closure``       2.5 vertices per strand spacing   0.4 × the default: 3_1 27, 4_1 52,
 ``named``               of length, at least 100           7_2 136, 8_1 and 8_3 197
