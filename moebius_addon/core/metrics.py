@@ -51,10 +51,13 @@ def _edge_row(i, mx, my, mz, ln, arc, clen, starts, comp, low, kw, kv):
     px, py, pz, li, si, lc = mx[i], my[i], mz[i], ln[i], arc[i], clen[c]
     sw = 0.0
     sv = 0.0
-    for j in range(n):
+    lo1, hi1, lo2, hi2 = _other_ranges(i, starts[c], starts[c + 1])
+    # every entry is written below except edge i and its two neighbours (not disjoint)
+    s0 = starts[c]
+    s1 = starts[c + 1]
+    for j in (i - 1 if i > s0 else s1 - 1, i, i + 1 if i + 1 < s1 else s0):
         kw[j] = 0.0
         kv[j] = 0.0
-    lo1, hi1, lo2, hi2 = _other_ranges(i, starts[c], starts[c + 1])
     for rng in range(2):
         lo = lo1 if rng == 0 else lo2
         hi = hi1 if rng == 0 else hi2
@@ -103,12 +106,12 @@ def _hs_rows(mx, my, mz, ln, arc, clen, starts, comp, nxt, prv, low, nchunks, A)
     weights of edge ``prv[p] = p − 1`` are reused from the previous row. Writes into A (N × N).
     """
     n = ln.shape[0]
+    inv_ln = 1.0 / ln
     block = (n + nchunks - 1) // nchunks
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
         p0 = ch * block
         p1 = min(n, p0 + block)
-        A[p0:p1] = 0.0
         kw = np.empty(n)
         kv = np.empty(n)
         qw = np.empty(n)
@@ -131,10 +134,10 @@ def _hs_rows(mx, my, mz, ln, arc, clen, starts, comp, nxt, prv, low, nchunks, A)
             ap = -1.0 / ln[p]
             aq = 1.0 / ln[q]
             row = A[p]
-            for j in range(n):
-                xd = -2.0 * (ap * kw[j] + aq * qw[j]) / ln[j]
+            for j in range(n):  # the first write of every entry of the row
+                xd = -2.0 * (ap * kw[j] + aq * qw[j]) * inv_ln[j]
                 xm = -(kv[j] + qv[j]) * 0.5
-                row[j] += xm - xd
+                row[j] = xm - xd
                 tmp[j] = xm + xd  # goes to column nxt[j]
             for c in range(starts.shape[0] - 1):
                 s0 = starts[c]

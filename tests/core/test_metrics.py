@@ -102,6 +102,17 @@ def test_gram_of_link_matches_slow_formula(metric, rng):
                                rtol=1e-12, atol=1e-13 * np.abs(slow_gram(metric, comps)).max())
 
 
+@pytest.mark.parametrize("metric", ["hs", "hs_pure"])
+def test_gram_of_smallest_components_matches_slow_formula(metric, rng):
+    # 4 and 5 edges: the neighbours excluded from the disjoint pairs wrap around the component
+    comps = [ngon(4) + 0.05 * rng.standard_normal((4, 3)),
+             ngon(5)[:, [0, 2, 1]] * 0.7 + [1.5, 0.0, 0.2] + 0.05 * rng.standard_normal((5, 3))]
+    for P in (comps[0], comps[1], comps):
+        B = slow_gram(metric, P if isinstance(P, list) else [P])
+        np.testing.assert_allclose(gram_matrix(metric, P), B, rtol=1e-12,
+                                   atol=1e-13 * np.abs(B).max())
+
+
 @pytest.mark.parametrize("metric", METRICS)
 def test_gram_symmetric_definite_and_scales_like_inverse_square(metric, wobbly):
     A = gram_matrix(metric, wobbly)
