@@ -107,10 +107,10 @@ def _mirror_lower(M):
 
 
 def cholesky(A: np.ndarray, overwrite: bool = False):
-    """Cholesky factor of an SPD matrix for :func:`cho_solve` (potrf), or None if LAPACK is
-    unavailable. Only the lower triangle of the returned C-ordered array is the factor ``L``;
-    the strict upper triangle keeps the input's values. ``overwrite=True`` factors a C-ordered
-    ``A`` in place."""
+    """Cholesky factor of an SPD matrix (potrf; ``linalg.CholeskySolve`` applies it), or None
+    if LAPACK is unavailable. Only the lower triangle of the returned C-ordered array is the
+    factor ``L``; the strict upper triangle keeps the input's values. ``overwrite=True``
+    factors a C-ordered ``A`` in place."""
     if overwrite and _lib is not None and A.flags.c_contiguous and A.dtype in (np.float64,
                                                                              np.float32):
         M = A

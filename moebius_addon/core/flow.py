@@ -362,6 +362,24 @@ class Relaxation(_Run):
                 return Q, False
         return Q, False
 
+    def _project(self, Q: np.ndarray, target: float) -> tuple[np.ndarray, bool, float | None]:
+        """Step 4 for the trial ``Q`` whose Armijo target is ``target``: ``(Q, ok, EQ)``.
+
+        ``EQ`` is the trial's energy where this already decided: above ``target`` for a trial
+        rejected at ``|Φ| ≤ _EARLY`` (it misses Armijo by more than the rest of the
+        back-projection could change), −inf for one finished after passing that test (the
+        energy with the gradient decides); None where the energy is still to be computed."""
+        if self.interpolate:  # the parabola needs the energy of the finished trial
+            return (*self._backproject(Q), None)
+        Q, ok = self._backproject(Q, _EARLY)
+        if not ok or self._bp_size <= self.backproject_tol:
+            return Q, ok, None
+        EQ = energy_x(Q, self.layout)
+        if EQ > target + self._energy_margin():
+            return Q, True, EQ
+        Q, ok = self._backproject(Q, resume=True)
+        return Q, ok, (-np.inf if ok else None)
+
     def _energy_margin(self) -> float:
         """How far the energy may still move while the back-projection finishes: the
         remaining steps are taken to shrink like the last one (ratio ρ ≤ _CONTRACTION) and the
@@ -394,20 +412,9 @@ class Relaxation(_Run):
                 tau *= min(0.5, max(0.1, 0.9 * np.sqrt(_MAX_TRIAL_RESIDUAL / r0)))
                 continue
             target = E - self.armijo * tau * gu
-            EQ = None
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
                 # a wild trial may overflow on its way to rejection; it is never accepted
-                if self.interpolate:
-                    Q, ok = self._backproject(Q)
-                else:
-                    # a trial whose energy misses Armijo by far at |Φ| ≤ _EARLY is rejected
-                    # there: the rest of the back-projection cannot move the energy that much
-                    Q, ok = self._backproject(Q, _EARLY)
-                    if ok and self._bp_size > self.backproject_tol:
-                        EQ = energy_x(Q, self.layout)
-                        if EQ <= target + self._energy_margin():
-                            Q, ok = self._backproject(Q, resume=True)
-                            EQ = -np.inf if ok else None  # decided by E(Q) with ∇E below
+                Q, ok, EQ = self._project(Q, target)
             if not ok and not self.solver.fresh and not refactored:
                 # a stale factorization may be what failed: refactor once, same step
                 self.solver.refactor()

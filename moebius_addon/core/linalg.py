@@ -12,8 +12,9 @@ edge block of ``S`` is ``(D A⁻¹ Dᵀ) ∘ (T Tᵀ)``: O(N²) once ``A⁻¹`` 
 ``SaddlePointSolver`` reuses that factorization across iterations as a preconditioner for GMRES
 on the current system (the metric and the constraints change little from one iterate to the
 next), and refactors when a solve costs more than the average since the last factorization
-(including it). numpy only: no scipy at run time, so the triangular inverse is a blocked
-recursion on BLAS-3 products.
+(including it). numpy only: no scipy at run time. LAPACK comes from numpy's own OpenBLAS
+(``_lapack``); where that cannot be reached, the inverse falls back to numpy's Cholesky and a
+blocked triangular inverse on BLAS-3 products.
 """
 
 from __future__ import annotations
@@ -40,12 +41,13 @@ def _numpy_triangular_inverse(L: np.ndarray) -> np.ndarray:
     return out
 
 
-def spd_inverse(A: np.ndarray) -> np.ndarray:
+def spd_inverse(A: np.ndarray, overwrite: bool = False) -> np.ndarray:
     """Inverse of a symmetric positive definite matrix via Cholesky (raises LinAlgError).
 
     LAPACK ``potrf`` + ``potri`` (N³ flops) where numpy's own LAPACK can be reached, else
-    Cholesky, a blocked triangular inverse and ``LᵀL`` (2 N³ flops)."""
-    out = _lapack.spd_inverse(A)
+    Cholesky, a blocked triangular inverse and ``LᵀL`` (2 N³ flops). ``overwrite=True`` lets
+    LAPACK invert a C-ordered ``A`` in place (the fallback always returns a new array)."""
+    out = _lapack.spd_inverse(A, overwrite=overwrite)
     if out is not None:
         return out
     Li = _numpy_triangular_inverse(np.linalg.cholesky(A))
@@ -245,8 +247,7 @@ class Factorization:
             M = np.array(A, dtype=self.dtype, order="C")
         else:
             np.copyto(M, A, casting="same_kind")
-        out = _lapack.spd_inverse(M, overwrite=True)
-        self.Ainv = out if out is not None else spd_inverse(M)
+        self.Ainv = spd_inverse(M, overwrite=True)
         S = None
         if old is not None and old.sinv is not None and old.sinv.F.shape == (m, m):
             S = old.sinv.F
