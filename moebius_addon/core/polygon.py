@@ -95,8 +95,10 @@ def _resample_one(P: np.ndarray, n: int, closed: bool) -> np.ndarray:
         raise ValueError("all points coincide: there is no curve to resample")
     cum = np.concatenate(([0.0], np.cumsum(seg)))
     out, miss = _equal_chords(P, cum, n, closed)
-    if miss <= _EQUAL or not closed:
+    if miss <= _EQUAL:
         return out
+    if not closed:  # both ends are fixed: make the closest march equilateral between them
+        return equalize(out, closed=False)
     # Curves with sharp turns often have no equal-chord polygon through the first point (the
     # march jumps where a chord cuts a corner): start elsewhere, keep the closest miss.
     total = cum[-1]
@@ -211,34 +213,47 @@ def _cyclic_tridiagonal_solve(a, b, r):
     return y - f * z
 
 
-def equalize(P: np.ndarray, tol: float = 1e-13) -> np.ndarray:
-    """The equilateral closed polygon nearest to ``P`` found by Gauss–Newton on the log edge
-    lengths: every step moves the vertices by the least (Euclidean) amount that corrects the
-    linearized lengths, toward targets that go from the current lengths to their mean in
-    stages of at most 0.1 in log length. Edge lengths end equal to ``tol`` (relative).
+def equalize(P: np.ndarray, tol: float = 1e-13, closed: bool = True) -> np.ndarray:
+    """The equilateral polygon nearest to ``P`` found by Gauss–Newton on the log edge lengths:
+    every step moves the vertices by the least (Euclidean) amount that corrects the linearized
+    lengths, toward targets that go from the current lengths to their mean in stages of at
+    most 0.1 in log length. Edge lengths end equal to ``tol`` (relative). ``closed=False``: an
+    open chain whose two end vertices stay where they are.
 
     Raises ValueError if the iteration does not converge (degenerate polygons)."""
     X = np.array(P, dtype=np.float64)
-    ln = np.linalg.norm(np.roll(X, -1, axis=0) - X, axis=1)
+
+    def edges(X):
+        return np.roll(X, -1, axis=0) - X if closed else np.diff(X, axis=0)
+
+    ln = np.linalg.norm(edges(X), axis=1)
     if not np.all(ln > 0):
         raise ValueError("the polygon repeats a point; remove repeated points first")
     start = np.log(ln)
     final = np.log(ln.mean())
     stages = max(1, int(np.ceil(np.abs(start - final).max() / 0.1)))
+    # vertices free to move per edge: both, but an open chain's first and last edge have one
+    free = np.full(len(ln), 2.0)
+    if not closed:
+        free[[0, -1]] = 1.0
     for k in range(1, stages + 1):
         target = start + k / stages * (final - start)
         last = k == stages
         for _ in range(30):
-            E = np.roll(X, -1, axis=0) - X
+            E = edges(X)
             l2 = np.einsum("ij,ij->i", E, E)
             phi = 0.5 * np.log(l2) - target
             if np.abs(phi).max() <= (tol if last else 1e-3):
                 break
             F = E / l2[:, None]  # row i of the Jacobian: −F_i at vertex i, +F_i at i + 1
-            a = 2.0 / l2
             b = -np.einsum("ij,ij->i", F, np.roll(F, -1, axis=0))
-            mu = _cyclic_tridiagonal_solve(a, b, phi)
-            X -= np.roll(mu[:, None] * F, 1, axis=0) - mu[:, None] * F
+            if not closed:
+                b[-1] = 0.0  # the last edge does not wrap around to the first
+            mu = _cyclic_tridiagonal_solve(free / l2, b, phi)
+            if closed:
+                X -= np.roll(mu[:, None] * F, 1, axis=0) - mu[:, None] * F
+            else:
+                X[1:-1] -= mu[:-1, None] * F[:-1] - mu[1:, None] * F[1:]
         else:
             raise ValueError("could not make this polygon equilateral (it is degenerate)")
     return X
@@ -269,7 +284,9 @@ def resample(points, n, closed: bool = True):
         closed curve and, if none closes either, the closest march is made equilateral by
         :func:`equalize`, which moves vertices off the polyline (on those polylines: by at
         most 0.85 edge lengths; per count, the largest move has a median of 0.01 to 0.2
-        edge lengths). ``closed=False`` has no such fallback: its last chord may differ.
+        edge lengths). An open polyline (``closed=False``) keeps its two ends; where no
+        equal-chord march reaches the far end, the closest one is made equilateral between
+        them by :func:`equalize` (``closed=False``) in the same way.
     """
     if isinstance(points, (list, tuple)):
         ns = list(n) if np.ndim(n) else _split_count(points, int(n))

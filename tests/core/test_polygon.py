@@ -8,9 +8,9 @@ from moebius_addon.core.polygon import _cyclic_tridiagonal_solve, equalize
 from tests.conftest import ngon, trefoil
 
 
-def _distance_to_polyline(points, poly):
-    a = poly
-    b = np.roll(poly, -1, axis=0)
+def _distance_to_polyline(points, poly, closed=True):
+    a = poly if closed else poly[:-1]
+    b = np.roll(poly, -1, axis=0) if closed else poly[1:]
     d = b - a
     t = np.clip(np.einsum("ikj,kj->ik", points[:, None, :] - a[None], d) / (d * d).sum(1), 0, 1)
     closest = a[None] + t[..., None] * d[None]
@@ -34,6 +34,25 @@ def test_resample_open_polyline_keeps_both_ends():
     ln = np.linalg.norm(np.diff(P, axis=0), axis=1)
     assert ln.max() / ln.min() - 1 < 1e-10
     np.testing.assert_allclose(P[[0, -1]], raw[[0, -1]], atol=1e-12)
+
+
+def _open_star():
+    ang = np.arange(20) * np.pi / 10
+    r = np.where(np.arange(20) % 2 == 0, 1.0, 0.4)
+    return np.c_[r * np.cos(ang), r * np.sin(ang), 0 * ang]  # 20 points, not closed
+
+
+@pytest.mark.parametrize("n", [12, 31, 97, 312])
+def test_resample_open_polyline_with_sharp_turns_is_equilateral(n):
+    # no equal-chord march reaches the far end at these counts (the last chord was up to 11
+    # times the others); the closest march is made equilateral between the two ends
+    raw = _open_star()
+    P = resample(raw, n, closed=False)
+    ln = np.linalg.norm(np.diff(P, axis=0), axis=1)
+    assert P.shape == (n, 3) and ln.max() / ln.min() - 1 < 1e-10
+    np.testing.assert_array_equal(P[0], raw[0])
+    np.testing.assert_allclose(P[-1], raw[-1], atol=1e-14)
+    assert _distance_to_polyline(P, raw, closed=False).max() < 2 * ln.mean()
 
 
 def test_resample_link_and_duplicates():
@@ -151,10 +170,24 @@ def test_equalize_makes_equal_edges_with_small_moves(rng):
     assert spread < 1e-12
 
 
+def test_equalize_open_chain_keeps_its_ends(rng):
+    P = resample(trefoil(400)[:150], 60, closed=False)
+    np.testing.assert_allclose(equalize(P, closed=False), P, atol=1e-14)  # unmoved
+    noisy = P + 1e-4 * rng.standard_normal(P.shape)
+    Q = equalize(noisy, closed=False)
+    ln = np.linalg.norm(np.diff(Q, axis=0), axis=1)
+    assert ln.max() / ln.min() - 1 < 1e-12
+    np.testing.assert_array_equal(Q[[0, -1]], noisy[[0, -1]])
+    assert np.abs(Q - noisy).max() < 3e-4
+
+
 @pytest.mark.parametrize("n", [3, 4, 17])
-def test_cyclic_tridiagonal_solve(n, rng):
+@pytest.mark.parametrize("cyclic", [True, False])
+def test_cyclic_tridiagonal_solve(n, cyclic, rng):
     a = 2.0 + rng.random(n)
     b = rng.uniform(-0.9, 0.9, n)
+    if not cyclic:
+        b[-1] = 0.0  # plain tridiagonal (equalize's open chains)
     M = np.diag(a)
     for i in range(n):
         M[i, (i + 1) % n] += b[i]
