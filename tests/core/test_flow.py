@@ -185,6 +185,18 @@ def test_bad_inputs_raise_with_advice(trefoil300):
         relax(bad)
 
 
+def test_sizes_beyond_memory_are_refused_before_any_work(monkeypatch, trefoil300):
+    # this machine has room for a 300-gon; pretend it has 1 MB (32 bytes × 300² = 2.9 MB)
+    monkeypatch.setattr(flow, "_physical_memory", lambda: 1e6)
+    with pytest.raises(ValueError, match=r"300 vertices need about 0.0 GB.*at most 153 vertices"):
+        relax(trefoil300, max_iter=1)
+    with pytest.raises(ValueError, match="at most 153 vertices"):
+        relax(trefoil300, method="lbfgs", max_iter=1)
+    assert relax(resample(trefoil300, 150), max_iter=1).nit == 1
+    monkeypatch.setattr(flow, "_physical_memory", lambda: None)  # system does not say: no check
+    assert relax(trefoil300, max_iter=1).nit == 1
+
+
 def test_single_precision_factorization_gives_the_double_precision_flow():
     P = resample(trefoil(900), 420)
     double = relax(P, max_iter=5, precision="double")
