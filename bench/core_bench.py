@@ -14,6 +14,7 @@ import json
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
 from paper import machine  # bench/ is on sys.path when run as a script
 
@@ -160,6 +161,8 @@ def main():
         elif part == "sizes":
             out["too_coarse"] = bench_too_coarse(300)
             out["sizes"] = bench_sizes((600, 1200) if q else (600, 1200, 2400))
+    out["machine"]["threading_layer"] = numba.threading_layer()
+    print("threading layer:", out["machine"]["threading_layer"])
     path = Path(args.json)
     path.parent.mkdir(parents=True, exist_ok=True)
     old = json.loads(path.read_text()) if path.exists() and args.only else {}

@@ -6,15 +6,19 @@ projected Sobolev-gradient flow with collision-bounded Armijo steps, and the fur
 of the paper's comparison (``METHODS``, ``make_run``). See ``docs/api.md``.
 """
 
-from . import knots
-from .collision import max_collision_free_step
-from .constraints import Constraints
-from .energy import moebius_energy, moebius_gradient
-from .flow import IterationState, Relaxation, RelaxResult, relax, sobolev_gradient
-from .methods import METHODS, make_run
-from .metrics import METRICS, gram_matrix
-from .objio import read_obj, write_obj
-from .polygon import check_polygon, contact_ratio, resample, suggest_edge_count
+from ._threads import prefer_stable_layer
+
+prefer_stable_layer()  # before any parallel kernel runs: numba settles on a layer then
+
+from . import knots  # noqa: E402
+from .collision import max_collision_free_step  # noqa: E402
+from .constraints import Constraints  # noqa: E402
+from .energy import moebius_energy, moebius_gradient  # noqa: E402
+from .flow import IterationState, Relaxation, RelaxResult, relax, sobolev_gradient  # noqa: E402
+from .methods import METHODS, make_run  # noqa: E402
+from .metrics import METRICS, gram_matrix  # noqa: E402
+from .objio import read_obj, write_obj  # noqa: E402
+from .polygon import check_polygon, contact_ratio, resample, suggest_edge_count  # noqa: E402
 
 __all__ = [
     "METHODS",
