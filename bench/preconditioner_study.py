@@ -36,7 +36,8 @@ import numpy as np
 import scipy.linalg as sl
 import scipy.sparse as sp
 import scipy.sparse.linalg as spl
-from paper import machine  # bench/ is on sys.path when run as a script
+from core_bench import best_of  # bench/ is on sys.path when run as a script
+from paper import machine
 
 from moebius_addon.core import knots
 from moebius_addon.core.constraints import jacobian
@@ -116,13 +117,7 @@ def two_level(A, P, Z):
 
 
 def best_ms(f, repeat=5):
-    f()
-    out = []
-    for _ in range(repeat):
-        t = time.perf_counter()
-        f()
-        out.append(time.perf_counter() - t)
-    return 1e3 * min(out)
+    return 1e3 * best_of(f, repeat)
 
 
 def costs(A, Psparse, H, g, run):
