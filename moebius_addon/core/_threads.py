@@ -19,8 +19,8 @@ OpenMP threads that spin while they wait for work take the CPU from OpenBLAS's t
 between the parallel kernels: FHW 1648 to the circle took 51 s with libgomp's default spin
 count against 25–32 s with ``GOMP_SPINCOUNT=1000`` (``OMP_WAIT_POLICY=PASSIVE``: 28–32 s, and
 60 µs per call for small kernels). The price of this choice: a single large run in a fresh
-process is about 15% slower than with TBB (FHW 1648, alternated: TBB 22.9–27.6 s, mean 25.0,
-in 8 runs; OpenMP 25.3–32.2 s, mean 28.6, in 7; in the Blender module 23.6 and 28.1 s against
+process is about 11% slower than with TBB (FHW 1648, alternated: TBB 22.9–31.5 s, mean 25.7,
+in 10 runs; OpenMP 25.3–32.2 s, mean 28.6, in 7; in the Blender module 23.6 and 28.1 s against
 29.5 and 28.7 s).
 """
 
