@@ -1,12 +1,13 @@
 """numba's threading layer: OpenMP first, then TBB, numba's own workqueue last.
 
 numba takes TBB whenever it finds the library (on the benchmark machine Debian's libtbb12
-2021.8; inside Blender most likely Blender's own TBB). With numba 0.68.1 the cost of every
-parallel call on the TBB layer grows with the number of parallel calls already made in the
-process, and so does its memory (numba issues 10225 and 10556; a numba pull request gives the
+2021.8; inside Blender, Blender's own TBB). With numba 0.68.1 and that Debian TBB the cost of
+every parallel call on the TBB layer grows with the number of parallel calls already made in
+the process, and so does its memory (numba issues 10225 and 10556; a numba pull request gives the
 calls a shared task arena). Measured here with a 220 × 220 product: 29 µs per call over the
-first 2 000 calls, 678 µs after 16 000; the knot 7_3 relaxed 40 iterations at a time went from
-7.2 to 20.4 ms per iteration (and 3 MB more memory) in each of 12 runs in one process, and a
+first 2 000 calls, 678 µs after 16 000; the knot 7_3, relaxed 40 iterations at a time in 12
+runs in one process, took 7.2 ms per iteration in the first run and 20.4 in the last (memory
+3 MB more per run), and a
 sweep over the knot table reached 500 ms per iteration at 220–500 edges, 50 to 100 times its
 speed in a fresh process. With OpenMP the same product costs 7 µs per call, constant; with
 the workqueue layer about 100 µs, constant. The growth comes with that TBB: inside the Blender
