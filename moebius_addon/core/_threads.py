@@ -3,18 +3,19 @@
 numba takes TBB whenever it finds the library (on the benchmark machine Debian's libtbb12
 2021.8; inside Blender, Blender's own TBB). With numba 0.68.1 and that Debian TBB the cost of
 every parallel call on the TBB layer grows with the number of parallel calls already made in
-the process, and so does its memory (numba issues 10225 and 10556; a numba pull request gives the
-calls a shared task arena). Measured here with a 220 × 220 product: 29 µs per call over the
-first 2 000 calls, 678 µs after 16 000; the knot 7_3, relaxed 40 iterations at a time in 12
-runs in one process, took 7.2 ms per iteration in the first run and 20.4 in the last (memory
-3 MB more per run), and a
-sweep over the knot table reached 500 ms per iteration at 220–500 edges, 50 to 100 times its
-speed in a fresh process. With OpenMP the same product costs 7 µs per call, constant; with
-the workqueue layer about 100 µs, constant. The growth comes with that TBB: inside the Blender
-module (bpy 5.0.1, which brings its own TBB 2021.13) TBB calls stayed at 22–24 µs (OpenMP 9)
-and the knot table took 7.4 s in one session with TBB, 8.5 s with OpenMP — no harm there
-either way; but plain Python on a system with the older TBB (Debian 12; also Debian's own
-Blender package) got slower with every run.
+the process, and so does its memory (numba issues 10225 and 10556; a numba pull request gives
+the calls a shared task arena). Measured here with a 220 × 220 product: 29 µs per call over
+the first 2 000 calls, 678 µs after 16 000. The knot 7_3, relaxed 40 iterations at a time in
+12 runs in one process, took 7.2 ms per iteration in the first run and 20.4 in the last
+(memory 3 MB more per run); a sweep over the knot table (200 iterations per knot) reached
+470–510 ms per iteration at 220–500 edges (8_2 at 220 edges: 471.5 ms, 8_1 at 500: 507.8;
+bench/session.py with OpenMP: 6.9 and 18.0 ms, docs/benchmarks.md). With OpenMP the same
+product costs 7 µs per call, constant; with the workqueue layer about 100 µs, constant.
+
+The growth comes with that TBB: inside the Blender module (bpy 5.0.1, which brings its own
+TBB 2021.13) TBB calls stayed at 22–24 µs (OpenMP 9) and the knot table took 7.4 s in one
+session with TBB, 8.5 s with OpenMP — no harm there either way; but plain Python on a system
+with the older TBB (Debian 12; also Debian's own Blender package) got slower with every run.
 
 OpenMP threads that spin while they wait for work take the CPU from OpenBLAS's threads
 between the parallel kernels: FHW 1648 to the circle took 51 s with libgomp's default spin

@@ -184,7 +184,8 @@ def _equal_chords(P, cum, n, closed):
 def _cyclic_tridiagonal_solve(a, b, r):
     """Solve ``M x = r`` for the symmetric cyclic tridiagonal M with diagonal ``a`` and
     ``M[i, i+1] = M[i+1, i] = b[i]`` (indices mod n): Thomas' algorithm on the tridiagonal
-    part, the corners by Sherman–Morrison (Numerical Recipes' ``cyclic``)."""
+    part, the corners by Sherman–Morrison (Numerical Recipes' ``cyclic``). ``b[n−1] = 0``
+    leaves the plain tridiagonal system (``equalize``'s open chains)."""
     n = a.shape[0]
     c = b[n - 1]
     g = -a[0]
