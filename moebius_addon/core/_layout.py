@@ -68,3 +68,34 @@ def as_layout(P) -> tuple[np.ndarray, Layout]:
         arrays.append(a)
     X = np.ascontiguousarray(np.concatenate(arrays, axis=0))
     return X, layout_from_sizes([len(a) for a in arrays], is_link)
+
+
+# Spans of coordinates inside [2^-_SPAN_BITS, 2^_SPAN_BITS] are used as they are; the kernels'
+# intermediate terms reach the fourth power of lengths and their inverses (the gradient is NaN
+# from spans of about 1e100 or 1e-100), so far larger or smaller curves are scaled first.
+_SPAN_BITS = 64
+
+
+def unit_exponent(X: np.ndarray) -> int:
+    """``k`` such that ``X · 2^-k`` spans about 1, for coordinates spanning more than ``2^64``
+    or less than ``2^-64`` (0 otherwise, and for arrays that are empty, flat or not finite:
+    the checks report those). ``k`` is even, so that ``np.ldexp(X, -k)`` is exact and every
+    rounding of the homogeneous formulas (sums, products, quotients, square roots) is the same
+    as at the original size: results scaled back are the same bits."""
+    if X.size == 0 or not np.all(np.isfinite(X)):
+        return 0
+    span = float((X.max(axis=0) / 2 - X.min(axis=0) / 2).max())  # half-range, no overflow
+    if span == 0.0:
+        return 0
+    e = int(np.frexp(span)[1])
+    if abs(e) <= _SPAN_BITS:
+        return 0
+    return e + (e & 1)
+
+
+def as_unit_layout(P) -> tuple[np.ndarray, Layout, int]:
+    """:func:`as_layout` with the vertices scaled by ``2^-k`` (:func:`unit_exponent`):
+    ``(X · 2^-k, layout, k)``."""
+    X, layout = as_layout(P)
+    k = unit_exponent(X)
+    return (np.ldexp(X, -k) if k else X), layout, k

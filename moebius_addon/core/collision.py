@@ -17,7 +17,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ._layout import Layout, as_layout
+from ._layout import Layout, as_layout, as_unit_layout
 
 _MAX_ADVANCE = 64
 
@@ -199,8 +199,11 @@ def max_collision_free_step(P, U, tau_max: float, eps: float | None = None) -> f
     float
         Conservative (never larger than the true contact time).
     """
-    X, layout = as_layout(P)
+    X, layout, k = as_unit_layout(P)
     Ux, _ = as_layout(U)
+    if k:  # P, U and eps scaled alike (exactly, by 2^-k): the same contact time
+        Ux = np.ldexp(Ux, -k)
+        eps = None if eps is None else float(np.ldexp(eps, -k))
     if eps is None:
         eps = 1e-3 * float(np.linalg.norm(X[layout.nxt] - X, axis=1).mean())
     return contact_time_x(X, Ux, layout, tau_max, eps)

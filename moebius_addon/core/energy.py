@@ -13,7 +13,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ._layout import Layout, as_layout
+from ._layout import Layout, as_unit_layout
 
 # Partial gradients go to a fixed number of buffers, independent of the thread count, so the
 # result is bit-for-bit the same on every machine with the same inputs.
@@ -215,9 +215,10 @@ def moebius_energy(P) -> float:
     -------
     float
         ``4 + Σ`` over ordered pairs of disjoint edges (DESIGN.md); 4 for a regular polygon,
-        invariant under similarities and reversal. Scale-free.
+        invariant under similarities and reversal. Scale-free (computed at a size near 1 for
+        curves spanning more than 2^64 or less than 2^-64).
     """
-    X, layout = as_layout(P)
+    X, layout, _ = as_unit_layout(P)
     return energy_x(X, layout)
 
 
@@ -233,5 +234,6 @@ def moebius_gradient(P):
     (N, 3) array or list of arrays
         Same shape as ``P``; units 1/length.
     """
-    X, layout = as_layout(P)
-    return layout.split(energy_gradient_x(X, layout)[1])
+    X, layout, k = as_unit_layout(P)
+    g = energy_gradient_x(X, layout)[1]
+    return layout.split(np.ldexp(g, -k) if k else g)  # ∇E(2^k X) = 2^-k ∇E(X)

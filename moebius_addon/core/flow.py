@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._layout import as_layout
+from ._layout import as_unit_layout
 from .collision import contact_time_x
 from .constraints import Constraints, jacobian, make_constraints, residual
 from .energy import energy_gradient_x, energy_x
@@ -135,7 +135,7 @@ def _start(run, P, metric, max_iter, tol, energy_target, ftol, max_seconds, targ
     target edge lengths — "equal": the mean per component, the start refused unless it is
     equilateral already when ``equilateral``. Returns the scaled start and the targets."""
     run.t0 = time.perf_counter()
-    X, layout = as_layout(P)
+    X, layout, e2 = as_unit_layout(P)  # exact scaling of curves far from size 1
     _check_memory(layout.n)
     if check:
         check_polygon(P)
@@ -147,10 +147,12 @@ def _start(run, P, metric, max_iter, tol, energy_target, ftol, max_seconds, targ
     run.ftol = float(ftol)
     run.max_seconds = max_seconds
     ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
-    run._shift = X.mean(axis=0)
-    run._scale = float(ln.sum())
-    Xn = (X - run._shift) / run._scale
-    ln = ln / run._scale
+    shift = X.mean(axis=0)
+    scale = float(ln.sum())
+    Xn = (X - shift) / scale
+    ln = ln / scale
+    run._shift = np.ldexp(shift, e2)  # results are mapped back by these
+    run._scale = float(np.ldexp(scale, e2))
     if target_lengths == "keep":
         return Xn, ln.copy()
     lengths0 = np.empty_like(ln)
@@ -575,13 +577,14 @@ def sobolev_gradient(P, metric: str = "hs", projected: bool = True):
         Direction of steepest ascent in that metric (the flow moves along its negative); the
         paper's Fig. 2 compares these fields.
     """
-    X, layout = as_layout(P)
+    X, layout, k = as_unit_layout(P)  # u(2^k X) = 2^k u(X): every Gram matrix scales as 4^-k
     _, g = energy_gradient_x(X, layout)
     A = gram_x(metric, X, layout)
     if not projected:
-        return layout.split(np.linalg.solve(A, g))
-    ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
-    con = make_constraints(X, layout, ln)
-    fac = Factorization(A, jacobian(X, con))
-    u, _ = fac.solve(g, np.zeros(con.size))
-    return layout.split(u)
+        u = np.linalg.solve(A, g)
+    else:
+        ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
+        con = make_constraints(X, layout, ln)
+        fac = Factorization(A, jacobian(X, con))
+        u, _ = fac.solve(g, np.zeros(con.size))
+    return layout.split(np.ldexp(u, k) if k else u)

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ._layout import Layout, as_layout
+from ._layout import Layout, as_unit_layout
 
 METRICS = ("l2", "h1", "h2", "hs_pure", "hs")
 
@@ -285,5 +285,12 @@ def gram_matrix(metric: str, P) -> np.ndarray:
     (N, N) array
         Symmetric positive definite ``A`` with ``G = A ⊗ I₃``; entries scale as 1/length².
     """
-    X, layout = as_layout(P)
-    return gram_x(metric, X, layout)
+    X, layout, k = as_unit_layout(P)
+    A = gram_x(metric, X, layout)
+    if not k:
+        return A
+    out = np.ldexp(A, -2 * k)  # A(2^k X) = 4^-k A(X)
+    if not np.isfinite(out).all() or np.any((out == 0) & (A != 0)):
+        raise ValueError("the Gram matrix of a curve this size is outside the float64 range "
+                         "(its entries scale as 1/length²); scale the curve towards size 1")
+    return out

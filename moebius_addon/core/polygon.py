@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ._layout import Layout, as_layout
+from ._layout import Layout, as_unit_layout, unit_exponent
 from .collision import closest_pairs
 
 # Closest pair of vertices at least CONTACT_GAP edges apart, divided by the mean edge length,
@@ -290,8 +290,13 @@ def resample(points, n, closed: bool = True):
         them by :func:`equalize` (``closed=False``) in the same way.
     """
     if isinstance(points, (list, tuple)):
-        ns = list(n) if np.ndim(n) else _split_count(points, int(n))
-        return [resample(p, k, closed) for p, k in zip(points, ns, strict=True)]
+        parts = [np.asarray(p, dtype=np.float64) for p in points]
+        k = unit_exponent(np.concatenate(parts)) if all(
+            p.ndim == 2 and p.shape[1:] == (3,) for p in parts) else 0
+        if k:  # one scale for every component (their lengths decide the counts)
+            return [np.ldexp(q, k) for q in resample([np.ldexp(p, -k) for p in parts], n, closed)]
+        ns = list(n) if np.ndim(n) else _split_count(parts, int(n))
+        return [resample(p, c, closed) for p, c in zip(parts, ns, strict=True)]
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
         raise ValueError(f"points must be an (M, 3) array, got shape {P.shape}")
@@ -300,6 +305,9 @@ def resample(points, n, closed: bool = True):
     n = int(n)
     if n < MIN_VERTICES:
         raise ValueError(f"need at least {MIN_VERTICES} vertices for a closed polygon, got {n}")
+    k = unit_exponent(P)
+    if k:  # a curve far larger or smaller than 1: resampled at a size near 1 (exact scaling)
+        return np.ldexp(_resample_one(np.ldexp(P, -k), n, closed), k)
     return _resample_one(P, n, closed)
 
 
@@ -317,7 +325,7 @@ def _split_count(parts, n):
 def contact_ratio(P, min_gap: int = CONTACT_GAP) -> float:
     """Closest distance between vertices at least ``min_gap`` edges apart along the curve (or on
     different components), divided by the mean edge length. The start check wants >= 1."""
-    X, layout = as_layout(P)
+    X, layout, _ = as_unit_layout(P)
     (dv, _), _ = closest_pairs(X, layout, min_gap)
     return dv / _mean_edge(X, layout)
 
@@ -336,7 +344,7 @@ def _where(layout: Layout, v: int) -> str:
 def suggest_edge_count(P, max_edges: int = 20000) -> int | None:
     """Smallest edge count (total over a link) whose equilateral resampling of ``P`` passes the
     contact check, searched upward in steps of 10%; None if none up to ``max_edges``."""
-    X, layout = as_layout(P)
+    X, layout, _ = as_unit_layout(P)
     n = layout.n
     parts = layout.split(X) if layout.is_link else X
     ratio = contact_ratio(parts)
@@ -358,9 +366,9 @@ def check_polygon(P, *, coarseness: bool = True, name: str = "the curve") -> Non
     repeated consecutive points, no self-intersection (disjoint edges touching, with where),
     and (``coarseness``) no near-contact closer than the resolution: vertices at least 4 edges
     apart must be at least one mean edge length apart, else the message names the edge count
-    that works.
+    that works. Curves spanning more than 2^64 or less than 2^-64 are checked at a size near 1.
     """
-    X, layout = as_layout(P)
+    X, layout, e2 = as_unit_layout(P)
     for c in range(layout.k):
         size = int(layout.starts[c + 1] - layout.starts[c])
         if size < MIN_VERTICES:
@@ -388,7 +396,7 @@ def check_polygon(P, *, coarseness: bool = True, name: str = "the curve") -> Non
     h = float(edge.mean())
     (dv, (vi, vj)), (de, (ei, ej), (s, t)) = closest_pairs(X, layout, CONTACT_GAP)
     if de <= 1e-6 * h:
-        point = X[ei] + s * (X[layout.nxt[ei]] - X[ei])
+        point = np.ldexp(X[ei] + s * (X[layout.nxt[ei]] - X[ei]), e2)
         raise ValueError(
             f"{name} intersects itself: the edges after {_where(layout, ei)} and after "
             f"{_where(layout, ej)} touch near ({point[0]:.6g}, {point[1]:.6g}, {point[2]:.6g}); "

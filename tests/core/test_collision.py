@@ -102,3 +102,13 @@ def test_step_is_the_first_contact(rng):
             if j != nxt[i] and i != nxt[j]
         )
         assert tau == pytest.approx(ref, rel=1e-6)
+
+
+def test_contact_time_far_from_unit_size():
+    P = ngon(40)
+    U = np.zeros_like(P)
+    U[10] = P[10]  # vertex 10 moves through the centre, towards the far side
+    tau = max_collision_free_step(P, U, 5.0)
+    assert 0.0 < tau < 2.5
+    for k in (-500, 500):  # P, U and eps at 2^k: the same contact time, to the bit
+        assert max_collision_free_step(np.ldexp(P, k), np.ldexp(U, k), 5.0) == tau

@@ -123,3 +123,21 @@ def test_bad_shapes_raise():
         moebius_energy(np.zeros((5, 2)))
     with pytest.raises(ValueError, match="empty link"):
         moebius_energy([])
+
+
+@pytest.mark.parametrize("k", [-900, -300, 300, 900])
+def test_far_from_unit_size_gives_the_same_bits(rng, k):
+    # below about 1e-100 and above 1e100 the kernels' fourth powers leave the float64 range
+    # (the gradient was NaN there); curves that far from size 1 are computed at a size near 1,
+    # scaled by a power of 4, which changes no rounding
+    P = trefoil(80) + 0.02 * rng.standard_normal((80, 3))
+    Q = np.ldexp(P, k)
+    assert moebius_energy(Q) == moebius_energy(P)
+    np.testing.assert_array_equal(np.ldexp(moebius_gradient(Q), k), moebius_gradient(P))
+    link = moebius_gradient([Q, Q + np.ldexp(3.0, k)])
+    np.testing.assert_allclose(np.ldexp(link[1], k), moebius_gradient([P, P + 3.0])[1],
+                               rtol=1e-12, atol=0)
+    for s in (1e-300, 1e300):
+        assert moebius_energy(s * P) == pytest.approx(moebius_energy(P), rel=1e-13)
+        np.testing.assert_allclose(s * moebius_gradient(s * P), moebius_gradient(P),
+                                   rtol=1e-10, atol=1e-12 * np.abs(moebius_gradient(P)).max())

@@ -207,3 +207,16 @@ def test_single_precision_factorization_gives_the_double_precision_flow():
     np.testing.assert_allclose(single.x, double.x, atol=1e-6 * np.abs(P).max())
     assert max(single.history["constraint_residual"][1:]) <= 1e-10
     assert all(k >= 2 for k in single.stats["krylov_iterations"])  # refined, not raw float32
+
+
+def test_absurd_sizes_relax_like_size_one(trefoil300):
+    a = relax(trefoil300, max_iter=4)
+    for k in (-960, 960):  # a power of 4: the same iterates to the last bit
+        b = relax(np.ldexp(trefoil300, k), max_iter=4)
+        assert b.history["energy"] == a.history["energy"]
+        np.testing.assert_array_equal(np.ldexp(b.x, -k), a.x)
+    for s in (1e-300, 1e300):  # lengths squared leave the float64 range here
+        b = relax(s * trefoil300, max_iter=4)
+        assert b.nit == a.nit and np.isfinite(b.x).all()
+        np.testing.assert_allclose(b.history["energy"], a.history["energy"], rtol=1e-9)
+        np.testing.assert_allclose(b.x / s, a.x, atol=1e-7)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from moebius_addon.core import METRICS, gram_matrix
+from moebius_addon.core import METRICS, gram_matrix, resample, sobolev_gradient
 from tests.conftest import ngon, trefoil
 
 
@@ -132,3 +132,19 @@ def test_geometric_term_is_nonnegative_and_penalises_near_contact():
 def test_unknown_metric():
     with pytest.raises(ValueError, match="unknown metric"):
         gram_matrix("h3", ngon(10))
+
+
+@pytest.mark.parametrize("metric", METRICS)
+def test_far_from_unit_size(metric):
+    # curves spanning more than 2^64 are computed at a size near 1 and scaled back exactly
+    P = resample(trefoil(300), 60)
+    k = 100  # a power of 4: the same bits
+    np.testing.assert_array_equal(np.ldexp(gram_matrix(metric, np.ldexp(P, k)), 2 * k),
+                                  gram_matrix(metric, P))
+    np.testing.assert_array_equal(np.ldexp(sobolev_gradient(np.ldexp(P, k), metric), -k),
+                                  sobolev_gradient(P, metric))
+    u = sobolev_gradient(P, metric, projected=False)
+    np.testing.assert_allclose(sobolev_gradient(1e200 * P, metric, projected=False) / 1e200, u,
+                               rtol=0, atol=1e-8 * np.abs(u).max())  # h2: κ(A) ~ 1e8
+    with pytest.raises(ValueError, match="outside the float64 range"):
+        gram_matrix(metric, 1e300 * P)  # entries of 1e-600

@@ -1,5 +1,7 @@
 """Equilateral resampling and the start checks (clear messages for every bad input)."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -194,3 +196,27 @@ def test_cyclic_tridiagonal_solve(n, cyclic, rng):
         M[(i + 1) % n, i] += b[i]
     r = rng.standard_normal(n)
     np.testing.assert_allclose(M @ _cyclic_tridiagonal_solve(a, b, r), r, atol=1e-12)
+
+
+@pytest.mark.parametrize("s", [1e-300, 1e300])
+def test_checks_and_resampling_at_absurd_sizes(fhw_raw, s):
+    # squared edge lengths under- or overflow at these sizes: a 1e-300 trefoil was refused as
+    # "repeats a point", a 1e300 one as touching itself "after vertex 0 and after vertex 0"
+    P = resample(trefoil(400), 120)
+    check_polygon(s * P)
+    assert contact_ratio(s * P) == pytest.approx(contact_ratio(P), rel=1e-12)
+    np.testing.assert_allclose(resample(s * P, 90) / s, resample(P, 90), atol=1e-12)
+    k = 900 if s > 1 else -900
+    np.testing.assert_array_equal(np.ldexp(resample(np.ldexp(P, k), 90), -k), resample(P, 90))
+    link = resample([s * P, s * (P + 3.0)], 150)
+    np.testing.assert_allclose(link[1] / s, resample([P, P + 3.0], 150)[1], atol=1e-12)
+    bowtie = np.array([[0, 0, 0], [1, 1, 0], [1, 0, 0], [0, 1, 0]], dtype=float)
+    where = re.escape(f"near ({0.5 * s:.6g}, {0.5 * s:.6g}, 0)")
+    with pytest.raises(ValueError, match=f"intersects itself.*{where}"):
+        check_polygon(s * resample(bowtie, 40))
+    coarse = resample(fhw_raw, 300)
+    with pytest.raises(ValueError, match=r"too coarse.*at least (\d+) edges") as info:
+        check_polygon(s * coarse)
+    with pytest.raises(ValueError, match=r"too coarse") as plain:
+        check_polygon(coarse)
+    assert info.value.args[0] == plain.value.args[0]
