@@ -104,6 +104,25 @@ def _check_names(metric: str, target_lengths: str) -> None:
         raise ValueError("target_lengths must be 'equal' or 'keep'")
 
 
+def _number(name: str, value, low: float = -np.inf, *, above: bool = False,
+            integer: bool = False):
+    """``value`` as a finite float (an int with ``integer``) at least ``low`` (above it with
+    ``above``), else ValueError naming the option: NaN compares False with every bound, so
+    plain comparisons let it through to a run that then stalls for no visible reason."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not np.isfinite(x) or x < low or (above and x == low):
+        bound = "" if low == -np.inf else f" {'>' if above else '>='} {low:g}"
+        raise ValueError(f"{name} must be a finite number{bound}, got {value!r}")
+    if integer:
+        if x != int(x):
+            raise ValueError(f"{name} must be a whole number, got {value!r}")
+        return int(x)
+    return x
+
+
 def _physical_memory() -> float | None:
     """Bytes of physical memory, or None where the system does not say (Windows)."""
     try:
@@ -141,11 +160,12 @@ def _start(run, P, metric, max_iter, tol, energy_target, ftol, max_seconds, targ
         check_polygon(P)
     run.layout = layout
     run.metric = metric
-    run.max_iter = int(max_iter)
-    run.tol = float(tol)
-    run.energy_target = energy_target
-    run.ftol = float(ftol)
-    run.max_seconds = max_seconds
+    run.max_iter = _number("max_iter", max_iter, 0, integer=True)
+    run.tol = _number("tol", tol, 0)
+    run.energy_target = None if energy_target is None else _number("energy_target",
+                                                                   energy_target)
+    run.ftol = _number("ftol", ftol, 0)
+    run.max_seconds = None if max_seconds is None else _number("max_seconds", max_seconds, 0)
     ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
     shift = X.mean(axis=0)
     scale = float(ln.sum())
@@ -309,8 +329,10 @@ class Relaxation(_Run):
         _check_names(metric, target_lengths)
         if not 0 < armijo < 1:
             raise ValueError("armijo must lie in (0, 1)")
-        if growth < 1 or initial_step <= 0:
-            raise ValueError("growth must be >= 1 and initial_step > 0")
+        growth = _number("growth", growth, 1)
+        initial_step = _number("initial_step", initial_step, 0, above=True)
+        backproject_iter = _number("backproject_iter", backproject_iter, 0, integer=True)
+        backproject_tol = _number("backproject_tol", backproject_tol, 0, above=True)
         Xn, lengths0 = _start(self, P, metric, max_iter, tol, energy_target, ftol, max_seconds,
                               target_lengths, check, equilateral=True)
         layout = self.layout

@@ -50,6 +50,7 @@ from .flow import (
     RelaxResult,
     _check_names,
     _give_up,
+    _number,
     _Run,
     _start,
 )
@@ -473,8 +474,8 @@ class _PenaltyRun(_Run):
         _check_names(metric, target_lengths)
         if not 0 < c1 < c2 < 1:
             raise ValueError("Wolfe constants need 0 < c1 < c2 < 1")
-        if alpha < 0 or initial_step <= 0:
-            raise ValueError("alpha must be >= 0 and initial_step > 0")
+        alpha = _number("alpha", alpha, 0)
+        initial_step = _number("initial_step", initial_step, 0, above=True)
         # the penalty pulls a non-equilateral start to the mean lengths: no equilateral check
         Xn, lengths0 = _start(self, P, metric, max_iter, tol, energy_target, ftol, max_seconds,
                               target_lengths, check, equilateral=False)

@@ -1,6 +1,8 @@
 """The projected Sobolev-gradient flow: reference behaviour, invariants after every iteration,
 stopping, determinism."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -183,6 +185,28 @@ def test_bad_inputs_raise_with_advice(trefoil300):
     bad[10] = np.inf
     with pytest.raises(ValueError, match="NaN or infinite"):
         relax(bad)
+
+
+@pytest.mark.parametrize(("option", "value", "says"), [
+    ("growth", np.nan, "growth must be a finite number >= 1"),  # ran, then "stalled"
+    ("backproject_tol", 0.0, "backproject_tol must be a finite number > 0"),  # "stalled"
+    ("tol", np.nan, "tol must be a finite number >= 0"),  # ignored
+    ("energy_target", np.nan, "energy_target must be a finite number"),  # ignored
+    ("max_iter", -1, "max_iter must be a finite number >= 0"),  # ran no iteration
+    ("max_iter", 2.5, "max_iter must be a whole number"),  # ran 2
+    ("max_seconds", -1.0, "max_seconds must be a finite number >= 0"),  # "budget used up"
+    ("initial_step", np.inf, "initial_step must be a finite number > 0"),
+    ("tol", "small", "tol must be a number"),
+])
+@pytest.mark.parametrize("method", ["projected_gradient", "lbfgs"])
+def test_bad_options_are_refused_by_name(trefoil300, method, option, value, says):
+    if method == "lbfgs" and option in ("growth", "backproject_tol"):
+        pytest.skip("an option of the feasible methods: the penalty methods ignore it")
+    options = {"max_iter": 3, option: value}
+    with pytest.raises(ValueError, match=re.escape(says)):
+        relax(trefoil300, method=method, **options)
+    with pytest.raises(ValueError, match="alpha must be a finite number >= 0"):
+        relax(trefoil300, method="lbfgs", alpha=np.nan)
 
 
 def test_sizes_beyond_memory_are_refused_before_any_work(monkeypatch, trefoil300):
