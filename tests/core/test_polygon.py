@@ -220,3 +220,16 @@ def test_checks_and_resampling_at_absurd_sizes(fhw_raw, s):
     with pytest.raises(ValueError, match=r"too coarse") as plain:
         check_polygon(coarse)
     assert info.value.args[0] == plain.value.args[0]
+
+
+def test_equalize_many_edges_down_to_rounding():
+    # edges computed as differences of coordinates carry ε|x|/l of rounding: 1.8e-12 here,
+    # above the old fixed tolerance of 1e-13, so equalize and resample(trefoil, 40 000) failed
+    n = 50_000
+    t = 2 * np.pi * np.arange(n) / n
+    P = np.stack([np.cos(t), np.sin(t), 1e-4 * np.sin(7 * t)], axis=1)
+    P *= (1 + 1e-5 * np.cos(3 * t))[:, None]
+    Q = equalize(P)
+    ln = np.linalg.norm(np.roll(Q, -1, axis=0) - Q, axis=1)
+    assert ln.max() / ln.min() - 1 < 1e-10
+    assert np.abs(Q - P).max() < 1e-3
