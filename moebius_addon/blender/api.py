@@ -182,7 +182,15 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
                 f"{where} is an open curve; close it (Edit Mode: Alt+C, or F on the end "
                 "vertices of a mesh) or enable 'Close open splines'"
             )
-        points = _dedupe(np.asarray(points, np.float64), closed=True)
+        points = np.asarray(points, np.float64)
+        bad = ~np.isfinite(points).all(axis=1)
+        if bad.any():
+            raise ValueError(
+                f"{where} has NaN or infinite coordinates ({int(bad.sum())} of its "
+                f"{len(points)} points, the first at index {int(np.flatnonzero(bad)[0])}); "
+                "fix or delete those points"
+            )
+        points = _dedupe(points, closed=True)
         if len(points) < 4:
             raise ValueError(
                 f"{where} has only {len(points)} distinct points; a closed curve to relax needs "
@@ -737,6 +745,10 @@ def show_gradients(obj: bpy.types.Object, metrics: Sequence[str] = ("l2", "hs_pu
     """
     context = context or bpy.context
     polygons = geometry.curve_polygons(obj)
+    try:  # NaN or a self-intersection would give NaN arrows; coarseness is no obstacle here
+        core.check_polygon(_as_input(polygons), coarseness=False)
+    except ValueError as err:
+        raise ValueError(f"'{obj.name}': {err}") from None
     X = np.concatenate(polygons)
     diagonal = float(np.linalg.norm(np.ptp(X, axis=0)))
     out = []

@@ -47,7 +47,8 @@ def scene_state() -> dict:
             pts = s.bezier_points if s.type == "BEZIER" else s.points
             co = np.empty(len(pts) * (3 if s.type == "BEZIER" else 4))
             pts.foreach_get("co", co)
-            state[f"{c.name}/{k}"] = co.round(12).tolist()
+            # NaN as None: NaN != NaN would make equal states compare unequal
+            state[f"{c.name}/{k}"] = [None if x != x else x for x in co.round(12).tolist()]
     return state
 
 

@@ -55,6 +55,27 @@ def test_fewer_than_four_points(scene, mb):
     _refused(bpy.ops.moebius.convert, "only 3 distinct points.*at least 4")
 
 
+def test_nan_points(scene, mb):
+    P = _circle(40)
+    P[7, 1] = np.nan
+    P[9, 2] = np.inf
+    poly_curve("Broken", [P])
+    # was "'Broken' has only 1 distinct points" (the duplicate filter compared with NaN)
+    _refused(bpy.ops.moebius.convert, r"'Broken' has NaN or infinite coordinates \(2 of its 40 "
+                                      r"points, the first at index 7\); fix or delete")
+
+
+def test_gradients_of_a_broken_curve(scene, mb, core):
+    P = core.knots.named("3_1")
+    P[5, 0] = np.nan
+    poly_curve("Knot", [P])
+    # made three meshes of NaN arrows before
+    _refused(bpy.ops.moebius.show_gradient, "'Knot': the curve has NaN or infinite coordinates")
+    t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
+    poly_curve("Lemniscate", [np.column_stack([np.sin(t), np.sin(t) * np.cos(t), 0 * t])])
+    _refused(bpy.ops.moebius.show_gradient, "'Lemniscate': the curve intersects itself")
+
+
 def test_self_touching_curve(scene, mb):
     # a figure-eight drawn in a plane: the curve passes through the origin twice
     t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
