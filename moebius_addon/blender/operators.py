@@ -98,7 +98,7 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         self.report({kind}, f"'{run.obj.name}'{how}: {run.nit} iterations, energy "
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
-                            f"({result.message})")
+                            f"({result.message}{api.method_hint(run.method, result)})")
 
     def execute(self, context):
         if not self._start(context):

@@ -180,3 +180,16 @@ def test_failure_while_keyframing_restores_the_curve(scene, mb, trefoil, monkeyp
         bpy.ops.moebius.relax()
     assert scene_state() == before
     assert trefoil.data.animation_data is None or trefoil.data.animation_data.action is None
+
+
+def test_iteration_limit_report_suggests_the_implicit_method(scene, mb, capfd):
+    mb.api.add_knot("4_1", None)
+    scene.moebius.max_iterations = 3
+    bpy.ops.moebius.relax()
+    out, _ = capfd.readouterr()
+    assert ("(maximum number of iterations (3) reached; knots settle in fewer iterations with "
+            "Advanced ▸ Method: Implicit Gradient)") in out
+    scene.moebius.method = "projected_gradient_implicit"
+    bpy.ops.moebius.relax()
+    out, _ = capfd.readouterr()
+    assert "maximum number of iterations (3) reached)" in out and "settle" not in out

@@ -1,0 +1,55 @@
+"""The feasible methods on every knot of the table: which one reaches the knot's relaxed shape.
+
+    python bench/knot_methods.py                  # all 36 entries, 200 iterations (about 8 min)
+    python bench/knot_methods.py --names 4_1 7_3 --max-iter 600
+
+For each knot at its default edge count: iterations, seconds, final energy above the lowest
+of the three methods, and whether the run converged (``success``: gradient below ``tol`` or
+energy change below ``ftol``) within the iteration limit. Prints measurements; not a test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from moebius_addon import core
+
+METHODS = ("projected_gradient", "projected_gradient_implicit", "trust_region")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--names", nargs="*", default=None)
+    ap.add_argument("--max-iter", type=int, default=200)
+    args = ap.parse_args()
+    names = args.names or core.knots.names()
+    for m in METHODS:  # compile every kernel before timing
+        core.relax(core.knots.named("3_1"), method=m, max_iter=3)
+    print(f"{'knot':5s} {'N':>4s} | " + " | ".join(f"{m[:24]:>24s}" for m in METHODS))
+    totals = {m: [0.0, 0, 0] for m in METHODS}  # seconds, converged, lowest energy
+    for name in names:
+        P = core.knots.named(name)
+        rows = []
+        for m in METHODS:
+            t = time.perf_counter()
+            r = core.relax(P, method=m, max_iter=args.max_iter)
+            rows.append((m, r.nit, time.perf_counter() - t, float(r.fun), r.success))
+        best = min(row[3] for row in rows)
+        cells = []
+        for m, nit, sec, energy, ok in rows:
+            lowest = energy - best <= 1e-3
+            totals[m][0] += sec
+            totals[m][1] += ok
+            totals[m][2] += lowest
+            flag = "conv" if ok else "    "
+            cells.append(f"{nit:4d} it {sec:6.2f} s +{energy - best:7.4f} {flag}")
+        print(f"{name:5s} {len(P):4d} | " + " | ".join(cells), flush=True)
+    print(f"{len(names)} knots, at most {args.max_iter} iterations each:")
+    for m, (sec, ok, low) in totals.items():
+        print(f"  {m:28s} {sec:7.1f} s in all, converged on {ok}, lowest energy "
+              f"(within 1e-3) on {low}")
+
+
+if __name__ == "__main__":
+    main()
