@@ -154,18 +154,18 @@ def _start(run, P, metric, max_iter, tol, energy_target, ftol, max_seconds, targ
     target edge lengths — "equal": the mean per component, the start refused unless it is
     equilateral already when ``equilateral``. Returns the scaled start and the targets."""
     run.t0 = time.perf_counter()
-    X, layout, e2 = as_unit_layout(P)  # exact scaling of curves far from size 1
-    _check_memory(layout.n)
-    if check:
-        check_polygon(P)
-    run.layout = layout
-    run.metric = metric
     run.max_iter = _number("max_iter", max_iter, 0, integer=True)
     run.tol = _number("tol", tol, 0)
     run.energy_target = None if energy_target is None else _number("energy_target",
                                                                    energy_target)
     run.ftol = _number("ftol", ftol, 0)
     run.max_seconds = None if max_seconds is None else _number("max_seconds", max_seconds, 0)
+    X, layout, e2 = as_unit_layout(P)  # exact scaling of curves far from size 1
+    _check_memory(layout.n)
+    if check:
+        check_polygon(P)
+    run.layout = layout
+    run.metric = metric
     ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
     shift = X.mean(axis=0)
     scale = float(ln.sum())
