@@ -813,6 +813,9 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
     """
     scene = scene or bpy.context.scene
     path = Path(filepath)
+    suffix = path.suffix.lower()
+    if suffix not in (".abc", ".usd", ".usda", ".usdc", ".usdz"):
+        raise ValueError(f"unknown export format '{suffix}'; use .abc or .usd/.usda/.usdc")
     path.parent.mkdir(parents=True, exist_ok=True)
     selected = [o for o in bpy.context.view_layer.objects if o.select_get()]
     active = bpy.context.view_layer.objects.active
@@ -821,15 +824,12 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
     bevel = obj.data.bevel_depth
     obj.data.bevel_depth = 0.0
     try:
-        suffix = path.suffix.lower()
         if suffix == ".abc":
             bpy.ops.wm.alembic_export(filepath=str(path), start=scene.frame_start,
                                       end=scene.frame_end, selected=True)
-        elif suffix in (".usd", ".usda", ".usdc", ".usdz"):
+        else:
             bpy.ops.wm.usd_export(filepath=str(path), export_animation=True,
                                   selected_objects_only=True)
-        else:
-            raise ValueError(f"unknown export format '{suffix}'; use .abc or .usd/.usda/.usdc")
     finally:
         obj.data.bevel_depth = bevel
         obj.select_set(False)

@@ -57,6 +57,13 @@ def test_export_round_trip(relaxed, mb, tmp_path, suffix):
     assert bool(curves.attributes["cyclic"].data[0].value)
 
 
+def test_unknown_export_format_is_refused_before_any_change(relaxed, mb, tmp_path):
+    target = tmp_path / "new_dir" / "flow.obj"
+    with pytest.raises(ValueError, match=r"unknown export format '\.obj'"):
+        mb.api.export_flow(relaxed, target)
+    assert not target.parent.exists()  # the folder was created before the refusal
+
+
 def test_show_gradient_arrows(scene, mb, core):
     bpy.ops.moebius.add_knot(kind="3_1", edges=60)
     knot = bpy.context.active_object
