@@ -791,6 +791,15 @@ def show_gradients(obj: bpy.types.Object, metrics: Sequence[str] = ("l2", "hs_pu
     return out
 
 
+def export_suffix(filepath: str | Path) -> str:
+    """The lower-case suffix of an export path :func:`export_flow` can write, else ValueError."""
+    suffix = Path(filepath).suffix.lower()
+    if suffix not in (".abc", ".usd", ".usda", ".usdc", ".usdz"):
+        raise ValueError(f"unknown export format '{suffix}' ({filepath}); use .abc or "
+                         ".usd/.usda/.usdc/.usdz")
+    return suffix
+
+
 def export_flow(obj: bpy.types.Object, filepath: str | Path,
                 scene: bpy.types.Scene | None = None) -> Path:
     """Export the keyframed curve over the scene's frame range as Alembic or USD.
@@ -813,9 +822,7 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
     """
     scene = scene or bpy.context.scene
     path = Path(filepath)
-    suffix = path.suffix.lower()
-    if suffix not in (".abc", ".usd", ".usda", ".usdc", ".usdz"):
-        raise ValueError(f"unknown export format '{suffix}'; use .abc or .usd/.usda/.usdc")
+    suffix = export_suffix(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     selected = [o for o in bpy.context.view_layer.objects if o.select_get()]
     active = bpy.context.view_layer.objects.active

@@ -72,6 +72,8 @@ def main(argv: list[str]) -> int:
         return int(exit_.code or 0)
     try:
         api._check_method(args.method, args.penalty)  # refuse before touching anything
+        for path in args.export:
+            api.export_suffix(path)
         if args.open:
             bpy.ops.wm.open_mainfile(filepath=args.open)
         if args.knot:

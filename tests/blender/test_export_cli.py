@@ -59,7 +59,7 @@ def test_export_round_trip(relaxed, mb, tmp_path, suffix):
 
 def test_unknown_export_format_is_refused_before_any_change(relaxed, mb, tmp_path):
     target = tmp_path / "new_dir" / "flow.obj"
-    with pytest.raises(ValueError, match=r"unknown export format '\.obj'"):
+    with pytest.raises(ValueError, match=r"unknown export format '\.obj'.*use \.abc"):
         mb.api.export_flow(relaxed, target)
     assert not target.parent.exists()  # the folder was created before the refusal
 
@@ -105,6 +105,11 @@ def test_cli_command(scene, mb, tmp_path):
     assert cli.main(["--object", "Nope"]) == 1
     assert cli.main(["--knot", "no_such_knot"]) == 1
     assert cli.main(["--bogus"]) == 2
+    # an unknown export format is refused before the knot is added or anything is saved
+    objects = len(bpy.data.objects)
+    other = tmp_path / "other.blend"
+    assert cli.main(["--knot", "3_1", "--save", str(other), "--export", "x.obj"]) == 1
+    assert len(bpy.data.objects) == objects and not other.exists()
 
 
 def test_panels_registered(mb):
