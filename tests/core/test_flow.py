@@ -187,9 +187,7 @@ def test_bad_inputs_raise_with_advice(trefoil300):
         relax(bad)
 
 
-@pytest.mark.parametrize(("option", "value", "says"), [
-    ("growth", np.nan, "growth must be a finite number >= 1"),  # ran, then "stalled"
-    ("backproject_tol", 0.0, "backproject_tol must be a finite number > 0"),  # "stalled"
+_BAD_OPTIONS = [
     ("tol", np.nan, "tol must be a finite number >= 0"),  # ignored
     ("energy_target", np.nan, "energy_target must be a finite number"),  # ignored
     ("max_iter", -1, "max_iter must be a finite number >= 0"),  # ran no iteration
@@ -197,14 +195,24 @@ def test_bad_inputs_raise_with_advice(trefoil300):
     ("max_seconds", -1.0, "max_seconds must be a finite number >= 0"),  # "budget used up"
     ("initial_step", np.inf, "initial_step must be a finite number > 0"),
     ("tol", "small", "tol must be a number"),
-])
-@pytest.mark.parametrize("method", ["projected_gradient", "lbfgs"])
+]
+# options of the feasible methods (the penalty methods ignore them)
+_BAD_FEASIBLE_OPTIONS = [
+    ("growth", np.nan, "growth must be a finite number >= 1"),  # ran, then "stalled"
+    ("backproject_tol", 0.0, "backproject_tol must be a finite number > 0"),  # "stalled"
+]
+
+
+@pytest.mark.parametrize(("method", "option", "value", "says"),
+                         [("projected_gradient", *bad) for bad in _BAD_OPTIONS
+                          + _BAD_FEASIBLE_OPTIONS] + [("lbfgs", *bad) for bad in _BAD_OPTIONS])
 def test_bad_options_are_refused_by_name(trefoil300, method, option, value, says):
-    if method == "lbfgs" and option in ("growth", "backproject_tol"):
-        pytest.skip("an option of the feasible methods: the penalty methods ignore it")
     options = {"max_iter": 3, option: value}
     with pytest.raises(ValueError, match=re.escape(says)):
         relax(trefoil300, method=method, **options)
+
+
+def test_bad_penalty_is_refused_by_name(trefoil300):
     with pytest.raises(ValueError, match="alpha must be a finite number >= 0"):
         relax(trefoil300, method="lbfgs", alpha=np.nan)
 
