@@ -46,7 +46,7 @@ import numba as nb
 import numpy as np
 
 from .objio import read_obj
-from .polygon import contact_ratio, resample
+from .polygon import CONTACT_GAP, CONTACT_RATIO, contact_ratio, resample
 
 __all__ = [
     "braid_closure",
@@ -107,7 +107,7 @@ def torus_knot(p: int, q: int, n: int | None = None, R: float = 2.0, r: float = 
         rho = R + r * np.cos(psi)
         # -sin: with +sin the knot would be the negative one (the mirror of the braid σ1³).
         curves.append(np.stack([rho * np.cos(phi), rho * np.sin(phi), -r * np.sin(psi)], axis=1))
-    return _finish(curves, n)
+    return _finish(curves, n, knotted=min(abs(p), abs(q)) > 1)
 
 
 def figure_eight(n: int = 200) -> np.ndarray:
@@ -116,7 +116,8 @@ def figure_eight(n: int = 200) -> np.ndarray:
     m = _dense_count(n)
     t = 2.0 * np.pi * np.arange(m) / m
     rho = 2.0 + np.cos(2.0 * t)
-    return _finish([np.stack([rho * np.cos(3 * t), rho * np.sin(3 * t), np.sin(4 * t)], axis=1)], n)
+    return _finish([np.stack([rho * np.cos(3 * t), rho * np.sin(3 * t), np.sin(4 * t)], axis=1)], n,
+                   knotted=True)
 
 
 # --------------------------------------------------------------------------------------------
@@ -167,7 +168,7 @@ def braid_closure(word: Sequence[int], n: int | None = None, strands: int | None
     if n is None:
         n = _braid_default_n(curves)
     n = _check_n(n, len(curves))
-    return _finish(curves, n)
+    return _finish(curves, n, knotted=bool(word))
 
 
 def _braid_curves(word: list[int], strands: int) -> list[np.ndarray]:
@@ -399,9 +400,29 @@ def _split(n: int, lengths: list[float]) -> list[int]:
     return counts.tolist()
 
 
-def _finish(curves: list[np.ndarray], n: int) -> Curve:
-    """Resample dense closed curves to ``n`` vertices in all, centre, scale into the unit ball."""
+# The start check compares vertices at least CONTACT_GAP edges apart along the curve: a
+# polygon with fewer vertices per component than this has no such pair and passes unchecked.
+_MIN_KNOTTED = 2 * CONTACT_GAP + 1
+
+
+def _finish(curves: list[np.ndarray], n: int, knotted: bool = False) -> Curve:
+    """Resample dense closed curves to ``n`` vertices in all, centre, scale into the unit ball.
+
+    ``knotted``: the curves form a knot or link that a polygon too coarse for the start check
+    could lose (T(2, 3) at 5, 6 and 7 vertices passed the check as unknots, checked with
+    topoly): refuse fewer than ``_MIN_KNOTTED`` vertices per component, naming a count that
+    passes the check."""
     counts = [n] if len(curves) == 1 else _split(n, [_length(c) for c in curves])
+    if knotted and min(counts) < _MIN_KNOTTED:
+        parts = curves[0] if len(curves) == 1 else curves
+        k = _MIN_KNOTTED * len(curves)
+        while contact_ratio(resample(parts, k)) < CONTACT_RATIO:  # up in steps of 10%
+            k = int(np.ceil(1.1 * k))
+        raise ValueError(
+            f"n = {n} is too few vertices for this knot: below {_MIN_KNOTTED} per component the "
+            f"start check cannot see strands that come too close, and the polygon may not be "
+            f"knotted at all; use n >= {k}"
+        )
     polys = resample(curves, counts, closed=True)
     allv = np.concatenate(polys)
     centre = allv.mean(axis=0)

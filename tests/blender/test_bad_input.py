@@ -76,6 +76,12 @@ def test_gradients_of_a_broken_curve(scene, mb, core):
     _refused(bpy.ops.moebius.show_gradient, "'Lemniscate': the curve intersects itself")
 
 
+def test_knot_with_too_few_edges(scene, mb):
+    # 7 edges made an unknotted heptagon labelled as the trefoil (it passed every check)
+    _refused(bpy.ops.moebius.add_knot, r"n = 7 is too few vertices for this knot.*use n >= 19",
+             kind="torus", edges=7, p=2, q=3)
+
+
 def test_self_touching_curve(scene, mb):
     # a figure-eight drawn in a plane: the curve passes through the origin twice
     t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
