@@ -211,6 +211,14 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
         if int(edges) < 4:
             raise ValueError(f"{edges} edges is too few; a closed polygon needs at least 4")
         counts = [int(edges)] * len(cleaned)
+    few = core.polygon.MIN_CHECKED_VERTICES
+    if min(counts) < few:
+        raise ValueError(
+            f"'{obj.name}': {min(counts)} edges per component is too few: below {few} the "
+            "start check cannot see strands that come too close, and a knot can come out "
+            f"unknotted (the trefoil at 5 to 7 edges did); use at least {few}"
+            + (" or a shorter edge length" if edge_length is not None else "")
+        )
     total = sum(counts)
     if total > EDGE_LIMIT and not allow_large:
         raise ValueError(

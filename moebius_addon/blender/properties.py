@@ -26,8 +26,9 @@ class MoebiusSettings(bpy.types.PropertyGroup):
 
     # Polygon
     edges: IntProperty(
-        name="Edges", default=100, min=4, soft_max=1000, max=1_000_000,
-        description="Edges of each converted component (cost per iteration grows as edges²)",
+        name="Edges", default=100, min=9, soft_max=1000, max=1_000_000,
+        description="Edges of each converted component (cost per iteration grows as edges²; "
+                    "at least 9, below which the start check cannot judge a knot)",
     )
     use_edge_length: BoolProperty(
         name="Use Edge Length", default=False,

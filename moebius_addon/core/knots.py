@@ -46,7 +46,7 @@ import numba as nb
 import numpy as np
 
 from .objio import read_obj
-from .polygon import CONTACT_GAP, CONTACT_RATIO, contact_ratio, resample
+from .polygon import CONTACT_RATIO, MIN_CHECKED_VERTICES, contact_ratio, resample
 
 __all__ = [
     "braid_closure",
@@ -400,9 +400,7 @@ def _split(n: int, lengths: list[float]) -> list[int]:
     return counts.tolist()
 
 
-# The start check compares vertices at least CONTACT_GAP edges apart along the curve: a
-# polygon with fewer vertices per component than this has no such pair and passes unchecked.
-_MIN_KNOTTED = 2 * CONTACT_GAP + 1
+_MIN_KNOTTED = MIN_CHECKED_VERTICES  # fewer per component: the start check is blind
 
 
 def _finish(curves: list[np.ndarray], n: int, knotted: bool = False) -> Curve:

@@ -19,6 +19,9 @@ from .collision import closest_pairs
 # near-contact: every metric fails) against >= 1.06 at index distance >= 4 for curves that relax;
 # here the FHW unknot jammed at 460 edges (ratio 0.92) and relaxed at 500 (1.05).
 CONTACT_GAP = 4
+# Fewest vertices per component at which the coarseness check has a vertex pair to compare
+# (CONTACT_GAP edges apart both ways along the curve); below it a knot can pass unchecked.
+MIN_CHECKED_VERTICES = 2 * CONTACT_GAP + 1
 CONTACT_RATIO = 1.0
 MIN_VERTICES = 4
 # Chord lengths probed (evenly below the mean arc per edge) for sign changes of the closing

@@ -82,6 +82,21 @@ def test_knot_with_too_few_edges(scene, mb):
              kind="torus", edges=7, p=2, q=3)
 
 
+def test_convert_to_too_few_edges(scene, mb, core):
+    # a drawn trefoil converted to 7 edges passed every check as an unknotted heptagon
+    obj = poly_curve("Trefoil", [core.knots.torus_knot(2, 3, 300)])
+    scene.moebius.edges = 7
+    assert scene.moebius.edges == 9  # the panel's slider stops at 9; scripts get a message:
+    before = scene_state()
+    with pytest.raises(ValueError, match="'Trefoil': 7 edges per component is too few.*at least 9"):
+        mb.api.convert_object(obj, edges=7)
+    with pytest.raises(ValueError, match="too few.*or a shorter edge length"):
+        mb.api.convert_object(obj, edge_length=2.0)  # about 6 edges
+    assert scene_state() == before
+    # 9 is a count the check can judge: here it refuses it as too coarse, naming what works
+    _refused(bpy.ops.moebius.convert, r"too coarse .* resample with at least \d+ edges")
+
+
 def test_self_touching_curve(scene, mb):
     # a figure-eight drawn in a plane: the curve passes through the origin twice
     t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
