@@ -107,7 +107,7 @@ def torus_knot(p: int, q: int, n: int | None = None, R: float = 2.0, r: float = 
         rho = R + r * np.cos(psi)
         # -sin: with +sin the knot would be the negative one (the mirror of the braid σ1³).
         curves.append(np.stack([rho * np.cos(phi), rho * np.sin(phi), -r * np.sin(psi)], axis=1))
-    return _finish(curves, n, knotted=min(abs(p), abs(q)) > 1)
+    return _finish(curves, n)
 
 
 def figure_eight(n: int = 200) -> np.ndarray:
@@ -116,8 +116,7 @@ def figure_eight(n: int = 200) -> np.ndarray:
     m = _dense_count(n)
     t = 2.0 * np.pi * np.arange(m) / m
     rho = 2.0 + np.cos(2.0 * t)
-    return _finish([np.stack([rho * np.cos(3 * t), rho * np.sin(3 * t), np.sin(4 * t)], axis=1)], n,
-                   knotted=True)
+    return _finish([np.stack([rho * np.cos(3 * t), rho * np.sin(3 * t), np.sin(4 * t)], axis=1)], n)
 
 
 # --------------------------------------------------------------------------------------------
@@ -168,7 +167,7 @@ def braid_closure(word: Sequence[int], n: int | None = None, strands: int | None
     if n is None:
         n = _braid_default_n(curves)
     n = _check_n(n, len(curves))
-    return _finish(curves, n, knotted=bool(word))
+    return _finish(curves, n)
 
 
 def _braid_curves(word: list[int], strands: int) -> list[np.ndarray]:
@@ -400,26 +399,25 @@ def _split(n: int, lengths: list[float]) -> list[int]:
     return counts.tolist()
 
 
-_MIN_KNOTTED = MIN_CHECKED_VERTICES  # fewer per component: the start check is blind
 
 
-def _finish(curves: list[np.ndarray], n: int, knotted: bool = False) -> Curve:
+def _finish(curves: list[np.ndarray], n: int) -> Curve:
     """Resample dense closed curves to ``n`` vertices in all, centre, scale into the unit ball.
 
-    ``knotted``: the curves form a knot or link that a polygon too coarse for the start check
-    could lose (T(2, 3) at 5, 6 and 7 vertices passed the check as unknots, checked with
-    topoly): refuse fewer than ``_MIN_KNOTTED`` vertices per component, naming a count that
-    passes the check."""
+    Fewer than ``MIN_CHECKED_VERTICES`` per component are refused, naming a count that passes
+    the start check: below it the check has no vertex pair to compare, and the polygon need not
+    have the curve's knot type (T(2, 3) at 5, 6 and 7 vertices passed it as unknots, checked
+    with topoly; a coarse polygon of a tangled unknot could as well be knotted)."""
     counts = [n] if len(curves) == 1 else _split(n, [_length(c) for c in curves])
-    if knotted and min(counts) < _MIN_KNOTTED:
+    if min(counts) < MIN_CHECKED_VERTICES:
         parts = curves[0] if len(curves) == 1 else curves
-        k = _MIN_KNOTTED * len(curves)
+        k = MIN_CHECKED_VERTICES * len(curves)
         while contact_ratio(resample(parts, k)) < CONTACT_RATIO:  # up in steps of 10%
             k = int(np.ceil(1.1 * k))
         raise ValueError(
-            f"n = {n} is too few vertices for this knot: below {_MIN_KNOTTED} per component the "
-            f"start check cannot see strands that come too close, and the polygon may not be "
-            f"knotted at all; use n >= {k}"
+            f"n = {n} is too few vertices for this curve: below {MIN_CHECKED_VERTICES} per "
+            f"component the start check cannot see strands that come too close, and the "
+            f"polygon may not have the curve's knot type; use n >= {k}"
         )
     polys = resample(curves, counts, closed=True)
     allv = np.concatenate(polys)

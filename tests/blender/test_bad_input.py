@@ -78,7 +78,7 @@ def test_gradients_of_a_broken_curve(scene, mb, core):
 
 def test_knot_with_too_few_edges(scene, mb):
     # 7 edges made an unknotted heptagon labelled as the trefoil (it passed every check)
-    _refused(bpy.ops.moebius.add_knot, r"n = 7 is too few vertices for this knot.*use n >= 19",
+    _refused(bpy.ops.moebius.add_knot, r"n = 7 is too few vertices for this curve.*use n >= 19",
              kind="torus", edges=7, p=2, q=3)
 
 

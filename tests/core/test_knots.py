@@ -263,16 +263,15 @@ def test_bad_vertex_counts():
 
 
 @pytest.mark.parametrize("n", [5, 6, 7])
-def test_knots_too_coarse_for_the_start_check_are_refused(n):
+def test_curves_too_coarse_for_the_start_check_are_refused(n):
     # T(2, 3) at 5, 6 and 7 vertices passed check_polygon (no vertex pair is 4 edges apart) and
     # were unknots (topoly: 0_1); at 8-17 the check refuses it, from 18 it passes as a trefoil
-    with pytest.raises(ValueError, match=r"too few vertices for this knot.*use n >= (\d+)") as e:
+    with pytest.raises(ValueError, match=r"too few vertices for this curve.*use n >= (\d+)") as e:
         knots.torus_knot(2, 3, n)
     k = int(e.value.args[0].rsplit(">= ", 1)[1])
     check_polygon(knots.torus_knot(2, 3, k))
-    with pytest.raises(ValueError, match="too few vertices for this knot"):
-        knots.named("3_1", 8)
-    with pytest.raises(ValueError, match="too few vertices for this knot"):
-        knots.torus_knot(2, 4, 16)  # a link: 8 vertices per component
-    assert knots.torus_knot(1, 5, n).shape == (n, 3)  # T(1, q) is an unknot
-    assert knots.circle(n).shape == (n, 3)
+    for make in (lambda: knots.named("3_1", 8), lambda: knots.torus_knot(2, 4, 16),
+                 lambda: knots.random_unknot(8), lambda: knots.freedman_unknot(8)):
+        with pytest.raises(ValueError, match="too few vertices for this curve"):
+            make()
+    assert knots.circle(n).shape == (n, 3)  # a convex polygon: nothing to lose
