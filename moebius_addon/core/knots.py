@@ -399,8 +399,6 @@ def _split(n: int, lengths: list[float]) -> list[int]:
     return counts.tolist()
 
 
-
-
 def _finish(curves: list[np.ndarray], n: int) -> Curve:
     """Resample dense closed curves to ``n`` vertices in all, centre, scale into the unit ball.
 
