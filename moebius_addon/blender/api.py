@@ -466,8 +466,11 @@ class ObjectRelaxation:
                  tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
                  method: str = DEFAULT_METHOD, penalty: float | None = None,
                  **options) -> None:
-        if keyframe_stride < 1:
-            raise ValueError(f"keyframe_stride must be at least 1, got {keyframe_stride}")
+        # under this layer's names (the core would say max_iter, tol), before anything else
+        max_iterations = core.flow._number("max_iterations", max_iterations, 0, integer=True)
+        tolerance = core.flow._number("tolerance", tolerance, 0)
+        keyframe_stride = core.flow._number("keyframe_stride", keyframe_stride, 1, integer=True)
+        frame_start = core.flow._number("frame_start", frame_start, integer=True)
         options.update(_check_method(method, penalty))
         polygons = geometry.curve_polygons(obj)
         total = sum(len(p) for p in polygons)

@@ -86,7 +86,7 @@ def test_show_gradient_arrows(scene, mb, core):
     assert len([o for o in bpy.data.objects if ".grad." in o.name]) == 3
 
 
-def test_cli_command(scene, mb, tmp_path):
+def test_cli_command(scene, mb, tmp_path, capfd):
     from importlib import import_module
 
     cli = import_module(mb.__name__ + ".cli")
@@ -105,6 +105,15 @@ def test_cli_command(scene, mb, tmp_path):
     assert cli.main(["--object", "Nope"]) == 1
     assert cli.main(["--knot", "no_such_knot"]) == 1
     assert cli.main(["--bogus"]) == 2
+    # options named as the command line names them (was "tol must be …" for --tolerance)
+    capfd.readouterr()
+    assert cli.main(["--knot", "3_1", "--tolerance", "nan"]) == 1
+    err = capfd.readouterr().err
+    assert "moebius: error: tolerance must be a finite number >= 0, got nan" in err
+    with pytest.raises(ValueError, match="tolerance must be a finite number >= 0, got nan"):
+        mb.api.relax_object(bpy.context.active_object, tolerance=float("nan"))
+    with pytest.raises(ValueError, match="keyframe_stride must be a finite number >= 1"):
+        mb.api.relax_object(bpy.context.active_object, keyframe_stride=0)
     # an unknown export format is refused before the knot is added or anything is saved
     objects = len(bpy.data.objects)
     other = tmp_path / "other.blend"
