@@ -355,7 +355,7 @@ def method_hint(method: str, result) -> str:
     at the lowest energy of the three feasible methods on 35; docs/benchmarks.md)."""
     if method != DEFAULT_METHOD or result.success or "maximum number" not in result.message:
         return ""
-    label = dict((m, text) for m, text, _ in METHODS)["projected_gradient_implicit"]
+    label = _METHOD_TEXT["projected_gradient_implicit"][0]
     return f"; knots settle in fewer iterations with Advanced ▸ Method: {label}"
 
 

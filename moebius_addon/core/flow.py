@@ -337,9 +337,9 @@ class Relaxation(_Run):
                               target_lengths, check, equilateral=True)
         layout = self.layout
         self.armijo = float(armijo)
-        self.growth = float(growth)
-        self.backproject_iter = int(backproject_iter)
-        self.backproject_tol = float(backproject_tol)
+        self.growth = growth
+        self.backproject_iter = backproject_iter
+        self.backproject_tol = backproject_tol
         self.interpolate = bool(interpolate)
         self.con: Constraints = make_constraints(Xn, layout, lengths0, edge_lengths, barycenter)
         if precision not in ("auto", "double", "single"):
@@ -353,7 +353,7 @@ class Relaxation(_Run):
         )
         self.eps = 1e-3 * float(lengths0.mean())  # contact distance
         self.X = Xn
-        self.tau = float(initial_step) / self.growth
+        self.tau = initial_step / self.growth
         self.nit = 0
         self.done = False
         self.success = False

@@ -46,7 +46,7 @@ import numba as nb
 import numpy as np
 
 from .objio import read_obj
-from .polygon import CONTACT_RATIO, MIN_CHECKED_VERTICES, contact_ratio, resample
+from .polygon import MIN_CHECKED_VERTICES, contact_ratio, resample, suggest_edge_count
 
 __all__ = [
     "braid_closure",
@@ -408,14 +408,12 @@ def _finish(curves: list[np.ndarray], n: int) -> Curve:
     with topoly; a coarse polygon of a tangled unknot could as well be knotted)."""
     counts = [n] if len(curves) == 1 else _split(n, [_length(c) for c in curves])
     if min(counts) < MIN_CHECKED_VERTICES:
-        parts = curves[0] if len(curves) == 1 else curves
-        k = MIN_CHECKED_VERTICES * len(curves)
-        while contact_ratio(resample(parts, k)) < CONTACT_RATIO:  # up in steps of 10%
-            k = int(np.ceil(1.1 * k))
+        k = suggest_edge_count(curves[0] if len(curves) == 1 else curves,
+                               start=MIN_CHECKED_VERTICES * len(curves))
         raise ValueError(
             f"n = {n} is too few vertices for this curve: below {MIN_CHECKED_VERTICES} per "
             f"component the start check cannot see strands that come too close, and the "
-            f"polygon may not have the curve's knot type; use n >= {k}"
+            f"polygon may not have the curve's knot type; use n >= {k or MIN_CHECKED_VERTICES}"
         )
     polys = resample(curves, counts, closed=True)
     allv = np.concatenate(polys)

@@ -298,13 +298,8 @@ def resample(points, n, closed: bool = True):
         them by :func:`equalize` (``closed=False``) in the same way.
     """
     if isinstance(points, (list, tuple)):
-        parts = [np.asarray(p, dtype=np.float64) for p in points]
-        k = unit_exponent(np.concatenate(parts)) if all(
-            p.ndim == 2 and p.shape[1:] == (3,) for p in parts) else 0
-        if k:  # one scale for every component (their lengths decide the counts)
-            return [np.ldexp(q, k) for q in resample([np.ldexp(p, -k) for p in parts], n, closed)]
-        ns = list(n) if np.ndim(n) else _split_count(parts, int(n))
-        return [resample(p, c, closed) for p, c in zip(parts, ns, strict=True)]
+        ns = list(n) if np.ndim(n) else _split_count(points, int(n))
+        return [resample(p, k, closed) for p, k in zip(points, ns, strict=True)]
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
         raise ValueError(f"points must be an (M, 3) array, got shape {P.shape}")
@@ -321,9 +316,12 @@ def resample(points, n, closed: bool = True):
 
 def _split_count(parts, n):
     """Distribute ``n`` vertices over link components proportionally to their lengths
-    (largest remainder, so the counts add up to ``n``; at least 4 each)."""
-    lengths = np.array([np.linalg.norm(np.diff(np.vstack([p, p[:1]]), axis=0), axis=1).sum()
-                        for p in map(np.asarray, parts)])
+    (largest remainder, so the counts add up to ``n``; at least 4 each). The lengths are
+    taken at a size near 1 (one exact scale for all), as squares of 1e200 would overflow."""
+    parts = [np.asarray(p, dtype=np.float64) for p in parts]
+    k = unit_exponent(np.concatenate([p.ravel() for p in parts]))
+    lengths = np.array([np.linalg.norm(np.diff(np.vstack([q, q[:1]]), axis=0), axis=1).sum()
+                        for q in (np.ldexp(p, -k) for p in parts)])
     share = n * lengths / lengths.sum()
     ns = np.floor(share).astype(int)
     ns[np.argsort(ns - share)[: n - ns.sum()]] += 1
@@ -349,16 +347,18 @@ def _where(layout: Layout, v: int) -> str:
     return f"vertex {v - layout.starts[c]} of component {c}"
 
 
-def suggest_edge_count(P, max_edges: int = 20000) -> int | None:
+def suggest_edge_count(P, max_edges: int = 20000, start: int | None = None) -> int | None:
     """Smallest edge count (total over a link) whose equilateral resampling of ``P`` passes the
-    contact check, searched upward in steps of 10%; None if none up to ``max_edges``."""
+    contact check, searched upward in steps of 10% from ``start`` (default: a guess above
+    ``P``'s own count from its contact ratio); None if none up to ``max_edges``."""
     X, layout, _ = as_unit_layout(P)
-    n = layout.n
     parts = layout.split(X) if layout.is_link else X
-    ratio = contact_ratio(parts)
-    # the ratio grows about linearly with the edge count near a true contact
-    guess = max(n + 1, int(np.ceil(n * CONTACT_RATIO / max(ratio, 1e-9) * 1.05)))
-    k = guess
+    if start is None:
+        n = layout.n
+        ratio = contact_ratio(parts)
+        # the ratio grows about linearly with the edge count near a true contact
+        start = max(n + 1, int(np.ceil(n * CONTACT_RATIO / max(ratio, 1e-9) * 1.05)))
+    k = start
     while k <= max_edges:
         Q = resample(parts, k)
         if contact_ratio(Q) >= CONTACT_RATIO:
