@@ -202,7 +202,17 @@ def energy_gradient_x(X: np.ndarray, layout: Layout) -> tuple[float, np.ndarray]
     return _energy_from_rows(rows, layout), G
 
 
-def moebius_energy(P) -> float:
+def _engine_x(X, layout, engine, theta):
+    """The Barnes–Hut frame for ``engine``/``theta`` at X, or None for the exact sum."""
+    from . import barnes_hut  # the tree engine builds on this module's kernel
+
+    theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
+    if not barnes_hut.uses_tree(engine, layout.n):
+        return None
+    return barnes_hut.Frame(X, layout, theta)
+
+
+def moebius_energy(P, *, engine: str = "exact", theta: float | None = None) -> float:
     """Discrete Möbius energy of a closed polygon or a link.
 
     Parameters
@@ -210,6 +220,13 @@ def moebius_energy(P) -> float:
     P : (N, 3) array or list of (N_k, 3) arrays
         Vertices of a closed polygon (vertex ``i`` joined to ``i+1``, the last to the first), or
         the components of a link.
+    engine : {"exact", "tree", "auto"}
+        "exact": the sum over all pairs; "tree": Barnes–Hut on a hierarchy of edges with
+        admissibility ``theta`` (relative error about 1e-4 at the default, O(N log N));
+        "auto": the tree from ``barnes_hut.TREE_FROM`` edges on.
+    theta : float, optional
+        Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); smaller is more
+        accurate and slower.
 
     Returns
     -------
@@ -219,15 +236,19 @@ def moebius_energy(P) -> float:
         curves spanning more than 2^64 or less than 2^-64).
     """
     X, layout, _ = as_unit_layout(P)
-    return energy_x(X, layout)
+    frame = _engine_x(X, layout, engine, theta)
+    return energy_x(X, layout) if frame is None else frame.energy(X)
 
 
-def moebius_gradient(P):
+def moebius_gradient(P, *, engine: str = "exact", theta: float | None = None):
     """Exact derivative of :func:`moebius_energy` with respect to the vertices.
 
     Parameters
     ----------
     P : (N, 3) array or list of (N_k, 3) arrays
+    engine, theta
+        As in :func:`moebius_energy`; with the tree, the exact derivative of the approximated
+        sum.
 
     Returns
     -------
@@ -235,5 +256,6 @@ def moebius_gradient(P):
         Same shape as ``P``; units 1/length.
     """
     X, layout, k = as_unit_layout(P)
-    g = energy_gradient_x(X, layout)[1]
+    frame = _engine_x(X, layout, engine, theta)
+    g = (energy_gradient_x(X, layout) if frame is None else frame.energy_gradient(X))[1]
     return layout.split(np.ldexp(g, -k) if k else g)  # ∇E(2^k X) = 2^-k ∇E(X)
