@@ -99,7 +99,7 @@ def bench_ratio(n, iters=8):
     X, lay = run.X, run.layout
     A = gram_x("hs", X, lay)
     jac = jacobian(X, run.con)
-    dtype = run.solver.dtype
+    dtype = run.engine.solver.dtype
     parts = {
         "energy_gradient": best_of(lambda: energy_gradient_x(X, lay)),
         "energy": best_of(lambda: energy_x(X, lay)),
@@ -117,7 +117,7 @@ def bench_ratio(n, iters=8):
     return {"edges": n, "seconds_per_iteration": per_iter, "ratio": ratio,
             "parts_seconds": parts, "precision": np.dtype(dtype).name,
             "rejected_trials_per_iteration": rejected,
-            "krylov_per_iteration": float(np.mean(run.solver.krylov_its[-iters:]))}
+            "krylov_per_iteration": float(np.mean(run.engine.solver.krylov_its[-iters:]))}
 
 
 def bench_sizes(sizes):

@@ -20,9 +20,9 @@ import numpy as np
 
 from moebius_addon.core import _lapack, knots
 from moebius_addon.core.constraints import jacobian
-from moebius_addon.core.flow import Relaxation
 from moebius_addon.core.linalg import Factorization
 from moebius_addon.core.metrics import gram_x
+from moebius_addon.core.solvers import Relaxation
 
 
 def previous(A, jac, dtype):

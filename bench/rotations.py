@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from moebius_addon.core import knots
-from moebius_addon.core.flow import Relaxation
+from moebius_addon.core.solvers import Relaxation
 
 
 def main():

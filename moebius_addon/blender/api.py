@@ -7,7 +7,6 @@ exactly the code the panel runs. Numerics come from :mod:`moebius_addon.core`.
 
 from __future__ import annotations
 
-import inspect
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -37,7 +36,7 @@ METRICS = (
 DEFAULT_METHOD = "projected_gradient"
 
 #: Default weight α of the edge-stretch penalty of the penalty methods (the core's default).
-DEFAULT_PENALTY = float(inspect.signature(core.methods.NonlinearCG).parameters["alpha"].default)
+DEFAULT_PENALTY = core.DEFAULT_PENALTY_WEIGHT
 
 _METHOD_TEXT = {
     "projected_gradient": (
@@ -69,12 +68,12 @@ _METHOD_TEXT = {
 #: Optimizers offered for the flow, as ``(core name, label, description)``: exactly
 #: ``core.METHODS``, in its order (a method without a text here gets its name as label).
 METHODS = tuple(
-    (m, *_METHOD_TEXT.get(m, (m.replace("_", " ").title(), f"core.methods '{m}'")))
+    (m, *_METHOD_TEXT.get(m, (m.replace("_", " ").title(), f"core.solvers '{m}'")))
     for m in core.METHODS
 )
 
 #: Methods that replace the edge-length constraints by a penalty of weight α.
-PENALTY_METHODS = core.methods.INFEASIBLE
+PENALTY_METHODS = core.solvers.INFEASIBLE
 
 #: Catalogue entries besides the named knots of ``core.knots.names()``.
 SPECIAL_KNOTS = (
@@ -352,8 +351,9 @@ def method_hint(method: str, result) -> str:
     """Advice appended to the report of a run of the default method that hit its iteration
     limit: the explicit flow's last stretch on a knot is slow (over the 36 entries of the knot
     table, 200 iterations each: 5 converged with it, 12 with the implicit method, which ended
-    at the lowest energy of the three feasible methods on 35; docs/benchmarks.md)."""
-    if method != DEFAULT_METHOD or result.success or "maximum number" not in result.message:
+    at the lowest energy of the three feasible methods on 35; docs/benchmarks.md). Decided by
+    ``result.status``, never by the words of the message."""
+    if method != DEFAULT_METHOD or result.status != core.Status.MAX_ITER:
         return ""
     label = _METHOD_TEXT["projected_gradient_implicit"][0]
     return f"; knots settle in fewer iterations with Advanced ▸ Method: {label}"
@@ -363,7 +363,7 @@ def relax_settings(settings) -> dict:
     """Keyword arguments for :func:`relax_object` from the ``scene.moebius`` settings.
 
     Only the options that mean something to the chosen method are passed: the Armijo constant
-    is the explicit method's (the implicit one keeps its own, see ``core.methods``), the step
+    is the explicit method's (the implicit one keeps its own, see ``core.solvers``), the step
     growth the two projected gradients', back-projection and constraint toggles the methods
     that keep the constraints, the penalty weight the penalty methods'.
     """
@@ -467,10 +467,10 @@ class ObjectRelaxation:
                  method: str = DEFAULT_METHOD, penalty: float | None = None,
                  **options) -> None:
         # under this layer's names (the core would say max_iter, tol), before anything else
-        max_iterations = core.flow._number("max_iterations", max_iterations, 0, integer=True)
-        tolerance = core.flow._number("tolerance", tolerance, 0)
-        keyframe_stride = core.flow._number("keyframe_stride", keyframe_stride, 1, integer=True)
-        frame_start = core.flow._number("frame_start", frame_start, integer=True)
+        max_iterations = core.check_number("max_iterations", max_iterations, 0, integer=True)
+        tolerance = core.check_number("tolerance", tolerance, 0)
+        keyframe_stride = core.check_number("keyframe_stride", keyframe_stride, 1, integer=True)
+        frame_start = core.check_number("frame_start", frame_start, integer=True)
         options.update(_check_method(method, penalty))
         polygons = geometry.curve_polygons(obj)
         total = sum(len(p) for p in polygons)

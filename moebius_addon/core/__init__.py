@@ -3,7 +3,8 @@
 The discrete method of Reiter & Schumacher, *Sobolev Gradients for the Möbius Energy*: the
 Möbius energy of polygons and links, the metrics of the paper, the constraints, and the
 projected Sobolev-gradient flow with collision-bounded Armijo steps, and the further optimizers
-of the paper's comparison (``METHODS``, ``make_run``). See ``docs/api.md``.
+of the paper's comparison (``METHODS``, ``make_run``). See ``docs/api.md`` ("Architecture")
+for how the modules stack: ``flow`` → ``solvers`` → ``engine`` → kernels.
 """
 
 from ._threads import prefer_stable_layer
@@ -14,19 +15,26 @@ from . import knots  # noqa: E402
 from .collision import max_collision_free_step  # noqa: E402
 from .constraints import Constraints  # noqa: E402
 from .energy import moebius_energy, moebius_gradient  # noqa: E402
-from .flow import IterationState, Relaxation, RelaxResult, relax, sobolev_gradient  # noqa: E402
-from .methods import METHODS, make_run  # noqa: E402
+from .engine import ENGINES  # noqa: E402
+from .flow import relax, sobolev_gradient  # noqa: E402
 from .metrics import METRICS, gram_matrix  # noqa: E402
 from .objio import read_obj, write_obj  # noqa: E402
 from .polygon import check_polygon, contact_ratio, resample, suggest_edge_count  # noqa: E402
+from .solvers import METHODS, Relaxation, make_run  # noqa: E402
+from .solvers.base import IterationState, RelaxResult, Status, check_number  # noqa: E402
+from .solvers.penalty import DEFAULT_PENALTY_WEIGHT  # noqa: E402
 
 __all__ = [
+    "DEFAULT_PENALTY_WEIGHT",
+    "ENGINES",
     "METHODS",
     "METRICS",
     "Constraints",
     "IterationState",
     "RelaxResult",
     "Relaxation",
+    "Status",
+    "check_number",
     "check_polygon",
     "contact_ratio",
     "gram_matrix",

@@ -23,8 +23,6 @@ import numpy as np
 
 from ._layout import Layout, as_unit_layout
 
-METRICS = ("l2", "h1", "h2", "hs_pure", "hs")
-
 # Tiny L² term that keeps the pure W^{3/2,2} matrix definite for 4-gons, where disjoint edge
 # pairs do not connect all edges (DESIGN.md: "+ a small L² term if needed").
 _PURE_L2 = 1e-6
@@ -223,48 +221,78 @@ def _bending(ln, layout):
     return _sparse_to_dense(n, rows, cs, vals)
 
 
+def _hs_family(X, layout, ln, total, out, low):
+    """``A_hs`` with its V part times ``low`` (1: ``hs``, 0: the top-order part alone)."""
+    M = 0.5 * (X[layout.nxt] + X)
+    arc = np.empty_like(ln)
+    clen = np.empty(layout.k)
+    for c in range(layout.k):
+        s = slice(layout.starts[c], layout.starts[c + 1])
+        cum = np.cumsum(ln[s])
+        arc[s] = cum - 0.5 * ln[s]  # arc-length position of each edge midpoint
+        clen[c] = cum[-1]
+    return _hs_rows(
+        np.ascontiguousarray(M[:, 0]),
+        np.ascontiguousarray(M[:, 1]),
+        np.ascontiguousarray(M[:, 2]),
+        ln,
+        arc,
+        clen,
+        layout.starts,
+        layout.comp,
+        layout.nxt,
+        layout.prv,
+        low,
+        _CHUNKS,
+        out if out is not None and out.shape == (len(ln),) * 2 else np.empty((len(ln),) * 2),
+    )
+
+
+def _gram_l2(X, layout, ln, total, out):
+    return _mass(ln, layout) / total**3
+
+
+def _gram_h1(X, layout, ln, total, out):
+    return (_stiffness(ln, layout) + _mass(ln, layout) / total**2) / total
+
+
+def _gram_h2(X, layout, ln, total, out):
+    return total * _bending(ln, layout) + _gram_h1(X, layout, ln, total, out)
+
+
+def _gram_hs_pure(X, layout, ln, total, out):
+    A = _hs_family(X, layout, ln, total, out, 0.0)
+    A += _PURE_L2 * _mass(ln, layout) / total**3
+    return A
+
+
+def _gram_hs(X, layout, ln, total, out):
+    return _hs_family(X, layout, ln, total, out, 1.0)
+
+
+# Builder of every metric's matrix without the barycenter term, from the vertices ``X``, their
+# edge lengths ``ln`` and total length; ``out`` is memory a builder may overwrite. The order is
+# the one of METRICS (weakest first).
+_BUILDERS = {
+    "l2": _gram_l2,
+    "h1": _gram_h1,
+    "h2": _gram_h2,
+    "hs_pure": _gram_hs_pure,
+    "hs": _gram_hs,
+}
+METRICS = tuple(_BUILDERS)
+
+
 def gram_x(metric: str, X: np.ndarray, layout: Layout, out: np.ndarray | None = None) -> np.ndarray:
-    """Gram matrix ``A`` of the stacked vertex array (private fast path used by the flow).
+    """Gram matrix ``A`` of the stacked vertex array (private fast path used by the engine).
 
     ``out``: an (N, N) float64 array to overwrite with ``hs``/``hs_pure`` (the flow passes the
     previous iterate's: a fresh 72 MB array at 3000 vertices costs 27 ms of page faults)."""
-    if metric not in METRICS:
+    if metric not in _BUILDERS:
         raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
     E, ln = _lengths(X, layout)
     total = float(ln.sum())
-    if metric in ("hs", "hs_pure"):
-        M = 0.5 * (X[layout.nxt] + X)
-        arc = np.empty_like(ln)
-        clen = np.empty(layout.k)
-        for c in range(layout.k):
-            s = slice(layout.starts[c], layout.starts[c + 1])
-            cum = np.cumsum(ln[s])
-            arc[s] = cum - 0.5 * ln[s]  # arc-length position of each edge midpoint
-            clen[c] = cum[-1]
-        A = _hs_rows(
-            np.ascontiguousarray(M[:, 0]),
-            np.ascontiguousarray(M[:, 1]),
-            np.ascontiguousarray(M[:, 2]),
-            ln,
-            arc,
-            clen,
-            layout.starts,
-            layout.comp,
-            layout.nxt,
-            layout.prv,
-            1.0 if metric == "hs" else 0.0,
-            _CHUNKS,
-            out if out is not None and out.shape == (len(ln),) * 2 else np.empty((len(ln),) * 2),
-        )
-        if metric == "hs_pure":
-            A += _PURE_L2 * _mass(ln, layout) / total**3
-    elif metric == "l2":
-        A = _mass(ln, layout) / total**3
-    elif metric == "h1":
-        A = (_stiffness(ln, layout) + _mass(ln, layout) / total**2) / total
-    else:  # h2
-        h1 = (_stiffness(ln, layout) + _mass(ln, layout) / total**2) / total
-        A = total * _bending(ln, layout) + h1
+    A = _BUILDERS[metric](X, layout, ln, total, out)
     _add_barycenter_term(A, ln, layout, total)
     return A
 

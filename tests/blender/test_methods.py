@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from bpy_helpers import scene_state, spline_points
 
-from moebius_addon.core.methods import FEASIBLE, INFEASIBLE, METHODS
+from moebius_addon.core.solvers import FEASIBLE, INFEASIBLE, METHODS
 
 
 def _edges(X):

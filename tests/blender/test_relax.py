@@ -193,3 +193,15 @@ def test_iteration_limit_report_suggests_the_implicit_method(scene, mb, capfd):
     bpy.ops.moebius.relax()
     out, _ = capfd.readouterr()
     assert "maximum number of iterations (3) reached)" in out and "settle" not in out
+
+
+def test_method_hint_follows_the_status_not_the_words(mb, core):
+    def result(status, message):
+        return core.RelaxResult(x=None, fun=0.0, nit=3, success=False, message=message,
+                                status=status)
+
+    hint = mb.api.method_hint
+    assert "Implicit Gradient" in hint("projected_gradient", result(core.Status.MAX_ITER, ""))
+    # the words alone decide nothing: a time budget that mentions an iteration limit
+    assert hint("projected_gradient", result(core.Status.TIME, "maximum number of")) == ""
+    assert hint("projected_gradient_implicit", result(core.Status.MAX_ITER, "")) == ""

@@ -6,7 +6,9 @@ import re
 import numpy as np
 import pytest
 
-from moebius_addon.core import METRICS, Relaxation, flow, moebius_energy, relax, resample
+from moebius_addon.core import METRICS, Relaxation, Status, moebius_energy, relax, resample
+from moebius_addon.core.engine import ENGINES, DenseEngine, make_engine
+from moebius_addon.core.solvers import base, projected
 from tests.conftest import ngon, trefoil
 
 
@@ -73,6 +75,7 @@ def test_callback_stops_cleanly(trefoil300):
 
     r = relax(trefoil300, max_iter=50, callback=cb)
     assert r.nit == 3 and r.success and "callback" in r.message
+    assert r.status == Status.STOPPED == 5
     assert [s[0] for s in seen] == [1, 2, 3]
     assert seen[-1][1] == r.fun and seen[-1][2] == (300, 3)
 
@@ -104,6 +107,7 @@ def test_stepper_and_stop(trefoil300):
             run.stop("cancelled")
     res = run.result()
     assert res.nit == 4 and res.message == "cancelled" and res.success
+    assert res.status == Status.STOPPED
     assert energies == res.history["energy"]
     assert not run.step()
 
@@ -123,14 +127,14 @@ def test_early_armijo_test_changes_no_iterate(monkeypatch, fhw_raw):
     def run():
         r = Relaxation(P, max_iter=40)
         calls = []
-        solve = r.solver.pseudo_inverse
-        r.solver.pseudo_inverse = lambda phi: calls.append(1) or solve(phi)
+        solve = r.engine.pseudo_inverse
+        r.engine.pseudo_inverse = lambda phi: calls.append(1) or solve(phi)
         while r.step():
             pass
         return r, len(calls)
 
     early, n_early = run()
-    monkeypatch.setattr(flow, "_EARLY", 0.0)  # back-project every trial to the end first
+    monkeypatch.setattr(projected, "_EARLY", 0.0)  # back-project every trial to the end first
     full, n_full = run()
     assert early.nit == full.nit == 40 and early.rejected == full.rejected > 20
     assert early.history["energy"] == full.history["energy"]
@@ -159,9 +163,33 @@ def test_reused_factorization_follows_the_exact_flow():
 def test_energy_target_and_iteration_limit(trefoil300):
     r = relax(trefoil300, max_iter=50, energy_target=75.0)
     assert r.success and "target" in r.message and r.fun <= 75.0
+    assert r.status == Status.TARGET == 1
     assert r.history["energy"][-2] > 75.0
     r = relax(trefoil300, max_iter=2)
     assert not r.success and "maximum number of iterations" in r.message and r.nit == 2
+    assert r.status == Status.MAX_ITER == 2
+
+
+def test_status_codes_of_the_other_endings(trefoil300):
+    assert relax(trefoil300, max_iter=500).status == Status.CONVERGED == 0
+    assert relax(trefoil300, max_iter=500, max_seconds=0.0).status == Status.TIME == 3
+    run = Relaxation(trefoil300, max_iter=50)
+    run.step()
+    res = run.result()  # taken early
+    assert res.status == Status.NOT_FINISHED == 6 and "not finished" in res.message
+    assert (Status.STALLED, Status.STOPPED) == (4, 5)
+
+
+def test_engine_by_name(trefoil300):
+    r = relax(trefoil300, max_iter=3)
+    assert r.stats["engine"] == "exact" and ENGINES == {"exact": DenseEngine}
+    # theta is accepted for every engine and ignored by the exact one: the same bits
+    t = relax(trefoil300, max_iter=3, engine="exact", theta=0.5)
+    np.testing.assert_array_equal(t.x, r.x)
+    with pytest.raises(ValueError, match="unknown engine 'fast'; choose one of exact"):
+        relax(trefoil300, max_iter=3, engine="fast")
+    with pytest.raises(ValueError, match="unknown engine"):
+        make_engine("fast", None, "hs")
 
 
 def test_hopf_link_stays_linked_and_rounds_up():
@@ -219,13 +247,13 @@ def test_bad_penalty_is_refused_by_name(trefoil300):
 
 def test_sizes_beyond_memory_are_refused_before_any_work(monkeypatch, trefoil300):
     # this machine has room for a 300-gon; pretend it has 1 MB (32 bytes × 300² = 2.9 MB)
-    monkeypatch.setattr(flow, "_physical_memory", lambda: 1e6)
+    monkeypatch.setattr(base, "_physical_memory", lambda: 1e6)
     with pytest.raises(ValueError, match=r"300 vertices need about 0.0 GB.*at most 153 vertices"):
         relax(trefoil300, max_iter=1)
     with pytest.raises(ValueError, match="at most 153 vertices"):
         relax(trefoil300, method="lbfgs", max_iter=1)
     assert relax(resample(trefoil300, 150), max_iter=1).nit == 1
-    monkeypatch.setattr(flow, "_physical_memory", lambda: None)  # system does not say: no check
+    monkeypatch.setattr(base, "_physical_memory", lambda: None)  # system does not say: no check
     assert relax(trefoil300, max_iter=1).nit == 1
 
 

@@ -1,4 +1,4 @@
-"""The further optimizers of the paper's comparison (core.methods): every method decreases the
+"""The further optimizers of the paper's comparison (core.solvers): every method decreases the
 energy with every metric, feasible ones stay on the constraints, penalty ones near them, none
 passes a strand through another; pieces (trust-region subproblem, penalty metric, Hessian
 products) against slow, obvious versions."""
@@ -6,19 +6,13 @@ products) against slow, obvious versions."""
 import numpy as np
 import pytest
 
-from moebius_addon.core import max_collision_free_step, relax, resample
+from moebius_addon.core import Status, max_collision_free_step, relax, resample
 from moebius_addon.core._layout import as_layout
 from moebius_addon.core.constraints import jacobian, make_constraints
-from moebius_addon.core.methods import (
-    FEASIBLE,
-    INFEASIBLE,
-    METHODS,
-    TrustRegion,
-    _PenaltyMetric,
-    _trust_subproblem,
-    make_run,
-)
+from moebius_addon.core.engine import PenaltyMetric
 from moebius_addon.core.metrics import gram_x
+from moebius_addon.core.solvers import FEASIBLE, INFEASIBLE, METHODS, make_run
+from moebius_addon.core.solvers.second_order import TrustRegion, _trust_subproblem
 from tests.conftest import trefoil
 
 
@@ -111,6 +105,26 @@ def test_run_objects_share_the_relaxation_interface(trefoil100):
             assert np.asarray(run.x).shape == trefoil100.shape
         res = run.result()
         assert res.nit == 3 and not run.step()
+        assert res.status == Status.MAX_ITER and res.stats["engine"] == "exact"
+        with pytest.raises(ValueError, match="unknown engine 'tree'"):
+            make_run(method, trefoil100, "hs", max_iter=3, engine="tree")
+
+
+def test_optimizers_reach_the_kernels_only_through_the_engine():
+    # the solvers import no numerical kernel: a second engine replaces all of them at once
+    import ast
+    from pathlib import Path
+
+    from moebius_addon.core import solvers
+
+    kernels = {"energy", "collision", "metrics", "linalg", "flow"}
+    for path in Path(solvers.__file__).parent.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.level == 2:
+                names = {a.name for a in node.names}
+                if node.module in kernels:  # the list of metric names is no kernel
+                    assert names <= {"METRICS"}, (path.name, node.module, names)
+                assert not names & kernels, (path.name, names)
 
 
 @pytest.mark.parametrize("method", ["trust_region", "lbfgs", "nesterov"])
@@ -160,7 +174,7 @@ def test_penalty_metric_solves_the_assembled_system(rng):
     C = np.stack([jac.matvec(e.reshape(n, 3)) for e in np.eye(3 * n)], axis=1)
     K = np.kron(A, np.eye(3)) + alpha * C.T @ np.diag(l0) @ C
     g = rng.standard_normal((n, 3))
-    z = _PenaltyMetric(A, jac, alpha, l0, True).solve(g)
+    z = PenaltyMetric(A, jac, alpha, l0, True).solve(g)
     np.testing.assert_allclose(K @ z.ravel(), g.ravel(), rtol=1e-8, atol=1e-8 * np.abs(g).max())
 
 
@@ -196,7 +210,7 @@ def test_time_budget_holds_inside_a_step():
     r = relax(P, metric="l2", max_iter=10000, method="projected_gradient_implicit",
               max_seconds=0.3)
     assert time.perf_counter() - t < 3.0
-    assert "time budget" in r.message
+    assert "time budget" in r.message and r.status == Status.TIME
 
 
 def test_paper_benchmark_smoke(tmp_path):

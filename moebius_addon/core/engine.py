@@ -1,0 +1,195 @@
+"""The one door through which every optimizer (:mod:`.solvers`) reaches the numerics.
+
+An engine is built per run from the polygon's layout and the metric. It evaluates the Möbius
+energy and its gradient, the first contact along a motion, and holds the metric at the current
+iterate with the saddle-point solver of DESIGN.md step 2 (``[[G, Cᵀ], [C, 0]]``, ``G = A ⊗ I₃``)
+or, for the penalty methods, the solver of the penalized metric. The optimizers never call the
+kernels (:mod:`.energy`, :mod:`.collision`, :mod:`.metrics`, :mod:`.linalg`) themselves, so a
+second engine that evaluates some of these differently (e.g. a tree approximation of the
+far field) is one subclass here and one entry in :data:`ENGINES`.
+
+Engines by name (the ``engine=`` option of ``relax``, ``make_run`` and every run class):
+
+* ``"exact"``: :class:`DenseEngine`, every pair of edges summed exactly, dense metric.
+
+:func:`make_engine` is the one place that maps names to classes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._layout import Layout
+from .collision import contact_time_x
+from .constraints import Jacobian
+from .energy import energy_gradient_x, energy_x
+from .linalg import SaddlePointSolver, spd_inverse
+from .metrics import gram_x
+
+# Deterministic refactorization rule (see SaddlePointSolver): one factorization costs about as
+# much as N / _FACTOR_PER_ITER preconditioned Krylov iterations (measured here at N = 3000:
+# ~1.1 s against ~15 ms per iteration).
+_FACTOR_PER_ITER = 40.0
+# From this many vertices on, a single-precision factorization refined by GMRES pays (FHW flow,
+# ms per iteration single/double, session 3: 500: 28/21–23, 600: 27–34/32–34, 700: 42/49).
+_AUTO_SINGLE_FROM = 600
+
+
+class PenaltyMetric:
+    """Solver of ``(A ⊗ I₃ + α Cᵀ diag(l0) C) z = g`` (C: edge rows of DΦ) by Woodbury:
+
+        z = G⁻¹g − G⁻¹Cᵀ (C G⁻¹ Cᵀ + diag(1/(α l0)))⁻¹ C G⁻¹ g
+
+    with ``C G⁻¹ Cᵀ = (D A⁻¹ Dᵀ) ∘ (T Tᵀ)`` as in :mod:`linalg` (O(N²) once A⁻¹ is known).
+    ``penalty`` False (or ``alpha`` 0) leaves the penalty term out: ``z = G⁻¹ g``."""
+
+    def __init__(self, A: np.ndarray, jac: Jacobian, alpha: float, lengths0: np.ndarray,
+                 penalty: bool):
+        self.jac = jac
+        self.Ainv = spd_inverse(A)
+        self.Kinv = None
+        if penalty and alpha > 0:
+            lay = jac.con.layout
+            T, inv_l = jac.edge_fields()
+            Y = (self.Ainv[lay.nxt] - self.Ainv) * inv_l[:, None]
+            Y = (Y[:, lay.nxt] - Y) * inv_l[None, :]
+            S = Y * (T @ T.T)
+            S[np.diag_indices_from(S)] += 1.0 / (alpha * lengths0)
+            self.Kinv = spd_inverse(S)
+
+    def solve(self, g: np.ndarray) -> np.ndarray:
+        """``z`` for the (N, 3) field ``g``."""
+        z = self.Ainv @ g
+        if self.Kinv is not None:
+            z = z - self.Ainv @ self.jac.rmatvec(self.Kinv @ self.jac.matvec(z))
+        return z
+
+
+class DenseEngine:
+    """Exact energy, gradient and contact times over all edge pairs; dense metric ``A`` with
+    a factorized saddle-point solver (DESIGN.md, steps 1–4).
+
+    Parameters
+    ----------
+    layout : Layout
+        Components of the stacked vertex array every method below takes (``X``: (N, 3), at the
+        run's scale, total length 1).
+    metric : {"hs", "hs_pure", "h2", "h1", "l2"}
+        Metric of :meth:`update`, :meth:`metric_product` and :meth:`penalty_solver`.
+    precision : {"auto", "double", "single"}
+        Precision of the saddle-point factorization ("auto": single from 600 vertices on,
+        refined by GMRES to double-precision results).
+    reuse_factorization : bool
+        Reuse the factorization as a GMRES preconditioner across iterates while that pays.
+    theta : float, optional
+        Opening angle of a tree approximation; the exact engine takes it and ignores it, so
+        that one option set fits every engine.
+    """
+
+    name = "exact"
+
+    def __init__(self, layout: Layout, metric: str, *, precision: str = "auto",
+                 reuse_factorization: bool = False, theta: float | None = None):
+        if precision not in ("auto", "double", "single"):
+            raise ValueError("precision must be 'auto', 'double' or 'single'")
+        if precision == "auto":
+            precision = "single" if layout.n >= _AUTO_SINGLE_FROM else "double"
+        self.layout = layout
+        self.metric = metric
+        self.theta = theta
+        self.solver = SaddlePointSolver(
+            reuse=bool(reuse_factorization),
+            factor_cost=layout.n / _FACTOR_PER_ITER,
+            dtype=np.float32 if precision == "single" else np.float64,
+        )
+        self._gram = None  # the Gram matrix's memory, refilled at every update
+        self._penalty_factorizations = 0
+
+    # -- energy, gradient, contact -------------------------------------------------------------
+
+    def energy(self, X: np.ndarray) -> float:
+        """Möbius energy of ``X`` (N, 3)."""
+        return energy_x(X, self.layout)
+
+    def energy_gradient(self, X: np.ndarray) -> tuple[float, np.ndarray]:
+        """``(E, ∇E)`` at ``X``; ``∇E`` is (N, 3). Its ``E`` may differ from :meth:`energy`
+        in the last bits (the two kernels sum in different orders)."""
+        return energy_gradient_x(X, self.layout)
+
+    def contact_time(self, X: np.ndarray, U: np.ndarray, tau_max: float, eps: float) -> float:
+        """Smallest ``τ ≤ tau_max`` at which ``X − τU`` comes within ``eps`` of touching
+        itself (edges not adjacent), or ``tau_max`` when it does not."""
+        return contact_time_x(X, U, self.layout, tau_max, eps)
+
+    # -- metric and saddle-point solves at the current iterate ---------------------------------
+
+    def update(self, X: np.ndarray, jac: Jacobian) -> None:
+        """Move to the iterate ``X`` with constraint Jacobian ``jac``: assemble the metric
+        there and update (refactor or keep, see ``SaddlePointSolver``) the solver."""
+        # the previous iterate's Gram matrix is no longer needed: its memory takes the new one
+        self._gram = gram_x(self.metric, X, self.layout, out=self._gram)
+        self.solver.update(self._gram, jac)
+
+    def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(u, λ)`` of ``[[G, Cᵀ], [C, 0]] [u; λ] = [g; r]`` at the current iterate."""
+        return self.solver.solve(g, r)
+
+    def pseudo_inverse(self, phi: np.ndarray) -> np.ndarray:
+        """``G⁻¹Cᵀ(CG⁻¹Cᵀ)⁻¹ φ`` with the stored factorization (modified Newton, step 4)."""
+        return self.solver.pseudo_inverse(phi)
+
+    def metric_product(self, V: np.ndarray) -> np.ndarray:
+        """``A V`` for an (N, 3) field ``V``: the metric ``G`` applied to it."""
+        return self.solver.A @ V
+
+    def refactor(self) -> None:
+        """Factor the current iterate's system afresh (a stale one may be what failed)."""
+        self.solver.refactor()
+
+    @property
+    def fresh(self) -> bool:
+        """Whether the factorization belongs to the current iterate."""
+        return self.solver.fresh
+
+    # -- the penalty methods' metric -----------------------------------------------------------
+
+    def penalty_solver(self, X: np.ndarray, jac: Jacobian, alpha: float, lengths0: np.ndarray,
+                       penalty_in_metric: bool) -> PenaltyMetric:
+        """Solver of the penalized metric ``G + α DΦᵀ diag(l0) DΦ`` at ``X`` (``jac``: DΦ at
+        X; without the penalty term unless ``penalty_in_metric``); ``.solve(g)``."""
+        self._penalty_factorizations += 1
+        return PenaltyMetric(gram_x(self.metric, X, self.layout), jac, alpha, lengths0,
+                             penalty_in_metric)
+
+    # -- statistics ----------------------------------------------------------------------------
+
+    @property
+    def factorizations(self) -> int:
+        """Metric factorizations so far (saddle-point and penalty solvers)."""
+        return self.solver.n_factor + self._penalty_factorizations
+
+    @property
+    def krylov_iterations(self) -> list[int]:
+        """GMRES iterations of every saddle-point solve so far (0: direct solve)."""
+        return list(self.solver.krylov_its)
+
+
+#: Engines by name; :func:`make_engine` resolves a run's ``engine=`` here.
+ENGINES: dict[str, type[DenseEngine]] = {"exact": DenseEngine}
+
+
+def make_engine(name: str, layout: Layout, metric: str, **options) -> DenseEngine:
+    """The engine ``name`` (a key of :data:`ENGINES`) for a run on ``layout`` in ``metric``.
+
+    ``options`` go to the engine's constructor (``precision``, ``reuse_factorization``,
+    ``theta``). A name that selects among engines by the problem (e.g. by its size) belongs
+    here too, so that callers only ever pass names.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name (the message lists the valid ones).
+    """
+    if name not in ENGINES:
+        raise ValueError(f"unknown engine {name!r}; choose one of {', '.join(ENGINES)}")
+    return ENGINES[name](layout, metric, **options)

@@ -1,0 +1,64 @@
+"""The optimizers of the paper's comparison (section "Optimization methods employed",
+Figs. 3 and 4), each usable with every metric, and the table that names them.
+
+* :mod:`.base`: what every run shares (options, the scaled start, stopping rules and status
+  codes, ``RelaxResult``);
+* :mod:`.projected`: ``projected_gradient``, the paper's explicit method (:class:`Relaxation`);
+* :mod:`.second_order`: ``projected_gradient_implicit``, ``trust_region`` (feasible, with
+  Hessian products of the Lagrangian);
+* :mod:`.penalty`: ``ncg``, ``lbfgs``, ``nesterov`` (edge lengths held by a penalty).
+
+Feasible methods keep the constraints of DESIGN.md (edge lengths, barycenter) at every
+iterate; infeasible ones replace the edge-length constraints by a penalty. Every run has the
+same interface: ``step()``, ``state()``, ``stop()``, ``result()``, ``x``, ``energy``, ``nit``,
+``history`` (the Möbius energy ``E``, never the penalized one, so methods compare directly),
+and reaches the numerics only through its engine (:mod:`..engine`).
+"""
+
+from __future__ import annotations
+
+from .base import Run
+from .penalty import LBFGS, Nesterov, NonlinearCG
+from .projected import Relaxation
+from .second_order import ImplicitProjectedGradient, TrustRegion
+
+#: Run class of every method, in the order of the paper's comparison.
+METHOD_CLASSES: dict[str, type[Run]] = {
+    "projected_gradient": Relaxation,
+    "projected_gradient_implicit": ImplicitProjectedGradient,
+    "trust_region": TrustRegion,
+    "ncg": NonlinearCG,
+    "lbfgs": LBFGS,
+    "nesterov": Nesterov,
+}
+METHODS = tuple(METHOD_CLASSES)
+#: Methods that keep the constraints exactly (the explicit method and its subclasses).
+FEASIBLE = tuple(m for m, cls in METHOD_CLASSES.items() if issubclass(cls, Relaxation))
+#: Methods that hold the edge lengths by a penalty.
+INFEASIBLE = tuple(m for m in METHODS if m not in FEASIBLE)
+
+
+def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float = 1e-6, *,
+             engine: str = "exact", theta: float | None = None, **options) -> Run:
+    """A run object of ``method`` (see :data:`METHODS`) with :class:`Relaxation`'s interface.
+
+    Parameters
+    ----------
+    method : str
+        One of :data:`METHODS`.
+    P, metric, max_iter, tol, **options
+        As in :class:`Relaxation` and the method's own class.
+    engine : str
+        Numerical engine by name (``core.engine.ENGINES``; "exact" is the only one so far).
+    theta : float, optional
+        Tree opening angle for engines that approximate; ignored by "exact".
+
+    Raises
+    ------
+    ValueError
+        For an unknown method (the message lists the valid ones), metric or engine.
+    """
+    if method not in METHOD_CLASSES:
+        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    return METHOD_CLASSES[method](P, metric, max_iter, tol, engine=engine, theta=theta,
+                                  **options)

@@ -1,0 +1,330 @@
+"""What every run shares, whatever its method: the options, the start checked and scaled, the
+stopping rules with their status codes, the state a caller sees, and the result.
+
+A run works on a copy of the start scaled to total length 1 and centred at the origin, so
+tolerances mean the same for every size; ``x`` and the result are mapped back. Every run
+reaches the numerics (energy, gradient, metric, saddle-point solves, contact times) through
+one engine object (:mod:`..engine`), chosen by name with ``engine=``.
+
+Status codes (``RelaxResult.status``, in the spirit of ``scipy.optimize.OptimizeResult``):
+
+====  ==================  ==============================================================
+code  name                meaning
+====  ==================  ==============================================================
+0     ``CONVERGED``       gradient norm below ``tol``, relative change below ``ftol``, or
+                          no further decrease above round-off
+1     ``TARGET``          the energy reached ``energy_target``
+2     ``MAX_ITER``        ``max_iter`` accepted iterations
+3     ``TIME``            the ``max_seconds`` budget is used up
+4     ``STALLED``         steps collapsed with the gradient still large (jammed strands)
+5     ``STOPPED``         stopped by the caller (``stop()``) or a callback
+6     ``NOT_FINISHED``    result taken before the run finished (also: still running)
+====  ==================  ==============================================================
+"""
+
+from __future__ import annotations
+
+import enum
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._layout import as_unit_layout
+from ..engine import make_engine
+from ..metrics import METRICS
+from ..polygon import check_polygon
+
+HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
+
+# A run that stops moving with a projected gradient above this many times tol is jammed, not
+# converged (near the minimum Armijo fails on round-off with sqrt(<g,u>) ≈ 1e-8, DESIGN.md).
+_STALL_FACTOR = 1e3
+# Memory a run holds at its peak, in bytes per vertex pair: the Gram matrix (float64), the
+# inverse from its factorization and the Schur complement, all N × N (measured peak at 3000
+# vertices: 17.4 bytes per pair in single precision, 25.2 in double; with room for more).
+_BYTES_PER_PAIR = 32
+# Share of the machine's physical memory a run may need before it is refused.
+_MEMORY_SHARE = 0.75
+
+
+class Status(enum.IntEnum):
+    """Why a run stopped: ``RelaxResult.status`` (see the module docstring for the table)."""
+
+    CONVERGED = 0
+    TARGET = 1
+    MAX_ITER = 2
+    TIME = 3
+    STALLED = 4
+    STOPPED = 5
+    NOT_FINISHED = 6
+
+
+@dataclass
+class IterationState:
+    """What a callback sees after every accepted iterate (and what a run exposes)."""
+
+    nit: int
+    x: object  # polygon (N, 3) or list of arrays, in the caller's coordinates
+    energy: float
+    step: float
+    grad_norm: float
+    constraint_residual: float
+    seconds: float
+
+
+@dataclass
+class RelaxResult:
+    """Outcome of a run, in the spirit of ``scipy.optimize.OptimizeResult``: ``message`` says
+    why it stopped in words, ``status`` (a :class:`Status`) in a number to decide on."""
+
+    x: object
+    fun: float
+    nit: int
+    success: bool
+    message: str
+    status: int
+    history: dict = field(default_factory=dict)
+    metric: str = "hs"
+    stats: dict = field(default_factory=dict)
+
+    def __repr__(self) -> str:
+        return (
+            f"RelaxResult(fun={self.fun:.10g}, nit={self.nit}, success={self.success}, "
+            f"status={int(self.status)}, message={self.message!r})"
+        )
+
+
+def check_number(name: str, value, low: float = -np.inf, *, above: bool = False,
+                 integer: bool = False):
+    """``value`` as a finite float (an int with ``integer``) at least ``low`` (above it with
+    ``above``), else ValueError naming the option: NaN compares False with every bound, so
+    plain comparisons let it through to a run that then stalls for no visible reason.
+
+    Parameters
+    ----------
+    name : str
+        The option's name as the caller knows it (goes into the message).
+    value : object
+        What the caller passed.
+    low : float
+        Smallest allowed value (excluded with ``above``).
+    integer : bool
+        Require a whole number and return it as ``int``.
+    """
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not np.isfinite(x) or x < low or (above and x == low):
+        bound = "" if low == -np.inf else f" {'>' if above else '>='} {low:g}"
+        raise ValueError(f"{name} must be a finite number{bound}, got {value!r}")
+    if integer:
+        if x != int(x):
+            raise ValueError(f"{name} must be a whole number, got {value!r}")
+        return int(x)
+    return x
+
+
+def _check_names(metric: str, target_lengths: str) -> None:
+    if metric not in METRICS:
+        raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
+    if target_lengths not in ("equal", "keep"):
+        raise ValueError("target_lengths must be 'equal' or 'keep'")
+
+
+def _physical_memory() -> float | None:
+    """Bytes of physical memory, or None where the system does not say (Windows)."""
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _check_memory(n: int) -> None:
+    """Refuse a polygon whose dense N × N matrices would not fit in memory (an absurd size:
+    a machine swapping or killed by the out-of-memory handler says nothing useful)."""
+    total = _physical_memory()
+    need = _BYTES_PER_PAIR * float(n) ** 2
+    if total is None or need <= _MEMORY_SHARE * total:
+        return
+    most = int(np.sqrt(_MEMORY_SHARE * total / _BYTES_PER_PAIR))
+    raise ValueError(
+        f"{n} vertices need about {need / 1e9:.1f} GB for the dense metric and its "
+        f"factorization (memory grows as N²), more than this machine's "
+        f"{total / 1e9:.1f} GB allow: resample to at most {most} vertices "
+        f"(core.resample(P, n)); a few hundred are plenty to untangle a knot"
+    )
+
+
+class _OutOfTime(Exception):
+    """Raised inside a step when ``max_seconds`` runs out (one step may take many trials)."""
+
+
+class Run:
+    """Set-up and stopping rules shared by every method (:mod:`.projected`,
+    :mod:`.second_order`, :mod:`.penalty`).
+
+    The constructor checks the shared options, checks the start and scales it to total length
+    1 around the origin (``X``; results are mapped back), sets the target edge lengths
+    (``lengths0``: "equal", the mean per component, the start refused unless it is
+    equilateral already when ``equilateral``; "keep", the start's own) and the contact
+    distance ``eps``, and builds the ``engine``. Subclasses check their own options before
+    calling it, then set ``E``, the history and their state; ``_objective`` is what the
+    relative-change test watches, ``_GRADIENT`` how messages call the gradient norm.
+    """
+
+    _GRADIENT = "projected gradient norm"
+
+    def __init__(self, P, metric: str, max_iter: int, tol: float, *,
+                 energy_target: float | None, ftol: float, max_seconds: float | None,
+                 target_lengths: str, check: bool, equilateral: bool, engine: str = "exact",
+                 theta: float | None = None, **engine_options):
+        _check_names(metric, target_lengths)
+        self.t0 = time.perf_counter()
+        self.max_iter = check_number("max_iter", max_iter, 0, integer=True)
+        self.tol = check_number("tol", tol, 0)
+        self.energy_target = None if energy_target is None else check_number("energy_target",
+                                                                             energy_target)
+        self.ftol = check_number("ftol", ftol, 0)
+        self.max_seconds = None if max_seconds is None else check_number("max_seconds",
+                                                                         max_seconds, 0)
+        X, layout, e2 = as_unit_layout(P)  # exact scaling of curves far from size 1
+        _check_memory(layout.n)
+        if check:
+            check_polygon(P)
+        self.layout = layout
+        self.metric = metric
+        ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
+        shift = X.mean(axis=0)
+        scale = float(ln.sum())
+        self.X = (X - shift) / scale
+        ln = ln / scale
+        self._shift = np.ldexp(shift, e2)  # results are mapped back by these
+        self._scale = float(np.ldexp(scale, e2))
+        self.lengths0 = ln.copy() if target_lengths == "keep" else self._equal_lengths(
+            ln, equilateral)
+        self.eps = 1e-3 * float(self.lengths0.mean())  # contact distance
+        self.engine = make_engine(engine, layout, metric, theta=theta, **engine_options)
+        self.nit = 0
+        self.rejected = 0
+        self.done = False
+        self.success = False
+        self.message = ""
+        self.status = Status.NOT_FINISHED
+
+    def _equal_lengths(self, ln: np.ndarray, equilateral: bool) -> np.ndarray:
+        layout = self.layout
+        lengths0 = np.empty_like(ln)
+        for c in range(layout.k):
+            s = slice(layout.starts[c], layout.starts[c + 1])
+            mean = ln[s].mean()
+            spread = float(np.abs(ln[s] / mean - 1).max())
+            if equilateral and spread > 1e-6:
+                where = f"component {c}" if layout.is_link else "the polygon"
+                raise ValueError(
+                    f"{where} is not equilateral (edge lengths differ by up to "
+                    f"{100 * spread:.3g}%); call core.resample(P, n) first, or pass "
+                    f"target_lengths='keep' to keep its edge lengths"
+                )
+            lengths0[s] = mean
+        return lengths0
+
+    # -- state as the caller sees it ----------------------------------------------------------
+
+    @property
+    def x(self):
+        """Current polygon (or list of arrays for a link) in the caller's coordinates."""
+        return self.layout.split(self.X * self._scale + self._shift)
+
+    @property
+    def energy(self) -> float:
+        return self.E
+
+    def state(self) -> IterationState:
+        h = self.history
+        return IterationState(
+            self.nit, self.x, h["energy"][-1], h["step"][-1], h["grad_norm"][-1],
+            h["constraint_residual"][-1], h["seconds"][-1],
+        )
+
+    def _stats(self) -> dict:
+        """``result().stats``; subclasses add their counters."""
+        return {"engine": self.engine.name}
+
+    def result(self) -> RelaxResult:
+        if not self.done:
+            self.stop("not finished (result taken early)", Status.NOT_FINISHED)
+        return RelaxResult(
+            x=self.x,
+            fun=self.E,
+            nit=self.nit,
+            success=self.success,
+            message=self.message,
+            status=self.status,
+            history={k: list(v) for k, v in self.history.items()},
+            metric=self.metric,
+            stats=self._stats(),
+        )
+
+    # -- stopping rules ------------------------------------------------------------------------
+
+    def _objective(self) -> float:
+        return self.E
+
+    def _finish(self, success: bool, message: str, status: Status) -> None:
+        self.done = True
+        self.success = success
+        self.message = message
+        self.status = status
+
+    def stop(self, message: str = "stopped by the caller",
+             status: Status = Status.STOPPED) -> None:
+        """End the run cleanly after the current iterate (e.g. ESC in Blender)."""
+        if not self.done:
+            self._finish(True, message, status)
+
+    def _check_stop(self, prev: float | None) -> None:
+        gn = self.history["grad_norm"][-1]
+        cur = self._objective()
+        if gn <= self.tol:
+            self._finish(True, f"{self._GRADIENT} {gn:.3g} below tol {self.tol:g}",
+                         Status.CONVERGED)
+        elif self.energy_target is not None and self.E <= self.energy_target:
+            self._finish(True, f"energy {self.E:.10g} reached the target {self.energy_target:g}",
+                         Status.TARGET)
+        elif prev is not None and abs(prev - cur) <= self.ftol * abs(cur):
+            if gn <= _STALL_FACTOR * self.tol:
+                self._finish(True, f"relative energy change below ftol {self.ftol:g}",
+                             Status.CONVERGED)
+            else:
+                self._finish(False, self._stall_message(gn), Status.STALLED)
+        elif self.nit >= self.max_iter:
+            self._finish(False, f"maximum number of iterations ({self.max_iter}) reached",
+                         Status.MAX_ITER)
+        elif self.max_seconds is not None and time.perf_counter() - self.t0 >= self.max_seconds:
+            self._time_up()
+
+    def _deadline(self) -> None:
+        """Raise :class:`_OutOfTime` once the budget is used up (checked inside long steps)."""
+        if self.max_seconds is not None and time.perf_counter() - self.t0 >= self.max_seconds:
+            raise _OutOfTime
+
+    def _time_up(self) -> bool:
+        self._finish(False, f"time budget of {self.max_seconds:g} s used up", Status.TIME)
+        return False
+
+    def _give_up(self, gu: float) -> bool:
+        """End a run whose line search found no acceptable step: at the minimum the test fails
+        on round-off (DESIGN.md, step 6), which is convergence; anywhere else it is a failure
+        worth reporting (``gu``: the squared gradient norm in the metric). Returns False."""
+        gn = float(np.sqrt(max(gu, 0.0)))
+        if gn <= _STALL_FACTOR * self.tol:
+            self._finish(True, "converged: no further decrease above round-off", Status.CONVERGED)
+        else:
+            self._finish(False, self._stall_message(gn), Status.STALLED)
+        return False
+
+    def _stall_message(self, gn: float) -> str:
+        raise NotImplementedError

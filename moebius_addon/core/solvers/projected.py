@@ -1,0 +1,290 @@
+"""The projected Sobolev-gradient flow, the paper's explicit method (DESIGN.md, "One
+iteration"; the paper's "Projected gradient" and "Restoring feasibility and time step size
+rules").
+
+One iteration at a feasible polygon P:
+
+1. ``g = ∇E(P)``, ``G = A ⊗ I₃``, ``C = DΦ(P)``;
+2. ``[[G, Cᵀ], [C, 0]] [u; λ] = [g; 0]`` (``u`` is the projected G-gradient, ``<g,u> = uᵀGu``);
+3. ``τ* =`` first contact of ``P − τu``; first trial ``τ = min(2/3 τ*, growth · τ_prev)``;
+4. ``Q = P − τu``, then ``Q ← Q − G⁻¹Cᵀ(CG⁻¹Cᵀ)⁻¹Φ(Q)`` until ``|Φ(Q)|`` is below tolerance,
+   else halve τ; the straight path from P to Q is tested for contact too;
+5. accept when ``E(Q) ≤ E(P) − σ τ <g, u>``, else halve τ. (A trial that misses this by more
+   than the rest of its back-projection is estimated to change E is rejected once
+   ``|Φ| ≤ 1e-5``: in every run compared, the same decisions with a third fewer Newton steps.)
+
+Energy, gradient, metric, solves and contact times come from the run's engine.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..constraints import Constraints, jacobian, make_constraints, residual
+from .base import HISTORY_KEYS, Run, _check_names, check_number
+
+# The modified Newton back-projection gives up on a trial step once |Φ| shrinks by less than
+# this factor per iteration (it converges linearly; slower means the step left its basin).
+_CONTRACTION = 0.5
+# Trials whose straight step breaks the constraints by more than this (max |Φ|: relative edge
+# length change) are rejected before any solve. Measured on the FHW unknot at 600 edges: every
+# back-projection that succeeded started below 0.11, most failing ones above 0.12.
+_MAX_TRIAL_RESIDUAL = 0.12
+# The back-projection pauses at this |Φ| for a first Armijo test: a trial that fails it by
+# more than the energy can still move is rejected without the last Newton steps (FHW at 1648
+# edges: half the back-projections belong to rejected trials, about 6 steps each).
+_EARLY = 1e-5
+
+
+class Relaxation(Run):
+    """A projected Sobolev-gradient run that advances one accepted iterate per :meth:`step`.
+
+    Parameters
+    ----------
+    P : (N, 3) array or list of (N_k, 3) arrays
+        Closed polygon or link; equilateral per component unless ``target_lengths="keep"``.
+    metric : {"hs", "hs_pure", "h2", "h1", "l2"}
+        Metric of the gradient; ``hs`` is the paper's geometric W^{3/2,2}.
+    max_iter : int
+        Accepted iterations at most.
+    tol : float
+        Stop once ``sqrt(<g, u>)`` (scale-free) is below this.
+    energy_target : float, optional
+        Stop once the energy is at or below this (e.g. 4.01 for "round").
+    ftol : float
+        Stop once the relative energy decrease of an iteration is below this.
+    max_seconds : float, optional
+        Wall-time budget.
+    initial_step, armijo, growth : float
+        First trial step, Armijo constant σ (paper: 1/2), cap on the step growth per iteration:
+        the first trial is ``min(growth · τ_prev, 2/3 τ*)``. The paper starts at ``2/3 τ*``
+        alone; a cap of 8 keeps the contact search bounded and measured fewer iterations
+        than 1.5 or 4 on the FHW unknot (docs/benchmarks.md).
+    backproject_iter, backproject_tol : int, float
+        Modified Newton iterations and tolerance on ``max |Φ|`` (dimensionless).
+    edge_lengths, barycenter : bool
+        Which constraints to keep.
+    target_lengths : {"equal", "keep"}
+        "equal": the start must be equilateral (per component; use :func:`resample`);
+        "keep": the start's own edge lengths are the targets.
+    check : bool
+        Run :func:`check_polygon` on the start (disable only for inputs checked already).
+    reuse_factorization : bool
+        Reuse the saddle-point factorization as a GMRES preconditioner across iterations
+        instead of factoring every iterate (pays only late in a flow, see docs/benchmarks.md).
+    precision : {"auto", "double", "single"}
+        Precision of the factorization; "single" is refined to double precision by GMRES on
+        the exact system (same iterates up to the solver tolerance, cheaper factorization);
+        "auto" uses it from 600 vertices on.
+    interpolate : bool
+        After an Armijo failure shrink τ to the minimizer of the parabola through E(P), the
+        slope −<g,u> and E(Q), kept in [0.1, 0.5] τ, instead of halving it (fewer rejected
+        trials, but smaller accepted steps: measured more iterations on the FHW unknot).
+    engine : str
+        Name of the numerical engine (``core.engine.ENGINES``; only "exact" so far).
+    theta : float, optional
+        Tree opening angle, for engines that approximate; ignored by "exact".
+    """
+
+    def __init__(
+        self,
+        P,
+        metric: str = "hs",
+        max_iter: int = 200,
+        tol: float = 1e-6,
+        *,
+        energy_target: float | None = None,
+        ftol: float = 1e-12,
+        max_seconds: float | None = None,
+        initial_step: float = 1.0,
+        armijo: float = 0.5,
+        growth: float = 8.0,
+        backproject_iter: int = 10,
+        backproject_tol: float = 1e-10,
+        edge_lengths: bool = True,
+        barycenter: bool = True,
+        target_lengths: str = "equal",
+        check: bool = True,
+        reuse_factorization: bool = False,
+        precision: str = "auto",
+        interpolate: bool = False,
+        engine: str = "exact",
+        theta: float | None = None,
+    ):
+        _check_names(metric, target_lengths)
+        if not 0 < armijo < 1:
+            raise ValueError("armijo must lie in (0, 1)")
+        growth = check_number("growth", growth, 1)
+        initial_step = check_number("initial_step", initial_step, 0, above=True)
+        backproject_iter = check_number("backproject_iter", backproject_iter, 0, integer=True)
+        backproject_tol = check_number("backproject_tol", backproject_tol, 0, above=True)
+        super().__init__(P, metric, max_iter, tol, energy_target=energy_target, ftol=ftol,
+                         max_seconds=max_seconds, target_lengths=target_lengths, check=check,
+                         equilateral=True, engine=engine, theta=theta, precision=precision,
+                         reuse_factorization=reuse_factorization)
+        self.armijo = float(armijo)
+        self.growth = growth
+        self.backproject_iter = backproject_iter
+        self.backproject_tol = backproject_tol
+        self.interpolate = bool(interpolate)
+        self.con: Constraints = make_constraints(self.X, self.layout, self.lengths0,
+                                                 edge_lengths, barycenter)
+        self.tau = initial_step / self.growth
+        self._prepare(self.X, *self.engine.energy_gradient(self.X))
+        self.history = {k: [] for k in HISTORY_KEYS}
+        self._record(0.0)
+        self._check_stop(None)
+
+    # -- state ---------------------------------------------------------------------------------
+
+    def _prepare(self, X: np.ndarray, E: float, g: np.ndarray) -> None:
+        """Steps 1–2 at the (feasible) polygon X."""
+        self.X = X
+        self.E = E
+        self.g = g
+        self.jac = jacobian(X, self.con)
+        self.engine.update(X, self.jac)
+        self.u, _ = self.engine.solve(g, np.zeros(self.con.size))
+        self.gu = float(np.einsum("ij,ij->", g, self.u))
+        self._gnorm = float(np.linalg.norm(g))
+        self.phi = residual(X, self.con)
+
+    def _record(self, tau: float) -> None:
+        h = self.history
+        h["energy"].append(self.E)
+        h["step"].append(tau)
+        h["grad_norm"].append(float(np.sqrt(max(self.gu, 0.0))))
+        h["constraint_residual"].append(float(np.abs(self.phi).max()) if self.phi.size else 0.0)
+        h["seconds"].append(time.perf_counter() - self.t0)
+
+    # -- one iteration -------------------------------------------------------------------------
+
+    def _backproject(self, Q: np.ndarray, tol: float | None = None,
+                     resume: bool = False) -> tuple[np.ndarray, bool]:
+        """Modified Newton steps until ``max |Φ(Q)|`` is below ``tol`` (default: the run's
+        tolerance; never below it). ``resume=True`` goes on from where the last call stopped
+        with the same steps and checks as one uninterrupted call."""
+        tol = self.backproject_tol if tol is None else max(tol, self.backproject_tol)
+        if not resume:
+            self._bp_prev = np.inf  # residual before the last step
+            self._bp_step = 0.0  # Euclidean norm of the last step
+            self._bp_left = self.backproject_iter + 1
+        while self._bp_left > 0:
+            phi = residual(Q, self.con)
+            size = float(np.abs(phi).max()) if phi.size else 0.0
+            self._bp_size = size
+            if size <= tol:
+                return Q, True
+            self._bp_left -= 1
+            if not size < _CONTRACTION * self._bp_prev:
+                return Q, False  # not contracting (or NaN): the step is too long
+            self._bp_prev = size
+            d = self.engine.pseudo_inverse(phi)
+            self._bp_step = float(np.linalg.norm(d))
+            Q = Q - d
+            if not np.all(np.isfinite(Q)):
+                return Q, False
+        return Q, False
+
+    def _project(self, Q: np.ndarray, target: float) -> tuple[np.ndarray, bool, float | None]:
+        """Step 4 for the trial ``Q`` whose Armijo target is ``target``: ``(Q, ok, EQ)``.
+
+        ``EQ`` is the trial's energy where this already decided: above ``target`` for a trial
+        rejected at ``|Φ| ≤ _EARLY`` (it misses Armijo by more than the rest of the
+        back-projection could change), −inf for one finished after passing that test (the
+        energy with the gradient decides); None where the energy is still to be computed."""
+        if self.interpolate:  # the parabola needs the energy of the finished trial
+            return (*self._backproject(Q), None)
+        Q, ok = self._backproject(Q, _EARLY)
+        if not ok or self._bp_size <= self.backproject_tol:
+            return Q, ok, None
+        EQ = self.engine.energy(Q)
+        if EQ > target + self._energy_margin():
+            return Q, True, EQ
+        Q, ok = self._backproject(Q, resume=True)
+        return Q, ok, (-np.inf if ok else None)
+
+    def _energy_margin(self) -> float:
+        """How far the energy may still move while the back-projection finishes: the
+        remaining steps are taken to shrink like the last one (ratio ρ ≤ _CONTRACTION) and the
+        gradient along them to stay below 20 times the norm of the current iterate's. An
+        estimate, not a proof, chosen generously: in every run compared (FHW 600 and 1648,
+        helix 1940, and the test) the decisions and iterates were the same as without it."""
+        if not np.isfinite(self._bp_prev):
+            return np.inf  # no step taken yet: no estimate of how far the rest goes
+        rho = self._bp_size / self._bp_prev
+        rest = self._bp_step * rho / (1.0 - rho)
+        return 20.0 * self._gnorm * rest + 1e-14 * abs(self.E)
+
+    def step(self) -> bool:
+        """Advance by one accepted iterate. Returns False once the run is finished."""
+        if self.done:
+            return False
+        X, u, E, gu = self.X, self.u, self.E, self.gu
+        tau0 = self.growth * self.tau
+        tau_star = self.engine.contact_time(X, u, 1.5 * tau0, self.eps)
+        tau = min(tau0, 2.0 / 3.0 * tau_star)
+        refactored = False
+        for _ in range(60):
+            Q = X - tau * u
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r0 = float(np.abs(residual(Q, self.con)).max()) if self.con.size else 0.0
+            if r0 > _MAX_TRIAL_RESIDUAL:
+                # Φ(X − τu) grows like τ²: this trial is far outside the back-projection's
+                # basin; shrink at once, without solves, to about where it would succeed
+                self.rejected += 1
+                tau *= min(0.5, max(0.1, 0.9 * np.sqrt(_MAX_TRIAL_RESIDUAL / r0)))
+                continue
+            target = E - self.armijo * tau * gu
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                # a wild trial may overflow on its way to rejection; it is never accepted
+                Q, ok, EQ = self._project(Q, target)
+            if not ok and not self.engine.fresh and not refactored:
+                # a stale factorization may be what failed: refactor once, same step
+                self.engine.refactor()
+                refactored = True
+                continue
+            shrink = 0.5
+            # Armijo on the energy alone first (a rejected trial needs no gradient), then the
+            # contact test of the path P → Q, then Armijo again on the energy that comes with
+            # the gradient (the two kernels sum in different orders)
+            if EQ is None:
+                EQ = self.engine.energy(Q) if ok else np.inf
+            if EQ <= target and self.engine.contact_time(X, X - Q, 1.0, self.eps) >= 1.0:
+                EQ, gQ = self.engine.energy_gradient(Q)
+                if EQ <= target:
+                    self.tau = tau
+                    self.nit += 1
+                    self._prepare(Q, EQ, gQ)
+                    self._record(tau)
+                    self._check_stop(E)
+                    return not self.done
+            elif ok and self.interpolate:
+                # minimizer of the parabola through E, slope −<g,u> and E(Q), kept in
+                # [0.1, 0.5] τ (safeguarded backtracking, Nocedal & Wright §3.5)
+                curv = EQ - E + tau * gu
+                if curv > 0:
+                    shrink = min(0.5, max(0.1, 0.5 * gu * tau / curv))
+            self.rejected += 1
+            tau *= shrink
+            if tau * gu <= 1e-15 * abs(E):
+                break
+        return self._give_up(gu)
+
+    def _stall_message(self, gn: float) -> str:
+        return (
+            f"stalled at energy {self.E:.10g}: steps collapsed while the projected gradient "
+            f"norm is still {gn:.3g}; strands are probably jammed against each other — use "
+            f"more edges"
+        )
+
+    def _stats(self) -> dict:
+        return {
+            "factorizations": self.engine.factorizations,
+            "krylov_iterations": self.engine.krylov_iterations,
+            "rejected_steps": self.rejected,
+            "vertices": self.layout.n,
+            **super()._stats(),
+        }
