@@ -212,7 +212,7 @@ def _engine_x(X, layout, engine, theta):
     return barnes_hut.Frame(X, layout, theta)
 
 
-def moebius_energy(P, *, engine: str = "exact", theta: float | None = None) -> float:
+def moebius_energy(P, *, engine: str = "auto", theta: float | None = None) -> float:
     """Discrete Möbius energy of a closed polygon or a link.
 
     Parameters
@@ -240,7 +240,7 @@ def moebius_energy(P, *, engine: str = "exact", theta: float | None = None) -> f
     return energy_x(X, layout) if frame is None else frame.energy(X)
 
 
-def moebius_gradient(P, *, engine: str = "exact", theta: float | None = None):
+def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None):
     """Exact derivative of :func:`moebius_energy` with respect to the vertices.
 
     Parameters

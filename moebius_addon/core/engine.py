@@ -11,6 +11,11 @@ far field) is one subclass here and one entry in :data:`ENGINES`.
 Engines by name (the ``engine=`` option of ``relax``, ``make_run`` and every run class):
 
 * ``"exact"``: :class:`DenseEngine`, every pair of edges summed exactly, dense metric.
+* ``"tree"``: :class:`TreeEngine`, the energy and its gradient by Barnes–Hut
+  (:mod:`.barnes_hut`, admissibility ``theta``); contacts exact (the hierarchy of
+  :mod:`.bvh` serves the contact search of every engine above its crossover); the metric and
+  its solves dense as in the exact engine (until a matrix-free metric lands).
+* ``"auto"``: the tree from ``barnes_hut.TREE_FROM`` edges on, else exact.
 
 :func:`make_engine` is the one place that maps names to classes.
 """
@@ -19,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import barnes_hut
 from ._layout import Layout
 from .collision import contact_time_x
 from .constraints import Jacobian
@@ -96,7 +102,7 @@ class DenseEngine:
             precision = "single" if layout.n >= _AUTO_SINGLE_FROM else "double"
         self.layout = layout
         self.metric = metric
-        self.theta = theta
+        self.theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
         self.solver = SaddlePointSolver(
             reuse=bool(reuse_factorization),
             factor_cost=layout.n / _FACTOR_PER_ITER,
@@ -174,8 +180,23 @@ class DenseEngine:
         return list(self.solver.krylov_its)
 
 
-#: Engines by name; :func:`make_engine` resolves a run's ``engine=`` here.
-ENGINES: dict[str, type[DenseEngine]] = {"exact": DenseEngine}
+class TreeEngine(DenseEngine):
+    """:class:`DenseEngine` with the energy and its gradient by Barnes–Hut: a hierarchy and a
+    far/near split built at every evaluated polygon, so that the energy is one function of the
+    polygon (the line search compares values of the same approximated sum) and the gradient
+    its exact derivative. ``theta``: admissibility in (0, 2), default ``barnes_hut.THETA``."""
+
+    name = "tree"
+
+    def energy(self, X: np.ndarray) -> float:
+        return barnes_hut.Frame(X, self.layout, self.theta).energy(X)
+
+    def energy_gradient(self, X: np.ndarray) -> tuple[float, np.ndarray]:
+        return barnes_hut.Frame(X, self.layout, self.theta).energy_gradient(X)
+
+
+#: Engines by name; :func:`make_engine` resolves a run's ``engine=`` here ("auto" too).
+ENGINES: dict[str, type[DenseEngine]] = {"exact": DenseEngine, "tree": TreeEngine}
 
 
 def make_engine(name: str, layout: Layout, metric: str, **options) -> DenseEngine:
@@ -190,6 +211,9 @@ def make_engine(name: str, layout: Layout, metric: str, **options) -> DenseEngin
     ValueError
         For an unknown name (the message lists the valid ones).
     """
+    if name == "auto":
+        name = "tree" if barnes_hut.uses_tree(name, layout.n) else "exact"
     if name not in ENGINES:
-        raise ValueError(f"unknown engine {name!r}; choose one of {', '.join(ENGINES)}")
+        raise ValueError(f"unknown engine {name!r}; choose one of "
+                         f"{', '.join(barnes_hut.ENGINE_NAMES)}")
     return ENGINES[name](layout, metric, **options)

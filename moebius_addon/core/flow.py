@@ -28,7 +28,7 @@ def relax(
     callback: Callable[[IterationState], bool | None] | None = None,
     method: str = "projected_gradient",
     *,
-    engine: str = "exact",
+    engine: str = "auto",
     theta: float | None = None,
     **options,
 ) -> RelaxResult:
@@ -48,9 +48,12 @@ def relax(
         ``projected_gradient`` (the paper's explicit method, DESIGN.md) or another optimizer
         of :mod:`moebius_addon.core.solvers` (``METHODS`` lists them).
     engine : str
-        Numerical engine by name (``core.engine.ENGINES``; only "exact" so far).
+        "exact", "tree" or "auto" (the tree from ``barnes_hut.TREE_FROM`` edges on;
+        ``core.engine``): the tree evaluates energy and gradient by Barnes–Hut, contacts
+        stay exact.
     theta : float, optional
-        Tree opening angle for engines that approximate; ignored by "exact".
+        Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); checked
+        for every engine.
     **options
         See :class:`Relaxation` (``energy_target``, ``ftol``, ``max_seconds``, ``initial_step``,
         ``armijo``, ``growth``, ``backproject_iter``, ``backproject_tol``, ``edge_lengths``,

@@ -181,13 +181,19 @@ def test_status_codes_of_the_other_endings(trefoil300):
 
 
 def test_engine_by_name(trefoil300):
-    r = relax(trefoil300, max_iter=3)
-    assert r.stats["engine"] == "exact" and ENGINES == {"exact": DenseEngine}
+    r = relax(trefoil300, max_iter=3)  # "auto": exact below barnes_hut.TREE_FROM edges
+    assert r.stats["engine"] == "exact" and ENGINES["exact"] is DenseEngine
     # theta is accepted for every engine and ignored by the exact one: the same bits
     t = relax(trefoil300, max_iter=3, engine="exact", theta=0.5)
     np.testing.assert_array_equal(t.x, r.x)
-    with pytest.raises(ValueError, match="unknown engine 'fast'; choose one of exact"):
+    tree = relax(trefoil300, max_iter=3, engine="tree", theta=0.5)
+    assert tree.stats["engine"] == "tree" and tree.fun < tree.history["energy"][0]
+    assert not np.array_equal(tree.x, r.x)  # the tree's energy is another function
+    with pytest.raises(ValueError, match="unknown engine 'fast'; choose one of auto, exact, tree"):
         relax(trefoil300, max_iter=3, engine="fast")
+    for theta in (float("nan"), -1.0, 2.0):
+        with pytest.raises(ValueError, match="theta"):
+            relax(trefoil300, max_iter=3, engine="tree", theta=theta)
     with pytest.raises(ValueError, match="unknown engine"):
         make_engine("fast", None, "hs")
 

@@ -106,8 +106,15 @@ def test_run_objects_share_the_relaxation_interface(trefoil100):
         res = run.result()
         assert res.nit == 3 and not run.step()
         assert res.status == Status.MAX_ITER and res.stats["engine"] == "exact"
-        with pytest.raises(ValueError, match="unknown engine 'tree'"):
-            make_run(method, trefoil100, "hs", max_iter=3, engine="tree")
+        # every method runs on the tree engine (Barnes–Hut energy, exact contacts)
+        tree = make_run(method, trefoil100, "hs", max_iter=2, engine="tree", theta=0.5)
+        while tree.step():
+            pass
+        res = tree.result()
+        assert res.stats["engine"] == "tree" and res.nit == 2
+        assert res.fun < res.history["energy"][0]
+        with pytest.raises(ValueError, match="unknown engine 'fast'"):
+            make_run(method, trefoil100, "hs", max_iter=3, engine="fast")
 
 
 def test_optimizers_reach_the_kernels_only_through_the_engine():

@@ -39,7 +39,7 @@ INFEASIBLE = tuple(m for m in METHODS if m not in FEASIBLE)
 
 
 def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float = 1e-6, *,
-             engine: str = "exact", theta: float | None = None, **options) -> Run:
+             engine: str = "auto", theta: float | None = None, **options) -> Run:
     """A run object of ``method`` (see :data:`METHODS`) with :class:`Relaxation`'s interface.
 
     Parameters
@@ -49,9 +49,12 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
     P, metric, max_iter, tol, **options
         As in :class:`Relaxation` and the method's own class.
     engine : str
-        Numerical engine by name (``core.engine.ENGINES``; "exact" is the only one so far).
+        "exact", "tree" or "auto" (the tree from ``barnes_hut.TREE_FROM`` edges on;
+        ``core.engine``): the tree evaluates energy and gradient by Barnes–Hut, contacts
+        stay exact.
     theta : float, optional
-        Tree opening angle for engines that approximate; ignored by "exact".
+        Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); checked
+        for every engine.
 
     Raises
     ------

@@ -179,7 +179,7 @@ class Run:
 
     def __init__(self, P, metric: str, max_iter: int, tol: float, *,
                  energy_target: float | None, ftol: float, max_seconds: float | None,
-                 target_lengths: str, check: bool, equilateral: bool, engine: str = "exact",
+                 target_lengths: str, check: bool, equilateral: bool, engine: str = "auto",
                  theta: float | None = None, **engine_options):
         _check_names(metric, target_lengths)
         self.t0 = time.perf_counter()

@@ -62,7 +62,7 @@ class _PenaltyRun(Run):
                  alpha: float = DEFAULT_PENALTY_WEIGHT, penalty_metric="auto", c1: float = 1e-4,
                  c2: float = 0.9, energy_target: float | None = None, ftol: float = 1e-12,
                  max_seconds: float | None = None, initial_step: float = 1.0,
-                 target_lengths: str = "equal", check: bool = True, engine: str = "exact",
+                 target_lengths: str = "equal", check: bool = True, engine: str = "auto",
                  theta: float | None = None, **ignored):
         unknown = set(ignored) - _FEASIBLE_ONLY
         if unknown:

@@ -85,7 +85,8 @@ class Relaxation(Run):
     engine : str
         Name of the numerical engine (``core.engine.ENGINES``; only "exact" so far).
     theta : float, optional
-        Tree opening angle, for engines that approximate; ignored by "exact".
+        Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); checked
+        for every engine.
     """
 
     def __init__(
@@ -110,7 +111,7 @@ class Relaxation(Run):
         reuse_factorization: bool = False,
         precision: str = "auto",
         interpolate: bool = False,
-        engine: str = "exact",
+        engine: str = "auto",
         theta: float | None = None,
     ):
         _check_names(metric, target_lengths)

@@ -1,0 +1,150 @@
+"""Benchmark of the tree engine (issue: "Tree engine, part 1"). Prints measurements; not a test.
+
+    python bench/tree_bench.py                      # sizes 1 000 .. 100 000 (and errors)
+    python bench/tree_bench.py --sizes 1000 5000    # some sizes only
+    python bench/tree_bench.py --million            # also one E+g at 10^6 edges
+
+Energy+gradient exact vs tree (exact up to 20 000 edges), the frame (hierarchy build and the
+far/near split) and the box refit, the contact step of ``contact_time_x`` (exact, through the
+hierarchy above its crossover), relative errors against the exact sum as a function of theta,
+and peak memory. Results also go to ``out/bench_tree.json`` (``--json PATH``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import time
+from pathlib import Path
+
+import numpy as np
+from core_bench import best_of  # bench/ is on sys.path when run as a script
+from paper import machine
+
+from moebius_addon import core
+from moebius_addon.core import barnes_hut, bvh
+from moebius_addon.core._layout import as_layout
+from moebius_addon.core.collision import contact_time_x
+from moebius_addon.core.energy import energy_gradient_x
+
+EXACT_UP_TO = 20000
+THETAS = (0.0625, 0.125, 0.25, 0.5)
+CACHE = Path("out/bench_tree_curves")
+
+
+def curve(name: str, n: int) -> np.ndarray | list:
+    """The benchmark curves, resampled once and kept in out/ (resampling 100 000 edges takes
+    tens of seconds today)."""
+    CACHE.mkdir(parents=True, exist_ok=True)
+    path = CACHE / f"{name}_{n}.npy"
+    if path.exists():
+        data = np.load(path)
+        return list(data) if name == "link3" else data
+    if name == "fhw":
+        P = core.knots.freedman_unknot(n)
+    elif name == "7_2":
+        P = core.resample(core.knots.named("7_2"), n)
+    elif name == "noneq":  # the 7_2 with every vertex moved by 0.2 edge lengths
+        Q = curve("7_2", n)
+        rng = np.random.default_rng(7)
+        P = Q + 0.2 * np.linalg.norm(Q[1] - Q[0]) * rng.standard_normal(Q.shape)
+    elif name == "link3":  # a chain of three rings, n // 3 edges each
+        t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+        ring = np.c_[np.cos(t), np.sin(t), 0 * t]
+        P = core.resample([ring, ring[:, [0, 2, 1]] + [1.0, 0, 0], ring + [2.0, 0, 0]],
+                          [n // 3] * 3)
+    else:
+        raise ValueError(name)
+    np.save(path, np.asarray(P))
+    return P
+
+
+def errors(P, thetas=THETAS) -> list[dict]:
+    X, layout = as_layout(P)
+    E0, G0 = energy_gradient_x(X, layout)
+    rows = []
+    for theta in thetas:
+        E1, G1 = barnes_hut.Frame(X, layout, theta).energy_gradient(X)
+        rows.append({"theta": theta, "energy": abs(E1 - E0) / E0,
+                     "gradient": float(np.linalg.norm(G1 - G0) / np.linalg.norm(G0))})
+    return rows
+
+
+def timings(P, exact: bool, theta: float) -> dict:
+    X, layout = as_layout(P)
+    n = layout.n
+    row: dict = {"edges": n}
+    frame = barnes_hut.Frame(X, layout, theta)
+    row["far_pairs"], row["near_pairs"] = frame.far_pairs, frame.near_pairs
+    row["tree_eg"] = best_of(lambda: barnes_hut.Frame(X, layout, theta).energy_gradient(X), 3)
+    row["tree_e"] = best_of(lambda: barnes_hut.Frame(X, layout, theta).energy(X), 3)
+    row["frame"] = best_of(lambda: barnes_hut.Frame(X, layout, theta), 3)
+    row["build"] = best_of(lambda: bvh.build(X, layout), 3)
+    tree = bvh.build(X, layout)
+    row["refit"] = best_of(lambda: bvh.segment_boxes(tree, X, layout), 3)
+    if exact:
+        row["exact_eg"] = best_of(lambda: energy_gradient_x(X, layout), 2)
+        row["speedup"] = row["exact_eg"] / row["tree_eg"]
+    # the contact step as the flow calls it: along the gradient, scaled so that the fastest
+    # vertex moves 0.1 edge lengths at tau = 1; once with a contact before tau_max, once without
+    _, G = frame.energy_gradient(X)
+    h = float(np.linalg.norm(X[layout.nxt] - X, axis=1).mean())
+    U = G * (0.1 * h / np.abs(G).max())
+    eps = 1e-3 * h
+    row["contact_none"] = best_of(lambda: contact_time_x(X, U, layout, 1.0, eps), 3)
+    row["contact_hit"] = best_of(lambda: contact_time_x(X, U, layout, 1e4, eps), 3)
+    return row
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--sizes", type=int, nargs="*", default=[1000, 2000, 5000, 10000, 20000,
+                                                              100000])
+    ap.add_argument("--error-sizes", type=int, nargs="*", default=[5000, 20000])
+    ap.add_argument("--theta", type=float, default=barnes_hut.THETA)
+    ap.add_argument("--million", action="store_true")
+    ap.add_argument("--json", default="out/bench_tree.json")
+    args = ap.parse_args()
+    out: dict = {"machine": machine(), "theta": args.theta, "leaf_size": bvh.LEAF_SIZE}
+    print(out["machine"], flush=True)
+
+    print(f"\nEnergy+gradient (7_2, theta={args.theta}), seconds (best of 3):", flush=True)
+    out["timings"] = []
+    for n in args.sizes:
+        row = timings(curve("7_2", n), n <= EXACT_UP_TO, args.theta)
+        out["timings"].append(row)
+        exact = (f"exact {row['exact_eg']:.4f}  ratio {row['speedup']:.1f}x"
+                 if "exact_eg" in row else "exact -")
+        print(f"  N={n:7d}: tree E+g {row['tree_eg']:.4f} (E {row['tree_e']:.4f}, frame "
+              f"{row['frame']:.4f}, build {row['build']:.4f}, refit {row['refit']:.5f})  "
+              f"{exact}  contact {row['contact_none']:.4f}/{row['contact_hit']:.4f}  "
+              f"far/near pairs {row['far_pairs']}/{row['near_pairs']}", flush=True)
+
+    print("\nRelative errors against the exact sum (energy, gradient 2-norm):", flush=True)
+    out["errors"] = []
+    for n in args.error_sizes:
+        for name in ("fhw", "7_2", "link3", "noneq"):
+            for r in errors(curve(name, n)):
+                out["errors"].append({"curve": name, "edges": n, **r})
+                print(f"  {name:6s} N={n:6d} theta={r['theta']:<7g} energy {r['energy']:.2e}  "
+                      f"gradient {r['gradient']:.2e}", flush=True)
+
+    if args.million:
+        n = 1000000
+        t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+        P = np.c_[np.sin(t) + 2 * np.sin(2 * t), np.cos(t) - 2 * np.cos(2 * t), -np.sin(3 * t)]
+        X, layout = as_layout(P)
+        t0 = time.perf_counter()
+        barnes_hut.Frame(X, layout, args.theta).energy_gradient(X)
+        out["million"] = {"edges": n, "seconds": time.perf_counter() - t0}
+        print(f"\n10^6 edges (trefoil curve): E+g {out['million']['seconds']:.2f} s", flush=True)
+
+    out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(f"\npeak resident memory of this process: {out['peak_rss_mb']:.0f} MB")
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()
