@@ -38,6 +38,9 @@ from ._layout import Layout
 
 THETA = 0.125  # default admissibility (docs/benchmarks.md, "Tree engine: accuracy")
 _FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
+# Fixed work split of the near field (independent of the thread count: the same bits on every
+# machine); each chunk holds a buffer of 7 values per edge.
+_CHUNKS = 8
 
 
 ENGINE_NAMES = ("auto", "exact", "tree")
@@ -171,6 +174,9 @@ def _split(left, right, bmin, bmax, nc, theta2):
     """Dual traversal from (root, root): unordered far pairs (admissible clusters) and near
     pairs of leaves (self pairs ``(A, A)`` included), in a deterministic order."""
     m = left.shape[0]
+    diam2 = np.empty(m)
+    for node in range(m):
+        diam2[node] = bvh.box_diam2(bmin, bmax, node)
     far = np.empty((4 * m + 16, 2), np.int64)
     near = np.empty((4 * m + 16, 2), np.int64)
     nfar = 0
@@ -201,9 +207,9 @@ def _split(left, right, bmin, bmax, nc, theta2):
                 stack[top + 2, 1] = la
                 top += 3
             continue
+        da = diam2[a]
+        db = diam2[b]
         gap2 = bvh.box_gap2(bmin, bmax, a, b)
-        da = bvh.box_diam2(bmin, bmax, a)
-        db = bvh.box_diam2(bmin, bmax, b)
         if gap2 > 0.0 and nc[a] >= 0 and nc[b] >= 0 and max(da, db) <= theta2 * gap2:
             far = _push_pair(far, nfar, a, b)
             nfar += 1
@@ -422,25 +428,30 @@ def _push_down(L, C, S, gL, gS, gC, gD, left, right):
 
 
 @nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
-def _near(E, M, ln, cp, pos, size, lo, hi, leaves, noff, npart, acc, grad):
-    """Per edge (tree order): the exact row sum over its near partners (ordered pairs) and,
-    with ``grad``, the partial derivatives of the whole approximated energy with respect to
-    its edge vector and midpoint (near field twice, far field from ``acc``)."""
+def _near(E, M, ln, cp, pos, size, lo, hi, pairs, nchunks, grad):
+    """The near field, each unordered pair of edges once (pairs of leaves, self pairs
+    included): per edge (tree order) its share of the ordered sum (``rows``: f for each end
+    of every pair) and, with ``grad``, the partial derivatives of the ordered sum with respect
+    to its edge vector and midpoint. The leaf pairs are cut into ``nchunks`` fixed runs with a
+    buffer each, summed in order: the same bits for every thread count."""
     n = ln.shape[0]
-    rows = np.zeros(n)
-    ga = np.zeros((n, 3))
-    gm = np.zeros((n, 3))
-    for kk in nb.prange(leaves.shape[0]):
-        a = leaves[np.int64(kk)]
-        for q in range(lo[a], hi[a]):
-            ax, ay, az, li = E[q, 0], E[q, 1], E[q, 2], ln[q]
-            px, py, pz = M[q, 0], M[q, 1], M[q, 2]
-            cq, iq, sq = cp[q], pos[q], size[q]
-            s = 0.0
-            gax = gay = gaz = gmx = gmy = gmz = 0.0
-            for p in range(noff[a], noff[a + 1]):
-                b = npart[p]
-                for r in range(lo[b], hi[b]):
+    npairs = pairs.shape[0]
+    width = 7 if grad else 1
+    buf = np.zeros((nchunks, width, n))
+    for cc in nb.prange(nchunks):
+        ch = np.int64(cc)
+        b = buf[ch]
+        for p in range(ch * npairs // nchunks, (ch + 1) * npairs // nchunks):
+            la = pairs[p, 0]
+            lb = pairs[p, 1]
+            for q in range(lo[la], hi[la]):
+                ax, ay, az, li = E[q, 0], E[q, 1], E[q, 2], ln[q]
+                px, py, pz = M[q, 0], M[q, 1], M[q, 2]
+                cq, iq, sq = cp[q], pos[q], size[q]
+                s = 0.0
+                gax = gay = gaz = gmx = gmy = gmz = 0.0
+                r0 = q + 1 if la == lb else lo[lb]
+                for r in range(r0, hi[lb]):
                     dx = px - M[r, 0]
                     dy = py - M[r, 1]
                     dz = pz - M[r, 2]
@@ -457,45 +468,82 @@ def _near(E, M, ln, cp, pos, size, lo, hi, leaves, noff, npart, acc, grad):
                         db = dx * bx + dy * by + dz * bz
                         sv = (li * lj + ab) * inv
                         qq = da * db * inv * inv
-                        s += sv - 2.0 * qq
+                        f = sv - 2.0 * qq
+                        s += f
+                        b[0, r] += f
                         if grad:
-                            ci = lj / li
                             tb = 2.0 * db * inv
                             ta = 2.0 * da * inv
+                            ci = lj / li
+                            cj = li / lj
                             gax += (ci * ax + bx - tb * dx) * inv
                             gay += (ci * ay + by - tb * dy) * inv
                             gaz += (ci * az + bz - tb * dz) * inv
+                            b[1, r] += 2.0 * (cj * bx + ax - ta * dx) * inv
+                            b[2, r] += 2.0 * (cj * by + ay - ta * dy) * inv
+                            b[3, r] += 2.0 * (cj * bz + az - ta * dz) * inv
                             cd = 8.0 * qq - 2.0 * sv
-                            gmx += (cd * dx - tb * ax - ta * bx) * inv
-                            gmy += (cd * dy - tb * ay - ta * by) * inv
-                            gmz += (cd * dz - tb * az - ta * bz) * inv
+                            fdx = (cd * dx - tb * ax - ta * bx) * inv
+                            fdy = (cd * dy - tb * ay - ta * by) * inv
+                            fdz = (cd * dz - tb * az - ta * bz) * inv
+                            gmx += fdx
+                            gmy += fdy
+                            gmz += fdz
+                            b[4, r] -= 2.0 * fdx
+                            b[5, r] -= 2.0 * fdy
+                            b[6, r] -= 2.0 * fdz
                     else:
                         f = li * lj * inv
                         s += f
+                        b[0, r] += f
                         if grad:
                             ci = lj * inv / li
+                            cj = li * inv / lj
                             gax += ci * ax
                             gay += ci * ay
                             gaz += ci * az
+                            b[1, r] += 2.0 * cj * bx
+                            b[2, r] += 2.0 * cj * by
+                            b[3, r] += 2.0 * cj * bz
                             cd = -2.0 * f * inv
                             gmx += cd * dx
                             gmy += cd * dy
                             gmz += cd * dz
-            rows[q] = s
-            if grad:
-                t = acc[a]
-                inv_l = 1.0 / li
-                far_t = t[3] + px * t[4] + py * t[5] + pz * t[6]
-                ga[q, 0] = (2.0 * gax + t[0] + far_t * ax * inv_l
-                            + t[7] * px + t[8] * py + t[9] * pz - t[16])
-                ga[q, 1] = (2.0 * gay + t[1] + far_t * ay * inv_l
-                            + t[10] * px + t[11] * py + t[12] * pz - t[17])
-                ga[q, 2] = (2.0 * gaz + t[2] + far_t * az * inv_l
-                            + t[13] * px + t[14] * py + t[15] * pz - t[18])
-                gm[q, 0] = 2.0 * gmx + li * t[4] + t[7] * ax + t[10] * ay + t[13] * az
-                gm[q, 1] = 2.0 * gmy + li * t[5] + t[8] * ax + t[11] * ay + t[14] * az
-                gm[q, 2] = 2.0 * gmz + li * t[6] + t[9] * ax + t[12] * ay + t[15] * az
-    return rows, ga, gm
+                            b[4, r] -= 2.0 * cd * dx
+                            b[5, r] -= 2.0 * cd * dy
+                            b[6, r] -= 2.0 * cd * dz
+                b[0, q] += s
+                if grad:
+                    b[1, q] += 2.0 * gax
+                    b[2, q] += 2.0 * gay
+                    b[3, q] += 2.0 * gaz
+                    b[4, q] += 2.0 * gmx
+                    b[5, q] += 2.0 * gmy
+                    b[6, q] += 2.0 * gmz
+    out = buf[0].copy()
+    for ch in range(1, nchunks):
+        out += buf[ch]
+    return out
+
+
+@nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
+def _far_to_edges(E, M, ln, lo, hi, leaves, acc, part):
+    """Add what every edge receives from the far field (``acc`` of its leaf, see
+    :func:`_push_down`) to its partial derivatives ``part`` (rows 1–3: edge vector, 4–6:
+    midpoint)."""
+    for kk in nb.prange(leaves.shape[0]):
+        a = leaves[np.int64(kk)]
+        t = acc[a]
+        for q in range(lo[a], hi[a]):
+            ax, ay, az, li = E[q, 0], E[q, 1], E[q, 2], ln[q]
+            px, py, pz = M[q, 0], M[q, 1], M[q, 2]
+            far_t = (t[3] + px * t[4] + py * t[5] + pz * t[6]) / li
+            part[1, q] += t[0] + far_t * ax + t[7] * px + t[8] * py + t[9] * pz - t[16]
+            part[2, q] += t[1] + far_t * ay + t[10] * px + t[11] * py + t[12] * pz - t[17]
+            part[3, q] += t[2] + far_t * az + t[13] * px + t[14] * py + t[15] * pz - t[18]
+            part[4, q] += li * t[4] + t[7] * ax + t[10] * ay + t[13] * az
+            part[5, q] += li * t[5] + t[8] * ax + t[11] * ay + t[14] * az
+            part[6, q] += li * t[6] + t[9] * ax + t[12] * ay + t[15] * az
 
 
 # ------------------------------------------------------------------------------------------------
@@ -531,7 +579,7 @@ class Frame:
         self.far_pairs = far.shape[0]
         self.near_pairs = near.shape[0]
         self.foff, self.fpart = _by_target(far, m)
-        self.noff, self.npart = _by_target(near, m)
+        self.near = near
         self.leaves = np.flatnonzero(tree.left < 0).astype(np.int64)
 
     def _evaluate(self, X: np.ndarray, grad: bool):
@@ -539,13 +587,14 @@ class Frame:
         E, M, ln, cp, pos, size = _edge_arrays(X, lay.nxt, lay.comp, lay.starts, tree.perm)
         L, C, S, D, nc = _cluster_data(E, M, ln, cp, tree.lo, tree.hi, tree.left, tree.right)
         eF, gL, gS, gC, gD = _far(L, C, S, D, nc, self.foff, self.fpart, grad)
-        acc = (_push_down(L, C, S, gL, gS, gC, gD, tree.left, tree.right) if grad
-               else np.zeros((tree.size, 19)))
-        rows, ga, gm = _near(E, M, ln, cp, pos, size, tree.lo, tree.hi, self.leaves,
-                             self.noff, self.npart, acc, grad)
-        energy = 4.0 * lay.k + float(np.sum(rows)) + float(np.sum(eF))
+        part = _near(E, M, ln, cp, pos, size, tree.lo, tree.hi, self.near, _CHUNKS, grad)
+        energy = 4.0 * lay.k + float(np.sum(part[0])) + float(np.sum(eF))
         if not grad:
             return energy, None
+        acc = _push_down(L, C, S, gL, gS, gC, gD, tree.left, tree.right)
+        _far_to_edges(E, M, ln, tree.lo, tree.hi, self.leaves, acc, part)
+        ga = part[1:4].T
+        gm = part[4:7].T
         G = np.zeros_like(X)
         # e_I = P[nxt I] − P[I], m_I = (P[I] + P[nxt I]) / 2, with I = perm[q]
         i = tree.perm

@@ -187,12 +187,19 @@ class TreeEngine(DenseEngine):
     its exact derivative. ``theta``: admissibility in (0, 2), default ``barnes_hut.THETA``."""
 
     name = "tree"
+    _frame = None  # the last frame and the polygon it was built at
+
+    def _frame_at(self, X: np.ndarray) -> barnes_hut.Frame:
+        # a trial accepted by its energy is evaluated again with the gradient: same frame
+        if self._frame is None or not np.array_equal(self._frame[0], X):
+            self._frame = (X.copy(), barnes_hut.Frame(X, self.layout, self.theta))
+        return self._frame[1]
 
     def energy(self, X: np.ndarray) -> float:
-        return barnes_hut.Frame(X, self.layout, self.theta).energy(X)
+        return self._frame_at(X).energy(X)
 
     def energy_gradient(self, X: np.ndarray) -> tuple[float, np.ndarray]:
-        return barnes_hut.Frame(X, self.layout, self.theta).energy_gradient(X)
+        return self._frame_at(X).energy_gradient(X)
 
 
 #: Engines by name; :func:`make_engine` resolves a run's ``engine=`` here ("auto" too).

@@ -71,13 +71,12 @@ def slow_frame_energy(X, layout, frame):
         return L, c, e[idx].sum(axis=0), e[idx].T @ (m[idx] - c), set(comp[idx])
 
     total = 4.0 * layout.k
+    for a, b in frame.near:  # unordered pairs of leaves
+        for i in perm[tree.lo[a]:tree.hi[a]]:
+            for j in perm[tree.lo[b]:tree.hi[b]]:
+                if disjoint(i, j):
+                    total += f(i, j) if a == b else f(i, j) + f(j, i)
     for a in range(tree.size):
-        for p in range(frame.noff[a], frame.noff[a + 1]):
-            b = frame.npart[p]
-            for i in perm[tree.lo[a]:tree.hi[a]]:
-                for j in perm[tree.lo[b]:tree.hi[b]]:
-                    if disjoint(i, j):
-                        total += f(i, j)
         for p in range(frame.foff[a], frame.foff[a + 1]):
             b = frame.fpart[p]
             La, ca, Sa, Da, ka = moments(a)
