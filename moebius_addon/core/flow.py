@@ -17,7 +17,7 @@ from .energy import energy_gradient_x
 from .linalg import Factorization
 from .metrics import gram_x
 from .solvers import make_run
-from .solvers.base import IterationState, RelaxResult
+from .solvers.base import IterationState, RelaxResult, check_dense_size
 
 
 def relax(
@@ -95,6 +95,7 @@ def sobolev_gradient(P, metric: str = "hs", projected: bool = True):
         paper's Fig. 2 compares these fields.
     """
     X, layout, k = as_unit_layout(P)  # u(2^k X) = 2^k u(X): every Gram matrix scales as 4^-k
+    check_dense_size(layout.n)
     _, g = energy_gradient_x(X, layout)
     A = gram_x(metric, X, layout)
     if not projected:

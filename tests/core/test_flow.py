@@ -286,3 +286,15 @@ def test_absurd_sizes_relax_like_size_one(trefoil300):
         assert b.nit == a.nit and np.isfinite(b.x).all()
         np.testing.assert_allclose(b.history["energy"], a.history["energy"], rtol=1e-9)
         np.testing.assert_allclose(b.x / s, a.x, atol=1e-7)
+
+
+def test_sizes_whose_dense_factorization_crashes_are_refused():
+    # numpy's OpenBLAS segfaulted in np.linalg.cholesky at 16 000 and 17 000 rows (2 threads):
+    # refuse before any work, naming the size that runs, in every door that factors
+    from moebius_addon.core import sobolev_gradient
+
+    P = ngon(base.DENSE_MAX_VERTICES + 1)
+    for call in (lambda: relax(P, max_iter=1), lambda: relax(P, engine="tree", max_iter=1),
+                 lambda: sobolev_gradient(P)):
+        with pytest.raises(ValueError, match=f"at most {base.DENSE_MAX_VERTICES} vertices"):
+            call()

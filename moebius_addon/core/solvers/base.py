@@ -47,6 +47,11 @@ _STALL_FACTOR = 1e3
 _BYTES_PER_PAIR = 32
 # Share of the machine's physical memory a run may need before it is refused.
 _MEMORY_SHARE = 0.75
+# Largest polygon whose dense factorization runs: numpy's bundled OpenBLAS (numpy 1.26, 2 threads)
+# segfaults in a double-precision Cholesky (np.linalg.cholesky, LAPACK potrf) of an SPD matrix
+# at 16 000 and 17 000 rows and factors 15 000 (21 s); single-threaded, 17 000 works. Every
+# engine's saddle-point solve is dense today, so every run is bounded by this.
+DENSE_MAX_VERTICES = 15000
 
 
 class Status(enum.IntEnum):
@@ -142,9 +147,17 @@ def _physical_memory() -> float | None:
         return None
 
 
-def _check_memory(n: int) -> None:
+def check_dense_size(n: int) -> None:
     """Refuse a polygon whose dense N × N matrices would not fit in memory (an absurd size:
-    a machine swapping or killed by the out-of-memory handler says nothing useful)."""
+    a machine swapping or killed by the out-of-memory handler says nothing useful), or whose
+    dense factorization would crash the process (``DENSE_MAX_VERTICES``)."""
+    if n > DENSE_MAX_VERTICES:
+        raise ValueError(
+            f"{n} vertices are more than the dense metric's factorization handles "
+            f"({DENSE_MAX_VERTICES}: numpy's multithreaded OpenBLAS Cholesky crashes the process "
+            f"from about 16 000 on): resample to at most {DENSE_MAX_VERTICES} vertices "
+            f"(core.resample(P, n)); a few hundred are plenty to untangle a knot"
+        )
     total = _physical_memory()
     need = _BYTES_PER_PAIR * float(n) ** 2
     if total is None or need <= _MEMORY_SHARE * total:
@@ -191,7 +204,7 @@ class Run:
         self.max_seconds = None if max_seconds is None else check_number("max_seconds",
                                                                          max_seconds, 0)
         X, layout, e2 = as_unit_layout(P)  # exact scaling of curves far from size 1
-        _check_memory(layout.n)
+        check_dense_size(layout.n)
         if check:
             check_polygon(P)
         self.layout = layout
