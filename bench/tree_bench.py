@@ -49,10 +49,10 @@ def curve(name: str, n: int) -> np.ndarray | list:
         Q = curve("7_2", n)
         rng = np.random.default_rng(7)
         P = Q + 0.2 * np.linalg.norm(Q[1] - Q[0]) * rng.standard_normal(Q.shape)
-    elif name == "link3":  # a chain of three rings, n // 3 edges each
+    elif name == "link3":  # a chain of three unit rings 1.2 apart, n // 3 edges each
         t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
         ring = np.c_[np.cos(t), np.sin(t), 0 * t]
-        P = core.resample([ring, ring[:, [0, 2, 1]] + [1.0, 0, 0], ring + [2.0, 0, 0]],
+        P = core.resample([ring, ring[:, [0, 2, 1]] + [1.2, 0, 0], ring + [2.4, 0, 0]],
                           [n // 3] * 3)
     else:
         raise ValueError(name)
