@@ -1,0 +1,288 @@
+"""Exact contact queries through the edge hierarchy (:mod:`bvh`): the first contact along a
+motion and the closest pairs, with the same answers as the all-pairs searches of
+:mod:`collision` in O(N log N) typical time (private; ``collision`` dispatches here).
+
+Nothing is approximated: a pair of nodes is skipped only where no pair of their edges can
+matter (the boxes of the edges' swept spheres do not meet, or the boxes are farther apart than
+the best distance so far), every other pair of edges gets the all-pairs code's own test
+(:func:`_pairs.pair_time`, :func:`_pairs.segment_distance2`). The contact time of a pair
+depends on the pair alone, so the minimum is the same bits as the all-pairs search's.
+
+Work is split into a fixed number of chunks of node pairs (a frontier of the dual traversal),
+each searched depth first with its own running best; the minimum over chunks is exact, ties of
+the closest pairs are broken by the smaller indices: the same result for any thread count.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from . import bvh
+from ._layout import Layout
+from ._pairs import edge_motion, pair_time, segment_distance2
+
+_CHUNKS = 16
+_TASKS = 8 * _CHUNKS  # node pairs in the frontier before the parallel search
+
+
+@nb.njit(cache=True)
+def _disjoint(i, j, starts, comp):
+    """Edges ``i < j`` share no vertex (the all-pairs rule)."""
+    c = comp[i]
+    if comp[j] != c:
+        return True
+    if j == i + 1:
+        return False
+    return not (i == starts[c] and j == starts[c + 1] - 1)
+
+
+@nb.njit(cache=True)
+def _frontier(left, right, bmin, bmax, cut2, want):
+    """Node pairs (self pairs included) whose subtrees hold every pair of edges closer than
+    ``sqrt(cut2)`` in box distance (``cut2 < 0``: overlapping boxes only), expanded breadth
+    first until there are ``want`` of them or only leaf pairs are left."""
+    cur = np.zeros((1, 2), np.int64)
+    while True:
+        nxt = np.empty((3 * cur.shape[0], 2), np.int64)
+        count = 0
+        grew = False
+        for p in range(cur.shape[0]):
+            a, b = cur[p, 0], cur[p, 1]
+            if a == b:
+                if left[a] < 0:
+                    nxt[count, 0] = a
+                    nxt[count, 1] = a
+                    count += 1
+                    continue
+                grew = True
+                la, ra = left[a], right[a]
+                for x, y in ((la, la), (la, ra), (ra, ra)):
+                    if x == y or bvh.box_gap2(bmin, bmax, x, y) <= cut2 or (
+                            cut2 < 0 and bvh.box_gap2(bmin, bmax, x, y) == 0.0):
+                        nxt[count, 0] = x
+                        nxt[count, 1] = y
+                        count += 1
+                continue
+            if left[a] < 0 and left[b] < 0:
+                nxt[count, 0] = a
+                nxt[count, 1] = b
+                count += 1
+                continue
+            grew = True
+            split_a = left[b] < 0 or (left[a] >= 0 and bvh.box_diam2(bmin, bmax, a)
+                                      >= bvh.box_diam2(bmin, bmax, b))
+            for child in ((left[a], right[a]) if split_a else (left[b], right[b])):
+                x, y = (child, b) if split_a else (a, child)
+                g = bvh.box_gap2(bmin, bmax, x, y)
+                if g <= cut2 or (cut2 < 0 and g == 0.0):
+                    nxt[count, 0] = x
+                    nxt[count, 1] = y
+                    count += 1
+        cur = nxt[:count].copy()
+        if not grew or count >= want:
+            return cur
+
+
+# ------------------------------------------------------------------------------------------------
+# first contact along a motion
+
+
+@nb.njit(cache=True)
+def _swept_boxes(perm, lo, hi, left, right, mid, vel, spread, half, eps, T, pad):
+    """Per node the box of its edges' grown midpoint spheres over ``τ ∈ [0, T]``: centre
+    ``m − τ ū``, radius ``l/2 + eps/2 + τ·spread`` (the spheres of the pair test; a sphere
+    moving and growing linearly stays in the hull of its end spheres), padded by ``pad``."""
+    m = lo.shape[0]
+    bmin = np.empty((m, 3))
+    bmax = np.empty((m, 3))
+    for node in range(m - 1, -1, -1):
+        if left[node] < 0:
+            for k in range(3):
+                bmin[node, k] = np.inf
+                bmax[node, k] = -np.inf
+            for q in range(lo[node], hi[node]):
+                i = perm[q]
+                r0 = half[i] + 0.5 * eps
+                r1 = r0 + T * spread[i]
+                for k in range(3):
+                    c0 = mid[i, k]
+                    c1 = mid[i, k] - T * vel[i, k]
+                    bmin[node, k] = min(bmin[node, k], min(c0 - r0, c1 - r1) - pad)
+                    bmax[node, k] = max(bmax[node, k], max(c0 + r0, c1 + r1) + pad)
+        else:
+            a, b = left[node], right[node]
+            for k in range(3):
+                bmin[node, k] = min(bmin[a, k], bmin[b, k])
+                bmax[node, k] = max(bmax[a, k], bmax[b, k])
+    return bmin, bmax
+
+
+@nb.njit(cache=True, parallel=True)
+def _contact_search(X, U, nxt, starts, comp, perm, lo, hi, left, right, tau_max, eps,
+                    nchunks, want):
+    mid, vel, spread, half, vmax = edge_motion(X, U, nxt)
+    scale = 0.0
+    for i in range(X.shape[0]):
+        for k in range(3):
+            scale = max(scale, abs(mid[i, k]) + tau_max * abs(vel[i, k]))
+        scale = max(scale, half[i] + tau_max * spread[i])
+    pad = 1e-12 * scale  # rounding of the pair test's sphere arithmetic
+    bmin, bmax = _swept_boxes(perm, lo, hi, left, right, mid, vel, spread, half, eps,
+                              tau_max, pad)
+    tasks = _frontier(left, right, bmin, bmax, -1.0, want)
+    best = np.full(nchunks, tau_max)
+    for cc in nb.prange(nchunks):
+        ch = np.int64(cc)
+        tb = tau_max
+        stack = np.empty((128, 2), np.int64)
+        for t in range(ch, tasks.shape[0], nchunks):
+            stack[0, 0] = tasks[t, 0]
+            stack[0, 1] = tasks[t, 1]
+            top = 1
+            while top > 0:
+                top -= 1
+                a, b = stack[top, 0], stack[top, 1]
+                if a != b and bvh.box_gap2(bmin, bmax, a, b) > 0.0:
+                    continue
+                if top + 3 > stack.shape[0]:
+                    grown = np.empty((2 * stack.shape[0], 2), np.int64)
+                    grown[:top] = stack[:top]
+                    stack = grown
+                if left[a] < 0 and left[b] < 0:
+                    for q in range(lo[a], hi[a]):
+                        for r in range(q + 1 if a == b else lo[b], hi[b]):
+                            i, j = perm[q], perm[r]
+                            if i > j:
+                                i, j = j, i
+                            if _disjoint(i, j, starts, comp):
+                                tb = pair_time(X, U, nxt, i, j, mid, vel, spread, half, vmax,
+                                               eps, tb)
+                elif a == b:
+                    la, ra = left[a], right[a]
+                    stack[top, 0], stack[top, 1] = la, ra
+                    stack[top + 1, 0], stack[top + 1, 1] = ra, ra
+                    stack[top + 2, 0], stack[top + 2, 1] = la, la
+                    top += 3
+                elif left[b] < 0 or (left[a] >= 0 and bvh.box_diam2(bmin, bmax, a)
+                                     >= bvh.box_diam2(bmin, bmax, b)):
+                    stack[top, 0], stack[top, 1] = left[a], b
+                    stack[top + 1, 0], stack[top + 1, 1] = right[a], b
+                    top += 2
+                else:
+                    stack[top, 0], stack[top, 1] = a, left[b]
+                    stack[top + 1, 0], stack[top + 1, 1] = a, right[b]
+                    top += 2
+        best[ch] = tb
+    return best.min()
+
+
+def contact_time_tree(X: np.ndarray, U: np.ndarray, layout: Layout, tau_max: float,
+                      eps: float) -> float:
+    """:func:`collision.contact_time_x` through the hierarchy (the same value)."""
+    tree = bvh.build(X, layout)
+    return float(_contact_search(X, np.ascontiguousarray(U), layout.nxt, layout.starts,
+                                 layout.comp, *tree, float(tau_max), float(eps), _CHUNKS,
+                                 _TASKS))
+
+
+# ------------------------------------------------------------------------------------------------
+# closest pairs
+
+
+@nb.njit(cache=True, inline="always")
+def _better(d2, i, j, best, bi, bj):
+    return d2 < best or (d2 == best and (i < bi or (i == bi and j < bj)))
+
+
+@nb.njit(cache=True, parallel=True)
+def _closest_search(X, nxt, starts, comp, perm, lo, hi, left, right, bmin, bmax, min_gap,
+                    nchunks, want):
+    tasks = _frontier(left, right, bmin, bmax, np.inf, want)
+    big = np.iinfo(np.int64).max
+    vbest = np.full(nchunks, np.inf)
+    vidx = np.full((nchunks, 2), big, np.int64)
+    ebest = np.full(nchunks, np.inf)
+    eidx = np.full((nchunks, 2), big, np.int64)
+    epar = np.zeros((nchunks, 2))
+    for cc in nb.prange(nchunks):
+        ch = np.int64(cc)
+        vb, vi0, vj0 = np.inf, big, big
+        eb, ei0, ej0, es, et = np.inf, big, big, 0.0, 0.0
+        stack = np.empty((128, 2), np.int64)
+        for t in range(ch, tasks.shape[0], nchunks):
+            stack[0, 0] = tasks[t, 0]
+            stack[0, 1] = tasks[t, 1]
+            top = 1
+            while top > 0:
+                top -= 1
+                a, b = stack[top, 0], stack[top, 1]
+                if a != b:
+                    g = bvh.box_gap2(bmin, bmax, a, b)
+                    if g > vb and g > eb:
+                        continue
+                if top + 3 > stack.shape[0]:
+                    grown = np.empty((2 * stack.shape[0], 2), np.int64)
+                    grown[:top] = stack[:top]
+                    stack = grown
+                if left[a] < 0 and left[b] < 0:
+                    for q in range(lo[a], hi[a]):
+                        for r in range(q + 1 if a == b else lo[b], hi[b]):
+                            i, j = perm[q], perm[r]
+                            if i > j:
+                                i, j = j, i
+                            c = comp[i]
+                            same = comp[j] == c
+                            size = starts[c + 1] - starts[c]
+                            gap = j - i
+                            if same:
+                                gap = min(gap, size - gap)
+                            if (not same) or gap >= min_gap:
+                                d2 = (X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (
+                                    X[i, 2] - X[j, 2]
+                                ) ** 2
+                                if _better(d2, i, j, vb, vi0, vj0):
+                                    vb, vi0, vj0 = d2, i, j
+                            if (not same) or gap >= 2:
+                                i1, j1 = nxt[i], nxt[j]
+                                d2, s, u = segment_distance2(
+                                    X[i, 0], X[i, 1], X[i, 2], X[i1, 0], X[i1, 1], X[i1, 2],
+                                    X[j, 0], X[j, 1], X[j, 2], X[j1, 0], X[j1, 1], X[j1, 2],
+                                )
+                                if _better(d2, i, j, eb, ei0, ej0):
+                                    eb, ei0, ej0, es, et = d2, i, j, s, u
+                elif a == b:
+                    la, ra = left[a], right[a]
+                    stack[top, 0], stack[top, 1] = la, ra
+                    stack[top + 1, 0], stack[top + 1, 1] = ra, ra
+                    stack[top + 2, 0], stack[top + 2, 1] = la, la
+                    top += 3
+                elif left[b] < 0 or (left[a] >= 0 and bvh.box_diam2(bmin, bmax, a)
+                                     >= bvh.box_diam2(bmin, bmax, b)):
+                    stack[top, 0], stack[top, 1] = left[a], b
+                    stack[top + 1, 0], stack[top + 1, 1] = right[a], b
+                    top += 2
+                else:
+                    stack[top, 0], stack[top, 1] = a, left[b]
+                    stack[top + 1, 0], stack[top + 1, 1] = a, right[b]
+                    top += 2
+        vbest[ch], vidx[ch, 0], vidx[ch, 1] = vb, vi0, vj0
+        ebest[ch], eidx[ch, 0], eidx[ch, 1] = eb, ei0, ej0
+        epar[ch, 0], epar[ch, 1] = es, et
+    return vbest, vidx, ebest, eidx, epar
+
+
+def closest_pairs_tree(X: np.ndarray, layout: Layout, min_gap: int = 4):
+    """:func:`collision.closest_pairs` through the hierarchy (the same distances; of several
+    pairs at the same distance, the one with the smallest indices)."""
+    tree = bvh.build(X, layout)
+    bmin, bmax = bvh.segment_boxes(tree, X, layout)
+    vb, vi, eb, ei, ep = _closest_search(X, layout.nxt, layout.starts, layout.comp, *tree,
+                                         bmin, bmax, int(min_gap), _CHUNKS, _TASKS)
+    a = min(range(len(vb)), key=lambda c: (vb[c], vi[c, 0], vi[c, 1]))
+    b = min(range(len(eb)), key=lambda c: (eb[c], ei[c, 0], ei[c, 1]))
+    return (
+        (float(np.sqrt(vb[a])), (int(vi[a, 0]), int(vi[a, 1]))),
+        (float(np.sqrt(eb[b])), (int(ei[b, 0]), int(ei[b, 1])), (float(ep[b, 0]),
+                                                                 float(ep[b, 1]))),
+    )
