@@ -5,9 +5,9 @@
     python bench/tree_bench.py --million            # also one E+g at 10^6 edges
 
 Energy+gradient exact vs tree (exact up to 20 000 edges), the frame (hierarchy build and the
-far/near split) and the box refit, the contact step of ``contact_time_x`` (exact, through the
-hierarchy above its crossover), relative errors against the exact sum as a function of theta,
-and peak memory. Results also go to ``out/bench_tree.json`` (``--json PATH``).
+far/near split) and the box refit, the contact step and the closest pairs (exact; all pairs up
+to 20 000 edges, and through the hierarchy), relative errors against the exact sum as a
+function of theta, and peak memory. Results also go to ``out/bench_tree.json`` (``--json PATH``).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from paper import machine
 from moebius_addon import core
 from moebius_addon.core import barnes_hut, bvh
 from moebius_addon.core._layout import as_layout
-from moebius_addon.core.collision import contact_time_x
+from moebius_addon.core.collision import closest_pairs, contact_time_x
 from moebius_addon.core.energy import energy_gradient_x
 
 EXACT_UP_TO = 20000
@@ -76,7 +76,7 @@ def timings(P, exact: bool, theta: float) -> dict:
     n = layout.n
     row: dict = {"edges": n}
     frame = barnes_hut.Frame(X, layout, theta)
-    row["far_pairs"], row["near_pairs"] = frame.far_pairs, frame.near_pairs
+    row["far_pairs"], row["near_pairs"] = frame.far_pairs, len(frame.near)
     row["tree_eg"] = best_of(lambda: barnes_hut.Frame(X, layout, theta).energy_gradient(X), 3)
     row["tree_e"] = best_of(lambda: barnes_hut.Frame(X, layout, theta).energy(X), 3)
     row["frame"] = best_of(lambda: barnes_hut.Frame(X, layout, theta), 3)
@@ -92,8 +92,13 @@ def timings(P, exact: bool, theta: float) -> dict:
     h = float(np.linalg.norm(X[layout.nxt] - X, axis=1).mean())
     U = G * (0.1 * h / np.abs(G).max())
     eps = 1e-3 * h
-    row["contact_none"] = best_of(lambda: contact_time_x(X, U, layout, 1.0, eps), 3)
-    row["contact_hit"] = best_of(lambda: contact_time_x(X, U, layout, 1e4, eps), 3)
+    searches = ("pairs", "tree") if exact else ("tree",)
+    for search in searches:
+        for key, tau_max in (("none", 1.0), ("hit", 1e4)):
+            row[f"contact_{key}_{search}"] = best_of(
+                lambda t=tau_max, s=search: contact_time_x(X, U, layout, t, eps, search=s), 3)
+        row[f"closest_{search}"] = best_of(
+            lambda s=search: closest_pairs(X, layout, 4, search=s), 2 if search == "pairs" else 3)
     return row
 
 
@@ -118,8 +123,12 @@ def main() -> None:
                  if "exact_eg" in row else "exact -")
         print(f"  N={n:7d}: tree E+g {row['tree_eg']:.4f} (E {row['tree_e']:.4f}, frame "
               f"{row['frame']:.4f}, build {row['build']:.4f}, refit {row['refit']:.5f})  "
-              f"{exact}  contact {row['contact_none']:.4f}/{row['contact_hit']:.4f}  "
-              f"far/near pairs {row['far_pairs']}/{row['near_pairs']}", flush=True)
+              f"{exact}  far/near pairs {row['far_pairs']}/{row['near_pairs']}", flush=True)
+        for search in ("pairs", "tree"):
+            if f"closest_{search}" in row:
+                print(f"           contact step ({search}) {row[f'contact_none_{search}']:.4f} "
+                      f"(no contact) / {row[f'contact_hit_{search}']:.4f} (contact); closest "
+                      f"pairs {row[f'closest_{search}']:.4f}", flush=True)
 
     print("\nRelative errors against the exact sum (energy, gradient 2-norm):", flush=True)
     out["errors"] = []
