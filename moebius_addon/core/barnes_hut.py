@@ -36,7 +36,7 @@ import numpy as np
 from . import bvh
 from ._layout import Layout
 
-THETA = 0.125  # default admissibility (docs/benchmarks.md, "Tree engine: accuracy")
+THETA = 0.0625  # default admissibility (docs/benchmarks.md, "Tree engine: accuracy")
 _FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
 # Fixed split of the traversal into chunks (the same lists for every thread count).
 _SPLIT_CHUNKS = 16
