@@ -185,47 +185,18 @@ def _descend(a0, b0, left, right, bmin, bmax, nc, diam2, theta2, far, nfar, near
         top -= 1
         a = stack[top, 0]
         b = stack[top, 1]
-        if top + 3 > stack.shape[0]:
-            grown = np.empty((2 * stack.shape[0], 2), np.int64)
-            grown[:top] = stack[:top]
-            stack = grown
-        if a == b:
-            if left[a] >= 0:
-                la, ra = left[a], right[a]
-                stack[top, 0], stack[top, 1] = la, ra
-                stack[top + 1, 0], stack[top + 1, 1] = ra, ra
-                stack[top + 2, 0], stack[top + 2, 1] = la, la
-                top += 3
-                continue
-            is_far = False
-        else:
-            is_far = _admissible(a, b, bmin, bmax, nc, diam2, theta2)
-            if not is_far and (left[a] >= 0 or left[b] >= 0):
-                if left[b] < 0 or (left[a] >= 0 and diam2[a] >= diam2[b]):
-                    stack[top, 0], stack[top, 1] = right[a], b
-                    stack[top + 1, 0], stack[top + 1, 1] = left[a], b
-                else:
-                    stack[top, 0], stack[top, 1] = a, right[b]
-                    stack[top + 1, 0], stack[top + 1, 1] = a, left[b]
-                top += 2
-                continue
+        is_far = a != b and _admissible(a, b, bmin, bmax, nc, diam2, theta2)
+        if not is_far and (left[a] >= 0 or left[b] >= 0):
+            stack, top = bvh.push_split(stack, top, a, b, left, right, diam2)
+            continue
+        full = nfar == far.shape[0] if is_far else nnear == near.shape[0]
+        if full and not grow:
+            return far, -1, near, -1
         if is_far:
-            if nfar == far.shape[0]:
-                if not grow:
-                    return far, -1, near, -1
-                far = _push_pair(far, nfar, a, b)
-            else:
-                far[nfar, 0] = a
-                far[nfar, 1] = b
+            far = _push_pair(far, nfar, a, b)
             nfar += 1
         else:
-            if nnear == near.shape[0]:
-                if not grow:
-                    return far, -1, near, -1
-                near = _push_pair(near, nnear, a, b)
-            else:
-                near[nnear, 0] = a
-                near[nnear, 1] = b
+            near = _push_pair(near, nnear, a, b)
             nnear += 1
     return far, nfar, near, nnear
 
@@ -247,22 +218,9 @@ def _tasks(left, right, bmin, bmax, nc, diam2, theta2, want):
         grew = False
         for p in range(cur.shape[0]):
             a, b = cur[p, 0], cur[p, 1]
-            if a == b and left[a] >= 0:
-                la, ra = left[a], right[a]
-                nxt[count, 0], nxt[count, 1] = la, la
-                nxt[count + 1, 0], nxt[count + 1, 1] = la, ra
-                nxt[count + 2, 0], nxt[count + 2, 1] = ra, ra
-                count += 3
-                grew = True
-            elif a != b and (left[a] >= 0 or left[b] >= 0) and not _admissible(
-                    a, b, bmin, bmax, nc, diam2, theta2):
-                if left[b] < 0 or (left[a] >= 0 and diam2[a] >= diam2[b]):
-                    nxt[count, 0], nxt[count, 1] = left[a], b
-                    nxt[count + 1, 0], nxt[count + 1, 1] = right[a], b
-                else:
-                    nxt[count, 0], nxt[count, 1] = a, left[b]
-                    nxt[count + 1, 0], nxt[count + 1, 1] = a, right[b]
-                count += 2
+            if (left[a] >= 0 or left[b] >= 0) and (
+                    a == b or not _admissible(a, b, bmin, bmax, nc, diam2, theta2)):
+                nxt, count = bvh.push_split(nxt, count, a, b, left, right, diam2)
                 grew = True
             else:
                 nxt[count, 0], nxt[count, 1] = a, b
@@ -279,10 +237,7 @@ def _split(left, right, bmin, bmax, nc, theta2, nchunks, want, cap):
     pairs of leaves (self pairs ``(A, A)`` included). The pairs of a frontier of ``want`` node
     pairs are split depth first in ``nchunks`` fixed chunks, each into a buffer of ``cap``
     pairs, and concatenated in chunk order: the same lists for every thread count."""
-    m = left.shape[0]
-    diam2 = np.empty(m)
-    for node in range(m):
-        diam2[node] = bvh.box_diam2(bmin, bmax, node)
+    diam2 = bvh.node_diam2(bmin, bmax)
     tasks = _tasks(left, right, bmin, bmax, nc, diam2, theta2, want)
     fbuf = np.empty((nchunks, cap, 2), np.int64)
     nbuf = np.empty((nchunks, cap, 2), np.int64)

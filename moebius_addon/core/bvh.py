@@ -153,3 +153,38 @@ def box_diam2(bmin, bmax, a):
         d = bmax[a, k] - bmin[a, k]
         s += d * d
     return s
+
+
+@nb.njit(cache=True)
+def node_diam2(bmin, bmax):
+    """Squared box diagonal of every node."""
+    m = bmin.shape[0]
+    d = np.empty(m)
+    for node in range(m):
+        d[node] = box_diam2(bmin, bmax, node)
+    return d
+
+
+@nb.njit(cache=True, inline="always")
+def push_split(stack, top, a, b, left, right, diam2):
+    """Push onto ``stack`` (pairs of nodes, ``top`` used) the pairs that split ``(a, b)``
+    in a dual traversal: for a self pair the two children with themselves and with each other,
+    else the larger node's halves against the other (a leaf is never split). Returns the
+    stack (grown when full) and the new top."""
+    if top + 3 > stack.shape[0]:
+        grown = np.empty((2 * stack.shape[0], 2), np.int64)
+        grown[:top] = stack[:top]
+        stack = grown
+    if a == b:
+        la, ra = left[a], right[a]
+        stack[top, 0], stack[top, 1] = la, ra
+        stack[top + 1, 0], stack[top + 1, 1] = ra, ra
+        stack[top + 2, 0], stack[top + 2, 1] = la, la
+        return stack, top + 3
+    if left[b] < 0 or (left[a] >= 0 and diam2[a] >= diam2[b]):
+        stack[top, 0], stack[top, 1] = right[a], b
+        stack[top + 1, 0], stack[top + 1, 1] = left[a], b
+    else:
+        stack[top, 0], stack[top, 1] = a, right[b]
+        stack[top + 1, 0], stack[top + 1, 1] = a, left[b]
+    return stack, top + 2

@@ -38,50 +38,29 @@ def _disjoint(i, j, starts, comp):
 
 
 @nb.njit(cache=True)
-def _frontier(left, right, bmin, bmax, cut2, want):
-    """Node pairs (self pairs included) whose subtrees hold every pair of edges closer than
-    ``sqrt(cut2)`` in box distance (``cut2 < 0``: overlapping boxes only), expanded breadth
-    first until there are ``want`` of them or only leaf pairs are left."""
+def _frontier(left, right, bmin, bmax, diam2, overlap, want):
+    """Node pairs (self pairs included) that hold every pair of edges a search must test,
+    expanded breadth first from (root, root) until there are ``want`` of them or only leaf
+    pairs are left; with ``overlap``, pairs whose boxes do not meet are dropped."""
     cur = np.zeros((1, 2), np.int64)
-    while True:
+    while cur.shape[0] < want:
         nxt = np.empty((3 * cur.shape[0], 2), np.int64)
         count = 0
         grew = False
         for p in range(cur.shape[0]):
             a, b = cur[p, 0], cur[p, 1]
-            if a == b:
-                if left[a] < 0:
-                    nxt[count, 0] = a
-                    nxt[count, 1] = a
-                    count += 1
-                    continue
+            if overlap and a != b and bvh.box_gap2(bmin, bmax, a, b) > 0.0:
+                continue
+            if left[a] >= 0 or left[b] >= 0:
+                nxt, count = bvh.push_split(nxt, count, a, b, left, right, diam2)
                 grew = True
-                la, ra = left[a], right[a]
-                for x, y in ((la, la), (la, ra), (ra, ra)):
-                    if x == y or bvh.box_gap2(bmin, bmax, x, y) <= cut2 or (
-                            cut2 < 0 and bvh.box_gap2(bmin, bmax, x, y) == 0.0):
-                        nxt[count, 0] = x
-                        nxt[count, 1] = y
-                        count += 1
-                continue
-            if left[a] < 0 and left[b] < 0:
-                nxt[count, 0] = a
-                nxt[count, 1] = b
+            else:
+                nxt[count, 0], nxt[count, 1] = a, b
                 count += 1
-                continue
-            grew = True
-            split_a = left[b] < 0 or (left[a] >= 0 and bvh.box_diam2(bmin, bmax, a)
-                                      >= bvh.box_diam2(bmin, bmax, b))
-            for child in ((left[a], right[a]) if split_a else (left[b], right[b])):
-                x, y = (child, b) if split_a else (a, child)
-                g = bvh.box_gap2(bmin, bmax, x, y)
-                if g <= cut2 or (cut2 < 0 and g == 0.0):
-                    nxt[count, 0] = x
-                    nxt[count, 1] = y
-                    count += 1
         cur = nxt[:count].copy()
-        if not grew or count >= want:
-            return cur
+        if not grew:
+            break
+    return cur
 
 
 # ------------------------------------------------------------------------------------------------
@@ -130,7 +109,8 @@ def _contact_search(X, U, nxt, starts, comp, perm, lo, hi, left, right, tau_max,
     pad = 1e-12 * scale  # rounding of the pair test's sphere arithmetic
     bmin, bmax = _swept_boxes(perm, lo, hi, left, right, mid, vel, spread, half, eps,
                               tau_max, pad)
-    tasks = _frontier(left, right, bmin, bmax, -1.0, want)
+    diam2 = bvh.node_diam2(bmin, bmax)
+    tasks = _frontier(left, right, bmin, bmax, diam2, True, want)
     best = np.full(nchunks, tau_max)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
@@ -145,10 +125,6 @@ def _contact_search(X, U, nxt, starts, comp, perm, lo, hi, left, right, tau_max,
                 a, b = stack[top, 0], stack[top, 1]
                 if a != b and bvh.box_gap2(bmin, bmax, a, b) > 0.0:
                     continue
-                if top + 3 > stack.shape[0]:
-                    grown = np.empty((2 * stack.shape[0], 2), np.int64)
-                    grown[:top] = stack[:top]
-                    stack = grown
                 if left[a] < 0 and left[b] < 0:
                     for q in range(lo[a], hi[a]):
                         for r in range(q + 1 if a == b else lo[b], hi[b]):
@@ -158,21 +134,8 @@ def _contact_search(X, U, nxt, starts, comp, perm, lo, hi, left, right, tau_max,
                             if _disjoint(i, j, starts, comp):
                                 tb = pair_time(X, U, nxt, i, j, mid, vel, spread, half, vmax,
                                                eps, tb)
-                elif a == b:
-                    la, ra = left[a], right[a]
-                    stack[top, 0], stack[top, 1] = la, ra
-                    stack[top + 1, 0], stack[top + 1, 1] = ra, ra
-                    stack[top + 2, 0], stack[top + 2, 1] = la, la
-                    top += 3
-                elif left[b] < 0 or (left[a] >= 0 and bvh.box_diam2(bmin, bmax, a)
-                                     >= bvh.box_diam2(bmin, bmax, b)):
-                    stack[top, 0], stack[top, 1] = left[a], b
-                    stack[top + 1, 0], stack[top + 1, 1] = right[a], b
-                    top += 2
                 else:
-                    stack[top, 0], stack[top, 1] = a, left[b]
-                    stack[top + 1, 0], stack[top + 1, 1] = a, right[b]
-                    top += 2
+                    stack, top = bvh.push_split(stack, top, a, b, left, right, diam2)
         best[ch] = tb
     return best.min()
 
@@ -208,7 +171,8 @@ def _better(d2, i, j, best, bi, bj):
 @nb.njit(cache=True, parallel=True)
 def _closest_search(X, nxt, starts, comp, perm, lo, hi, left, right, bmin, bmax, min_gap,
                     nchunks, want):
-    tasks = _frontier(left, right, bmin, bmax, np.inf, want)
+    diam2 = bvh.node_diam2(bmin, bmax)
+    tasks = _frontier(left, right, bmin, bmax, diam2, False, want)
     big = np.iinfo(np.int64).max
     vbest = np.full(nchunks, np.inf)
     vidx = np.full((nchunks, 2), big, np.int64)
@@ -231,10 +195,6 @@ def _closest_search(X, nxt, starts, comp, perm, lo, hi, left, right, bmin, bmax,
                     g = bvh.box_gap2(bmin, bmax, a, b)
                     if g > vb and g > eb:
                         continue
-                if top + 3 > stack.shape[0]:
-                    grown = np.empty((2 * stack.shape[0], 2), np.int64)
-                    grown[:top] = stack[:top]
-                    stack = grown
                 if left[a] < 0 and left[b] < 0:
                     for q in range(lo[a], hi[a]):
                         for r in range(q + 1 if a == b else lo[b], hi[b]):
@@ -261,21 +221,8 @@ def _closest_search(X, nxt, starts, comp, perm, lo, hi, left, right, bmin, bmax,
                                 )
                                 if _better(d2, i, j, eb, ei0, ej0):
                                     eb, ei0, ej0, es, et = d2, i, j, s, u
-                elif a == b:
-                    la, ra = left[a], right[a]
-                    stack[top, 0], stack[top, 1] = la, ra
-                    stack[top + 1, 0], stack[top + 1, 1] = ra, ra
-                    stack[top + 2, 0], stack[top + 2, 1] = la, la
-                    top += 3
-                elif left[b] < 0 or (left[a] >= 0 and bvh.box_diam2(bmin, bmax, a)
-                                     >= bvh.box_diam2(bmin, bmax, b)):
-                    stack[top, 0], stack[top, 1] = left[a], b
-                    stack[top + 1, 0], stack[top + 1, 1] = right[a], b
-                    top += 2
                 else:
-                    stack[top, 0], stack[top, 1] = a, left[b]
-                    stack[top + 1, 0], stack[top + 1, 1] = a, right[b]
-                    top += 2
+                    stack, top = bvh.push_split(stack, top, a, b, left, right, diam2)
         vbest[ch], vidx[ch, 0], vidx[ch, 1] = vb, vi0, vj0
         ebest[ch], eidx[ch, 0], eidx[ch, 1] = eb, ei0, ej0
         epar[ch, 0], epar[ch, 1] = es, et
