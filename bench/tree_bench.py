@@ -133,6 +133,15 @@ def main() -> None:
         million(args.theta)
         return
 
+    print("\nresample to 100 000 edges (issue 'Tree engine, part 2': <= 2 s), seconds:", flush=True)
+    out["resample"] = {}
+    for name in ("3_1", "7_2"):
+        P = core.knots.named(name)
+        t0 = time.perf_counter()
+        core.resample(P, 100000)
+        out["resample"][name] = time.perf_counter() - t0
+        print(f"  {name}: {out['resample'][name]:.2f}", flush=True)
+
     print(f"\nEnergy+gradient (7_2, theta={args.theta}), seconds (best of 3):", flush=True)
     out["timings"] = []
     for n in args.sizes:
