@@ -158,18 +158,20 @@ def keyed_energies(obj: bpy.types.Object) -> tuple[np.ndarray, np.ndarray]:
 
     Returns
     -------
-    frames, energies : (K,) float arrays
+    frames : (K,) int array
+        Whole frame numbers (``scene.frame_set`` takes them as they are).
+    energies : (K,) float array
         Empty when the object has no flow keys.
     """
     fcurves = _fcurves(obj, create=False)
     fc = None if fcurves is None else fcurves.find(ENERGY_PATH, index=0)
     if fc is None:
-        return np.empty(0), np.empty(0)
+        return np.empty(0, dtype=np.int64), np.empty(0)
     co = np.empty(2 * len(fc.keyframe_points))
     fc.keyframe_points.foreach_get("co", co)
-    return co[0::2], co[1::2]
+    return np.rint(co[0::2]).astype(np.int64), co[1::2]
 
 
-def keyed_frames(obj: bpy.types.Object) -> list[float]:
+def keyed_frames(obj: bpy.types.Object) -> list[int]:
     """Frames at which the energy of ``obj`` is keyed (empty when it has no flow keys)."""
     return keyed_energies(obj)[0].tolist()
