@@ -18,6 +18,9 @@ from .. import core
 from . import geometry, keyframes
 from .keyframes import ENERGY_PROP
 
+# Coordinates at or beyond this are Blender's clamped infinities (single precision: ±3.4e38).
+_FLOAT_LIMIT = 1e38
+
 #: Above this many edges in total the conversion is refused: each iteration evaluates all
 #: N² edge pairs of the energy and solves an N×N system, so ten times the edges cost about a
 #: hundred times the time per iteration. ``allow_large=True`` lifts the limit for scripts.
@@ -182,12 +185,14 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
                 "vertices of a mesh) or enable 'Close open splines'"
             )
         points = np.asarray(points, np.float64)
-        bad = ~np.isfinite(points).all(axis=1)
+        # Blender keeps points in single precision and stores an infinity typed in the UI as
+        # ±3.4e38 (its float limit): coordinates that large are infinite ones
+        bad = ~(np.abs(points) < _FLOAT_LIMIT).all(axis=1)
         if bad.any():
             raise ValueError(
                 f"{where} has NaN or infinite coordinates ({int(bad.sum())} of its "
-                f"{len(points)} points, the first at index {int(np.flatnonzero(bad)[0])}); "
-                "fix or delete those points"
+                f"{len(points)} points, the first at index {int(np.flatnonzero(bad)[0])}; "
+                "Blender shows an infinite one as ±3.4e38); fix or delete those points"
             )
         points = _dedupe(points, closed=True)
         if len(points) < 4:
