@@ -233,10 +233,31 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
         )
     polygons = [core.resample(p, n, closed=True) for p, n in zip(cleaned, counts, strict=True)]
     try:
-        core.check_polygon(_as_input(polygons))
+        core.check_polygon(_as_input(polygons), coarseness=False)
     except ValueError as err:
         raise ValueError(f"'{obj.name}' after resampling to {counts} edges: {err}") from None
+    if core.contact_ratio(_as_input(polygons)) < core.polygon.CONTACT_RATIO:
+        raise ValueError(f"'{obj.name}' is too coarse at {counts} edges for its shape: strands "
+                         f"far apart along the curve come closer than one edge length, and the "
+                         f"energy cannot keep them apart — "
+                         f"{_finer_conversion(cleaned, counts, edge_length)}")
     return polygons
+
+
+def _finer_conversion(cleaned, counts, edge_length) -> str:
+    """The fix for a too coarse conversion, in the unit of the field the user set: the
+    smallest count per component (or the largest edge length) in 10% steps that passes the
+    contact check, or a plain advice when none does up to EDGE_LIMIT edges."""
+    factor = 1.1
+    while sum(counts) * factor <= EDGE_LIMIT:
+        finer = [max(4, int(np.ceil(n * factor))) for n in counts]
+        polygons = [core.resample(p, n, closed=True) for p, n in zip(cleaned, finer, strict=True)]
+        if core.contact_ratio(_as_input(polygons)) >= core.polygon.CONTACT_RATIO:
+            if edge_length is not None:
+                return f"use an edge length of at most {edge_length / factor:.4g}"
+            return f"use at least {finer[0]} edges per component (the Edges field)"
+        factor *= 1.1
+    return f"move the strands apart; no conversion up to {EDGE_LIMIT} edges resolves them"
 
 
 def _link_like(new: bpy.types.Object, like: bpy.types.Object | None,

@@ -1,5 +1,7 @@
 """Bad input: a clear report that says what to do, and the scene left exactly as it was."""
 
+import re
+
 import bpy
 import numpy as np
 import pytest
@@ -94,7 +96,7 @@ def test_convert_to_too_few_edges(scene, mb, core):
         mb.api.convert_object(obj, edge_length=2.0)  # about 6 edges
     assert scene_state() == before
     # 9 is a count the check can judge: here it refuses it as too coarse, naming what works
-    _refused(bpy.ops.moebius.convert, r"too coarse .* resample with at least \d+ edges")
+    _refused(bpy.ops.moebius.convert, r"too coarse .* use at least \d+ edges per component")
 
 
 def test_self_touching_curve(scene, mb):
@@ -145,3 +147,17 @@ def test_infinite_points_named_as_such(scene, mb, value):
     poly_curve("Far", [P])
     _refused(bpy.ops.moebius.convert, r"'Far' has NaN or infinite coordinates \(1 of its 40 "
                                       r"points, the first at index 9; .*3\.4e38\)")
+
+
+def test_coarse_link_names_the_count_per_component(scene, mb):
+    # a chain of three rings: the suggestion was a total over the link ("at least 396 edges")
+    # while the Edges field counts per component
+    ring = _circle(64)
+    poly_curve("Chain", [ring, ring[:, [0, 2, 1]] + [1.0, 0, 0], ring + [2.0, 0.0, 0.3]])
+    obj = bpy.data.objects["Chain"]
+    with pytest.raises(ValueError, match=r"at least (\d+) edges per component") as err:
+        mb.api.prepare_conversion(obj, edges=12)
+    k = int(re.search(r"at least (\d+) edges per component", str(err.value)).group(1))
+    assert len(mb.api.prepare_conversion(obj, edges=k)) == 3  # the count named works
+    with pytest.raises(ValueError, match="edge length of at most"):
+        mb.api.prepare_conversion(obj, edge_length=0.6)
