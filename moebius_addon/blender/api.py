@@ -422,6 +422,40 @@ def relax_settings(settings) -> dict:
     return kwargs
 
 
+def check_relax_options(max_iterations, tolerance, keyframe_stride, frame_start,
+                        method: str = DEFAULT_METHOD, penalty: float | None = None):
+    """The relax options checked under this layer's names (the core would say max_iter, tol):
+    ``(max_iterations, tolerance, keyframe_stride, frame_start, method options)``, or
+    ValueError. Every door (operator, script, command line) calls this before any work."""
+    max_iterations = core.check_number("max_iterations", max_iterations, 0, integer=True)
+    tolerance = core.check_number("tolerance", tolerance, 0)
+    keyframe_stride = core.check_number("keyframe_stride", keyframe_stride, 1, integer=True)
+    frame_start = core.check_number("frame_start", frame_start, integer=True)
+    return max_iterations, tolerance, keyframe_stride, frame_start, _check_method(method, penalty)
+
+
+def knot_names() -> list[str]:
+    """Every name :func:`knot_polygons` takes: the generators, then the knot table."""
+    from ..core import knots
+
+    return [*_KNOT_MAKERS, *knots.names()]
+
+
+_KNOT_MAKERS = ("fhw", "helix", "random", "torus", "circle", "figure_eight")
+
+
+def check_knot(kind: str, n: int | None = None) -> None:
+    """ValueError for a name :func:`knot_polygons` does not know (listing those it does) or
+    more edges than a run takes (``EDGE_LIMIT``): the same refusal in every door, before any
+    work."""
+    if kind not in knot_names():
+        raise ValueError(f"unknown knot '{kind}'; choose one of {', '.join(knot_names())}")
+    if n and int(n) > EDGE_LIMIT:
+        raise ValueError(f"{int(n)} edges is too many: runs above {EDGE_LIMIT} edges are "
+                         f"refused (the cost per iteration grows as N²); use at most "
+                         f"{EDGE_LIMIT} (a few hundred are plenty to untangle a knot)")
+
+
 def _check_method(method: str, penalty: float | None) -> dict:
     """Validate ``method`` and ``penalty``; the extra options for ``core.make_run``."""
     if method not in core.METHODS:
@@ -492,12 +526,9 @@ class ObjectRelaxation:
                  tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
                  method: str = DEFAULT_METHOD, penalty: float | None = None,
                  **options) -> None:
-        # under this layer's names (the core would say max_iter, tol), before anything else
-        max_iterations = core.check_number("max_iterations", max_iterations, 0, integer=True)
-        tolerance = core.check_number("tolerance", tolerance, 0)
-        keyframe_stride = core.check_number("keyframe_stride", keyframe_stride, 1, integer=True)
-        frame_start = core.check_number("frame_start", frame_start, integer=True)
-        options.update(_check_method(method, penalty))
+        max_iterations, tolerance, keyframe_stride, frame_start, extra = check_relax_options(
+            max_iterations, tolerance, keyframe_stride, frame_start, method, penalty)
+        options.update(extra)
         polygons = geometry.curve_polygons(obj)
         total = sum(len(p) for p in polygons)
         if total > EDGE_LIMIT and not options.pop("allow_large", False):
@@ -699,6 +730,7 @@ def knot_polygons(kind: str, n: int | None = None, p: int = 2, q: int = 3,
     """
     from ..core import knots
 
+    check_knot(kind, n)
     n = n or None
     makers = {
         "fhw": lambda: knots.freedman_unknot(*(n,) if n else ()),
@@ -710,11 +742,8 @@ def knot_polygons(kind: str, n: int | None = None, p: int = 2, q: int = 3,
     }
     if kind in makers:
         link = _as_link(makers[kind]())
-    elif kind in knots.names():
-        link = _as_link(knots.named(kind, n))
     else:
-        raise ValueError(f"unknown knot '{kind}'; choose one of {sorted(makers)} or "
-                         f"core.knots.names()")
+        link = _as_link(knots.named(kind, n))
     out = []
     for P in link:
         e = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1)

@@ -28,8 +28,8 @@ def _parser() -> argparse.ArgumentParser:
     )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--object", help="name of the curve or edge-loop mesh object to relax")
-    src.add_argument("--knot", help="add this catalogue knot instead (fhw, helix, random, "
-                                    "torus, circle, figure_eight or a table name such as 7_2)")
+    src.add_argument("--knot", metavar="NAME",
+                     help="add this catalogue knot instead: " + ", ".join(api.knot_names()))
     p.add_argument("--open", metavar="FILE.blend", help="open this file first")
     p.add_argument("--edges", type=int, default=None,
                    help="edges per component (converts the object; default: keep a converted "
@@ -71,7 +71,11 @@ def main(argv: list[str]) -> int:
     except SystemExit as exit_:
         return int(exit_.code or 0)
     try:
-        api._check_method(args.method, args.penalty)  # refuse before touching anything
+        # every option is checked before anything is added, converted or relaxed
+        api.check_relax_options(args.max_iterations, args.tolerance, args.stride,
+                                args.frame_start, args.method, args.penalty)
+        if args.knot:
+            api.check_knot(args.knot, args.edges)
         for path in args.export:
             api.export_suffix(path)
         if args.open:

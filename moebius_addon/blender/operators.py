@@ -200,7 +200,7 @@ class MOEBIUS_OT_add_knot(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     # kind: EnumProperty over the catalogue, added in register() (the catalogue is read then)
-    edges: IntProperty(name="Edges", default=0, min=0, soft_max=1000, max=api.EDGE_LIMIT,
+    edges: IntProperty(name="Edges", default=0, min=0, soft_max=1000,
                        description="Edges of the polygon (0: the catalogue's default for this "
                                    "knot, fine enough for its shape)")
     p: IntProperty(name="p", default=2, min=1, soft_max=20, description="Torus knot: p")

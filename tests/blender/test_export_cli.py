@@ -158,3 +158,30 @@ def test_keyed_frames_are_whole_numbers(relaxed, mb):
     frames, energies = mb.keyed_energies(relaxed)
     bpy.context.scene.frame_set(frames[-1])  # a float frame raised TypeError here
     assert bpy.context.scene.frame_current == frames[-1] and len(energies) == len(frames)
+
+
+def test_one_set_of_limits_in_every_door(scene, mb, capfd):
+    from importlib import import_module
+
+    cli = import_module(mb.__name__ + ".cli")
+    limit = mb.api.EDGE_LIMIT
+    objects = len(bpy.data.objects)
+    # the script door: was clamped to the limit by the operator, made as asked by add_knot
+    with pytest.raises(ValueError, match=f"{limit + 1000} edges is too many.*at most {limit}"):
+        mb.add_knot("3_1", limit + 1000)
+    with pytest.raises(RuntimeError, match=f"{limit + 1000} edges is too many"):
+        bpy.ops.moebius.add_knot(kind="3_1", edges=limit + 1000)
+    # the command line: refused before adding anything (was a 6000-edge knot, then refused by
+    # Relax), and a bad --tolerance before the knot is added
+    capfd.readouterr()
+    assert cli.main(["--knot", "3_1", "--edges", str(limit + 1000), "--no-relax"]) == 1
+    assert cli.main(["--knot", "3_1", "--tolerance", "nan", "--no-relax"]) == 1
+    assert cli.main(["--knot", "no_such_knot"]) == 1
+    err = capfd.readouterr().err
+    assert "too many" in err and "tolerance must be" in err
+    assert "unknown knot 'no_such_knot'; choose one of fhw, helix" in err and "7_2" in err
+    assert len(bpy.data.objects) == objects
+    # --help lists the catalogue
+    assert cli.main(["--help"]) == 0
+    out = capfd.readouterr().out
+    assert "figure_eight" in out and "8_21" in out
