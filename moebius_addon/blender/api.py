@@ -558,7 +558,9 @@ class ObjectRelaxation:
         self.energies = [self.energy]
         self._pending = None
         self.t0 = time.perf_counter()
-        keyframes.remove_flow_keyframes(obj)
+        # the earlier run's keys stay until this run's are written (finish), so that a run
+        # that fails before its first iterate leaves them; live display removes them first
+        self._live = False
 
     def step(self) -> bool:
         """Advance by one accepted iterate; False once the run has finished."""
@@ -582,7 +584,11 @@ class ObjectRelaxation:
         self.run.stop(message)
 
     def show(self) -> None:
-        """Put the current iterate on the curve (for live display while running)."""
+        """Put the current iterate on the curve (for live display while running; the earlier
+        run's keys are removed at the first call, or they would pull the curve back)."""
+        if not self._live:
+            keyframes.remove_flow_keyframes(self.obj)
+            self._live = True
         geometry.write_polygons(self.obj.data, self.x)
 
     def finish(self, scene: bpy.types.Scene | None = None):
@@ -654,19 +660,34 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
     ValueError
         If the curve cannot be relaxed or the method or penalty is invalid; nothing is changed
         then.
+    BaseException
+        Whatever interrupts the run (Ctrl+C, a failing callback) passes through, after the
+        iterates computed so far are keyed (or, before the first one, the earlier animation is
+        left as it was); a note on the exception says which.
     """
     run = ObjectRelaxation(obj, metric=metric, max_iterations=max_iterations, tolerance=tolerance,
                            frame_start=frame_start, keyframe_stride=keyframe_stride,
                            method=method, penalty=penalty, **options)
     more = True
-    while more:
-        before = run.nit
-        more = run.step()
-        # every accepted iterate reaches the callback, the last one of the run included (as in
-        # core.relax); a True returned for the last one changes nothing
-        if run.nit > before and callback is not None and callback(run):
-            run.stop("stopped by callback")
-            break
+    try:
+        while more:
+            before = run.nit
+            more = run.step()
+            # every accepted iterate reaches the callback, the last one of the run included (as
+            # in core.relax); a True returned for the last one changes nothing
+            if run.nit > before and callback is not None and callback(run):
+                run.stop("stopped by callback")
+                break
+    except BaseException as err:  # Ctrl+C in a script, a failing callback: keep the work
+        if run.nit == 0:
+            err.add_note(f"moebius: no iterate was computed; the earlier animation of "
+                         f"'{obj.name}' is kept")
+        else:
+            run.stop(f"interrupted by {type(err).__name__}")
+            run.finish(scene)
+            err.add_note(f"moebius: the {run.nit} iterates computed before the interruption "
+                         f"are keyed on '{obj.name}' from frame {run.frame_start}")
+        raise
     return run.finish(scene)
 
 

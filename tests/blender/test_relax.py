@@ -205,3 +205,23 @@ def test_method_hint_follows_the_status_not_the_words(mb, core):
     # the words alone decide nothing: a time budget that mentions an iteration limit
     assert hint("projected_gradient", result(core.Status.TIME, "maximum number of")) == ""
     assert hint("projected_gradient_implicit", result(core.Status.MAX_ITER, "")) == ""
+
+
+@pytest.mark.parametrize("error", [KeyboardInterrupt, RuntimeError])
+def test_interrupted_script_keeps_the_work(scene, mb, error):
+    # a callback that raised (Ctrl+C in a script) deleted the earlier run's keys and the new
+    # iterates: the curve was left unanimated
+    bpy.ops.moebius.add_knot(kind="3_1", edges=60)
+    obj = bpy.context.active_object
+    mb.relax_object(obj, max_iterations=4, tolerance=0.0)
+    assert mb.keyed_frames(obj) == [1, 2, 3, 4, 5]
+
+    def interrupt(run):
+        if run.nit == 2:
+            raise error("stop")
+
+    with pytest.raises(error) as info:
+        mb.relax_object(obj, max_iterations=50, tolerance=0.0, callback=interrupt)
+    assert mb.keyed_frames(obj) == [1, 2, 3]  # the start and the two iterates computed
+    assert "the 2 iterates computed before the interruption are keyed" in "".join(
+        getattr(info.value, "__notes__", []))
