@@ -6,10 +6,11 @@ products) against slow, obvious versions."""
 import numpy as np
 import pytest
 
-from moebius_addon.core import Status, max_collision_free_step, relax, resample
+from moebius_addon.core import Status, max_collision_free_step, moebius_energy, relax, resample
 from moebius_addon.core._layout import as_layout
 from moebius_addon.core.constraints import jacobian, make_constraints
 from moebius_addon.core.engine import PenaltyMetric
+from moebius_addon.core.knots import freedman_unknot
 from moebius_addon.core.metrics import gram_x
 from moebius_addon.core.solvers import FEASIBLE, INFEASIBLE, METHODS, make_run
 from moebius_addon.core.solvers.second_order import TrustRegion, _trust_subproblem
@@ -239,7 +240,9 @@ def test_paper_benchmark_smoke(tmp_path):
     assert len(rows) == 2 * len(METHODS)
     for col in ("method", "metric", "iterations", "seconds", "final_energy"):
         assert col in rows[0]
-    assert all(float(r["final_energy"]) < 1600 for r in rows)
+    # every run lowered the energy of its start (was "< 1600": the start itself has 1528.9)
+    start = moebius_energy(freedman_unknot(500))
+    assert all(float(r["final_energy"]) < start - 1.0 for r in rows), start
     assert (tmp_path / "r_traces.csv").exists()
     for png in ("energy_vs_time.png", "energy_vs_iteration.png", "scaling.png"):
         assert (out / png).stat().st_size > 10000
