@@ -13,15 +13,21 @@ Run with the ``bpy`` module of the project's venv (``make demo``)::
 from __future__ import annotations
 
 import argparse
+import atexit
 import os
+import shutil
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-# a throw-away Blender user directory: the demo must not touch the user's preferences
-os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="moebius-demo-user-"))
+# a throw-away Blender user directory: the demo must not touch the user's preferences; it goes
+# when the demo ends
+if "BLENDER_USER_RESOURCES" not in os.environ:
+    _USER = tempfile.mkdtemp(prefix="moebius-demo-user-")
+    os.environ["BLENDER_USER_RESOURCES"] = _USER
+    atexit.register(shutil.rmtree, _USER, ignore_errors=True)
 sys.path.insert(0, str(ROOT))
 
 import bpy  # noqa: E402
