@@ -188,8 +188,8 @@ def test_penalty_metric_solves_the_assembled_system(rng):
 
 def test_hessian_products_are_symmetric_and_match_central_differences(trefoil100, rng):
     run = TrustRegion(trefoil100, "hs", 5)
-    V = run._project(rng.standard_normal(run.X.shape))
-    W = run._project(rng.standard_normal(run.X.shape))
+    V = run._tangent_solve(rng.standard_normal(run.X.shape))
+    W = run._tangent_solve(rng.standard_normal(run.X.shape))
     dL = run.g - run.jac.rmatvec(run.lam)
     HV, HW = run._hess(run.X, dL, V), run._hess(run.X, dL, W)
     assert abs(np.sum(W * HV) - np.sum(V * HW)) <= 1e-5 * abs(np.sum(V * HW))
@@ -246,3 +246,17 @@ def test_paper_benchmark_smoke(tmp_path):
     assert (tmp_path / "r_traces.csv").exists()
     for png in ("energy_vs_time.png", "energy_vs_iteration.png", "scaling.png"):
         assert (out / png).stat().st_size > 10000
+
+
+@pytest.mark.parametrize("method", ["projected_gradient_implicit", "trust_region"])
+def test_second_order_methods_solve_the_saddle_system_once_per_iterate(trefoil100, method):
+    # u and λ come from one solve of [[G, Cᵀ], [C, 0]] [u; λ] = [g; 0] (it was solved twice:
+    # once for u, again for λ, doubling the solves and the Krylov counts)
+    run = make_run(method, trefoil100, "hs", max_iter=3)
+    assert len(run.engine.krylov_iterations) == 1
+    u, lam = run.engine.solve(run.g, np.zeros(run.con.size))
+    np.testing.assert_array_equal(run.u, u)
+    np.testing.assert_array_equal(run.lam, lam)
+    # the explicit method's line-search option is refused, not ignored
+    with pytest.raises(ValueError, match="interpolate shapes the line search"):
+        make_run(method, trefoil100, "hs", interpolate=True)

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constraints import jacobian
+from ..constraints import jacobian, residual
 from .base import _OutOfTime
 from .projected import Relaxation
 
@@ -31,12 +31,33 @@ _FD_STEP = 1e-6
 
 
 class _Feasible(Relaxation):
-    """Relaxation plus what the second-order methods need: multipliers and Hessian products."""
+    """Relaxation plus what the second-order methods need: multipliers and Hessian products.
+
+    Their own step rules replace the explicit method's line search, so its ``interpolate``
+    option is refused here rather than ignored.
+    """
+
+    def __init__(self, P, metric, max_iter, tol, *, interpolate: bool = False, **options):
+        if interpolate:
+            raise ValueError(
+                f"interpolate shapes the line search of projected_gradient only; "
+                f"{type(self).__name__} chooses its steps otherwise: leave it False"
+            )
+        super().__init__(P, metric, max_iter, tol, **options)
 
     def _prepare(self, X, E, g):
-        super()._prepare(X, E, g)
-        # λ of [[G, Cᵀ], [C, 0]] [u; λ] = [g; 0]: the Lagrangian gradient is g − Cᵀλ = G u
-        _, self.lam = self.engine.solve(g, np.zeros(self.con.size))
+        # Relaxation._prepare's steps 1–2, keeping λ of the one saddle-point solve
+        # [[G, Cᵀ], [C, 0]] [u; λ] = [g; 0] (the Lagrangian gradient is g − Cᵀλ = G u): calling
+        # it and solving again for λ doubled the solves and the Krylov iterations per iterate
+        self.X = X
+        self.E = E
+        self.g = g
+        self.jac = jacobian(X, self.con)
+        self.engine.update(X, self.jac)
+        self.u, self.lam = self.engine.solve(g, np.zeros(self.con.size))
+        self.gu = float(np.einsum("ij,ij->", g, self.u))
+        self._gnorm = float(np.linalg.norm(g))
+        self.phi = residual(X, self.con)
         self.hess_products = getattr(self, "hess_products", 0)
 
     def _lagrangian_gradient(self, Y):
@@ -52,7 +73,7 @@ class _Feasible(Relaxation):
         self.hess_products += 1
         return (self._lagrangian_gradient(Y + h * V) - dLY) / h
 
-    def _project(self, R):
+    def _tangent_solve(self, R):
         """Constraint preconditioner: ``z`` with ``G z + Cᵀμ = R``, ``C z = 0``."""
         return self.engine.solve(R, np.zeros(self.con.size))[0]
 
@@ -68,7 +89,7 @@ class _Feasible(Relaxation):
         """
         s = np.zeros_like(b)
         r = b.copy()
-        z = self._project(r)
+        z = self._tangent_solve(r)
         rz = float(np.einsum("ij,ij->", r, z))
         if rz <= 0.0:
             return None, False
@@ -83,7 +104,7 @@ class _Feasible(Relaxation):
             a = rz / curv
             s += a * p
             r -= a * Kp
-            z = self._project(r)
+            z = self._tangent_solve(r)
             rz_new = float(np.einsum("ij,ij->", r, z))
             if rz_new <= rtol * rtol * rz0:
                 break
@@ -262,7 +283,7 @@ class TrustRegion(_Feasible):
         u = self.u
         dirs = [-u]
         if self.u_prev is not None:
-            dirs.append(-self._project(self.engine.metric_product(self.u_prev)))
+            dirs.append(-self._tangent_solve(self.engine.metric_product(self.u_prev)))
         if np.sqrt(max(self.gu, 0.0)) <= self.newton_rtol * self.gn0:
             nd = self._newton_direction(dL)
             if nd is not None:
