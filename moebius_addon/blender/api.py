@@ -385,15 +385,25 @@ def method_hint(method: str, result) -> str:
     return f"; knots settle in fewer iterations with Advanced ▸ Method: {label}"
 
 
-def relax_settings(settings) -> dict:
-    """Keyword arguments for :func:`relax_object` from the ``scene.moebius`` settings.
+def acting_settings(method: str) -> frozenset:
+    """Names of the ``scene.moebius`` line-search, back-projection and constraint settings
+    that reach a run of ``method`` (the panel greys out the others): the Armijo constant and
+    the step growth are the explicit method's (the implicit one keeps its own σ = 1e-4 and
+    growth 1.5, see ``core.solvers``), the back-projection and constraint toggles belong to the
+    methods that keep the constraints, the penalty weight to the penalty methods."""
+    if method in PENALTY_METHODS:
+        return frozenset({"penalty"})
+    own = {"armijo", "growth"} if method == DEFAULT_METHOD else set()
+    return frozenset(own | {"backproject_iter", "backproject_digits", "keep_edge_lengths",
+                            "keep_barycenter"})
 
-    Only the options that mean something to the chosen method are passed: the Armijo constant
-    is the explicit method's (the implicit one keeps its own, see ``core.solvers``), the step
-    growth the two projected gradients', back-projection and constraint toggles the methods
-    that keep the constraints, the penalty weight the penalty methods'.
-    """
+
+def relax_settings(settings) -> dict:
+    """Keyword arguments for :func:`relax_object` from the ``scene.moebius`` settings: those
+    every method takes, and of the others only those that act on the chosen method
+    (:func:`acting_settings`)."""
     method = settings.method
+    acting = acting_settings(method)
     kwargs = dict(
         metric=settings.metric,
         method=method,
@@ -403,12 +413,13 @@ def relax_settings(settings) -> dict:
         keyframe_stride=settings.keyframe_stride,
         initial_step=settings.initial_step,
     )
-    if method == DEFAULT_METHOD:
+    if "armijo" in acting:
         kwargs["armijo"] = settings.armijo
-        kwargs["growth"] = settings.growth  # the implicit method keeps its own (1.5)
-    if method in PENALTY_METHODS:
+    if "growth" in acting:
+        kwargs["growth"] = settings.growth
+    if "penalty" in acting:
         kwargs["penalty"] = settings.penalty
-    else:
+    if "backproject_iter" in acting:
         kwargs.update(
             backproject_iter=settings.backproject_iter,
             backproject_tol=10.0 ** -settings.backproject_digits,

@@ -151,29 +151,28 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         s = context.scene.moebius
-        penalty = s.method in api.PENALTY_METHODS
+        acting = api.acting_settings(s.method)
         col = layout.column(align=True)
         col.label(text="Method")
         col.prop(s, "method", text="")
-        if penalty:
+        if "penalty" in acting:
             col.prop(s, "penalty")
-        # settings a method does not use stay visible, greyed out (tooltips say which use them)
+        # settings the method does not use stay visible, greyed out (tooltips say which use
+        # them); api.acting_settings is also what relax_settings passes on
         col = layout.column(align=True)
         col.label(text="Line Search")
         col.prop(s, "initial_step")
         sub = col.column(align=True)
-        sub.active = s.method == api.DEFAULT_METHOD
+        sub.active = "armijo" in acting
         sub.prop(s, "armijo")
-        sub = col.column(align=True)
-        sub.active = s.method in (api.DEFAULT_METHOD, "projected_gradient_implicit")
         sub.prop(s, "growth")
         col = layout.column(align=True)
-        col.active = not penalty
+        col.active = "backproject_iter" in acting
         col.label(text="Back-projection")
         col.prop(s, "backproject_iter", text="Iterations")
         col.prop(s, "backproject_digits", text="Digits")
         col = layout.column(align=True)
-        col.active = not penalty
+        col.active = "keep_edge_lengths" in acting
         col.label(text="Constraints")
         col.prop(s, "keep_edge_lengths")
         col.prop(s, "keep_barycenter")

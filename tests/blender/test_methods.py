@@ -190,3 +190,18 @@ def test_panel_text_wraps_to_the_sidebar(mb):
     assert max(map(len, lines)) <= 25  # what fits the default sidebar (about 220 px)
     assert panel.wrap_text(message, 440, ui_scale=2.0) == lines
     assert panel.wrap_text("", 220) == [""]
+
+
+def test_panel_and_run_agree_on_which_settings_act(scene, mb):
+    # Step Growth was shown active for the implicit method, which never received it
+    s = bpy.context.scene.moebius
+    api = mb.api
+    for method in METHODS:
+        s.method = method
+        passed = set(api.relax_settings(s))
+        acting = api.acting_settings(method)
+        for setting, option in (("armijo", "armijo"), ("growth", "growth"),
+                                ("penalty", "penalty"), ("backproject_iter", "backproject_iter"),
+                                ("keep_edge_lengths", "edge_lengths")):
+            assert (setting in acting) == (option in passed), (method, setting)
+    assert {m for m in METHODS if "growth" in api.acting_settings(m)} == {api.DEFAULT_METHOD}
