@@ -25,8 +25,9 @@ generator               default ``n``                     smallest ``n`` passing
 ``torus_knot(p, q)``    ``40 (|p| + |q|)``                about ``5 (|p| + |q|)``: 18 for
                                                           T(2,3), 35 for T(3,4), 33 T(2,5)
 ``figure_eight``        200                               36
-``braid_closure``       2.5 vertices per strand spacing   0.4 × the default: 3_1 27, 4_1 52,
-``named``               of length, at least 100           7_2 136, 8_1 and 8_3 197
+``braid_closure``       3.3 vertices per strand spacing   0.3 × the default: 3_1 27 (of 100),
+``named``               of length, at least 100           4_1 52 (180), 7_2 136 (460), 8_1
+                                                          and 8_3 197 (660)
 ``freedman_unknot``     600                               470 (ratio 1.2 at 600)
 ``helix_unknot``        300                               62 (6 turns)
 ``random_unknot``       400                               about 50-100 (draws are kept only

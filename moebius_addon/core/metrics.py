@@ -10,10 +10,13 @@ Every metric is the ``N × N`` matrix ``A`` of one coordinate; the 3N × 3N Gram
 the geometric W^{3/2,2} matrix is ``A_hs = 2 Dᵀ(diag(W1) − W)D + 2 Mᵀ(diag(V1) − V)M``, the
 quadratic form ``Σ_{I,J} w_IJ |(Du)_I − (Du)_J|² + v_IJ |(Mu)_I − (Mu)_J|²``.
 
-Every matrix gets the barycenter term ``b bᵀ / L⁴`` (``b_k = (l_{k−1} + l_k)/2`` per component):
-the paper's ``<∫u, ∫w>``, which makes ``A`` invertible and vanishes on the constraint tangent
-space. Its factor 1/L⁴ and the powers of ``L`` on the lower-order metrics make every ``A``
-scale as 1/c² under ``P → cP``, so steps and tolerances do not depend on the curve's size.
+Every matrix gets the barycenter term ``N b bᵀ / L⁴`` (``b_k = (l_{k−1} + l_k)/2`` per
+component, ``N`` the number of vertices of the whole polygon or link): the paper's
+``<∫u, ∫w>``, which makes ``A`` invertible and vanishes on the constraint tangent space; the
+factor ``N`` puts its eigenvalue beside the lowest shape modes' instead of far below them
+(better conditioning, the same tangent-space metric). Its factor N/L⁴ and the powers of ``L``
+on the lower-order metrics make every ``A`` scale as 1/c² under ``P → cP``, so steps and
+tolerances do not depend on the curve's size.
 """
 
 from __future__ import annotations
