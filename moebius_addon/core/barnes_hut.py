@@ -105,15 +105,20 @@ def _edge_arrays(X, nxt, comp, starts, perm):
 
 @nb.njit(cache=True)
 def _cluster_data(E, M, ln, cp, lo, hi, left, right):
-    """Per node: total length ``L``, length-weighted centre ``c``, summed edge vector ``S``,
-    tangent dipole ``D = Σ e_I (m_I − c)ᵀ`` and its component (−1 for a node holding edges of
-    several components), bottom-up."""
+    """Per node, bottom-up: total length ``L``, length-weighted centre ``c``, summed edge vector
+    ``S``, tangent dipole ``D = Σ e_I δ_Iᵀ``, length quadrupole ``Q = Σ l_I δ_I δ_Iᵀ``, tangent
+    quadrupole ``T_acd = Σ e_I,a δ_I,c δ_I,d`` (``δ_I = m_I − c``) and the node's component (−1
+    for a node holding edges of several components). A parent takes its children's moments
+    moved to its centre (``δ = δ_child + h``, ``h = c_child − c``; ``Σ l δ_child = 0``)."""
     m = lo.shape[0]
     L = np.empty(m)
     C = np.empty((m, 3))
     S = np.empty((m, 3))
     D = np.zeros((m, 3, 3))
+    Q = np.zeros((m, 3, 3))
+    T = np.zeros((m, 3, 3, 3))
     nc = np.empty(m, np.int64)
+    dl = np.empty(3)
     for node in range(m - 1, -1, -1):
         if left[node] < 0:
             tot = 0.0
@@ -139,22 +144,34 @@ def _cluster_data(E, M, ln, cp, lo, hi, left, right):
             S[node, 2] = sz
             nc[node] = c0
             for q in range(lo[node], hi[node]):
+                for k in range(3):
+                    dl[k] = M[q, k] - C[node, k]
                 for a in range(3):
                     for b in range(3):
-                        D[node, a, b] += E[q, a] * (M[q, b] - C[node, b])
+                        D[node, a, b] += E[q, a] * dl[b]
+                        Q[node, a, b] += ln[q] * dl[a] * dl[b]
+                        for c in range(3):
+                            T[node, a, b, c] += E[q, a] * dl[b] * dl[c]
         else:
-            a, b = left[node], right[node]
-            tot = L[a] + L[b]
+            a0, b0 = left[node], right[node]
+            tot = L[a0] + L[b0]
             L[node] = tot
             for k in range(3):
-                C[node, k] = (L[a] * C[a, k] + L[b] * C[b, k]) / tot
-                S[node, k] = S[a, k] + S[b, k]
-            for ch in (a, b):  # moments of the children moved to this node's centre
-                for u in range(3):
-                    for v in range(3):
-                        D[node, u, v] += D[ch, u, v] + S[ch, u] * (C[ch, v] - C[node, v])
-            nc[node] = nc[a] if nc[a] == nc[b] else -1
-    return L, C, S, D, nc
+                C[node, k] = (L[a0] * C[a0, k] + L[b0] * C[b0, k]) / tot
+                S[node, k] = S[a0, k] + S[b0, k]
+            for ch in (a0, b0):
+                for k in range(3):
+                    dl[k] = C[ch, k] - C[node, k]
+                for a in range(3):
+                    for b in range(3):
+                        D[node, a, b] += D[ch, a, b] + S[ch, a] * dl[b]
+                        Q[node, a, b] += Q[ch, a, b] + L[ch] * dl[a] * dl[b]
+                        for c in range(3):
+                            T[node, a, b, c] += (T[ch, a, b, c] + D[ch, a, b] * dl[c]
+                                                 + D[ch, a, c] * dl[b]
+                                                 + S[ch, a] * dl[b] * dl[c])
+            nc[node] = nc[a0] if nc[a0] == nc[b0] else -1
+    return L, C, S, D, Q, T, nc
 
 
 # ------------------------------------------------------------------------------------------------
@@ -359,19 +376,130 @@ def _dipole(X, s0, s1, s2, d0, d1, d2, inv, w, grad, gs, gX, gd):
     return t
 
 
+@nb.njit(cache=True, inline="always")
+def _quadrupole(T, s, x, w, wt, grad_t, grad_s, grad_x, gT, gs, gx, v, Tx):
+    """Second-order tangent term ``K4 : (T ⊗ s) = Σ_abcd K4_abcd T_acd s_b`` (``K4 = ∇⁴ log|x|``,
+    ``T`` symmetric in ``c, d``), contracted through the traces and projections of ``T``
+    (``K4 = −2w²(δδ)₃ + 8w³(δxx)₆ − 48w⁴ xxxx``, ``w = 1/|x|²``); adds ``wt`` times its
+    derivatives in ``T``, ``s``, ``x`` (as asked) to ``gT``, ``gs``, ``gx``. ``v`` (7, 3) and
+    ``Tx`` (3, 3) are scratch."""
+    w2 = w * w
+    w3 = w2 * w
+    w4 = w3 * w
+    for a in range(3):
+        v[0, a] = T[a, 0, 0] + T[a, 1, 1] + T[a, 2, 2]
+        v[1, a] = T[0, 0, a] + T[1, 1, a] + T[2, 2, a]
+        for c in range(3):
+            Tx[a, c] = T[a, c, 0] * x[0] + T[a, c, 1] * x[1] + T[a, c, 2] * x[2]
+    for a in range(3):
+        v[2, a] = Tx[a, 0] * x[0] + Tx[a, 1] * x[1] + Tx[a, 2] * x[2]  # T(·, x, x)
+        v[3, a] = x[0] * Tx[0, a] + x[1] * Tx[1, a] + x[2] * Tx[2, a]  # T(x, ·, x)
+    xs = x[0] * s[0] + x[1] * s[1] + x[2] * s[2]
+    st = 0.0
+    sq = 0.0
+    lin = 0.0
+    txxx = 0.0
+    for a in range(3):
+        st += s[a] * (v[0, a] + 2.0 * v[1, a])
+        sq += s[a] * (v[2, a] + 2.0 * v[3, a])
+        lin += x[a] * (v[0, a] + 2.0 * v[1, a])
+        txxx += x[a] * v[2, a]
+    inner = sq + xs * lin
+    val = -2.0 * w2 * st + 8.0 * w3 * inner - 48.0 * w4 * xs * txxx
+    if grad_s:
+        for k in range(3):
+            gs[k] += wt * (-2.0 * w2 * (v[0, k] + 2.0 * v[1, k])
+                           + 8.0 * w3 * (v[2, k] + 2.0 * v[3, k] + x[k] * lin)
+                           - 48.0 * w4 * x[k] * txxx)
+    if grad_t:
+        for a in range(3):
+            for c in range(3):
+                for d in range(c, 3):
+                    g = 8.0 * w3 * (s[a] * x[c] * x[d] + x[a] * (s[c] * x[d] + s[d] * x[c]))
+                    g -= 48.0 * w4 * xs * x[a] * x[c] * x[d]
+                    if c == d:
+                        g += 8.0 * w3 * x[a] * xs - 2.0 * w2 * s[a]
+                    if a == c:
+                        g += 8.0 * w3 * xs * x[d] - 2.0 * w2 * s[d]
+                    if a == d:
+                        g += 8.0 * w3 * xs * x[c] - 2.0 * w2 * s[c]
+                    gT[a, c, d] += wt * g
+                    if d != c:
+                        gT[a, d, c] += wt * g
+    if grad_x:
+        for k in range(3):
+            p = s[0] * Tx[0, k] + s[1] * Tx[1, k] + s[2] * Tx[2, k]
+            q = Tx[k, 0] * s[0] + Tx[k, 1] * s[1] + Tx[k, 2] * s[2]
+            r = 0.0
+            for a in range(3):
+                r += x[a] * (T[a, k, 0] * s[0] + T[a, k, 1] * s[1] + T[a, k, 2] * s[2])
+            g = 8.0 * w3 * (st * x[k] + 2.0 * (p + q + r) + s[k] * lin
+                            + xs * (v[0, k] + 2.0 * v[1, k]))
+            g -= 48.0 * w4 * (x[k] * inner + s[k] * txxx + xs * (v[2, k] + 2.0 * v[3, k]))
+            g += 384.0 * w4 * w * xs * txxx * x[k]
+            gx[k] += wt * g
+    return val
+
+
+@nb.njit(cache=True, inline="always")
+def _dipole_pair(P, R, x, w, wt, grad, gP, gx, v):
+    """Second-order tangent term of two dipoles ``K4 : (P ⊗ R) = Σ_abcd K4_abcd P_ac R_bd``;
+    adds ``wt`` times its derivatives in ``P`` and ``x`` to ``gP``, ``gx``. ``v`` (7, 3) is
+    scratch."""
+    w2 = w * w
+    w3 = w2 * w
+    w4 = w3 * w
+    trp = P[0, 0] + P[1, 1] + P[2, 2]
+    trr = R[0, 0] + R[1, 1] + R[2, 2]
+    pr = 0.0
+    for i in range(3):
+        v[0, i] = 0.0
+        v[1, i] = 0.0
+        for j in range(3):
+            pr += P[i, j] * (R[i, j] + R[j, i])
+            v[0, i] += (P[i, j] + P[j, i]) * x[j]  # (P + Pᵀ) x
+            v[1, i] += (R[i, j] + R[j, i]) * x[j]
+    xpx = 0.5 * (x[0] * v[0, 0] + x[1] * v[0, 1] + x[2] * v[0, 2])
+    xrx = 0.5 * (x[0] * v[1, 0] + x[1] * v[1, 1] + x[2] * v[1, 2])
+    pp = v[0, 0] * v[1, 0] + v[0, 1] * v[1, 1] + v[0, 2] * v[1, 2]
+    zero = pr + trp * trr
+    two = pp + trp * xrx + trr * xpx
+    val = -2.0 * w2 * zero + 8.0 * w3 * two - 48.0 * w4 * xpx * xrx
+    if grad:
+        for i in range(3):
+            for j in range(3):
+                g = (-2.0 * w2 * (R[i, j] + R[j, i])
+                     + 8.0 * w3 * (v[1, i] * x[j] + x[i] * v[1, j] + trr * x[i] * x[j])
+                     - 48.0 * w4 * xrx * x[i] * x[j])
+                if i == j:
+                    g += 8.0 * w3 * xrx - 2.0 * w2 * trr
+                gP[i, j] += wt * g
+        for k in range(3):
+            a = 0.0
+            for j in range(3):
+                a += (P[k, j] + P[j, k]) * v[1, j] + (R[k, j] + R[j, k]) * v[0, j]
+            g = 8.0 * w3 * (zero * x[k] + a + trp * v[1, k] + trr * v[0, k])
+            g -= 48.0 * w4 * (two * x[k] + xrx * v[0, k] + xpx * v[1, k])
+            g += 384.0 * w4 * w * xpx * xrx * x[k]
+            gx[k] += wt * g
+    return val
+
+
 @nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
-def _far(L, C, S, D, nc, foff, fpart, grad):
-    """Per target node: Σ_B F(A, B) and, with ``grad``, twice Σ_B ∂F(A, B)/∂(L_A, S_A, c_A,
-    D_A) (the derivative of the ordered sum: F is symmetric). F: the length part at the
-    centres, the tangent part to first order (monopole and dipole ``D``): both are then exact
-    to first order, and exact (zero) for two pieces of one straight line, where the two parts
-    cancel: expanding one part further than the other measured larger errors."""
+def _far(L, C, S, D, Q, T, nc, foff, fpart, order, grad):
+    """Per target node: Σ_B F(A, B) and, with ``grad``, twice Σ_B ∂F(A, B)/∂(L_A, S_A, c_A, D_A,
+    Q_A, T_A) (the derivative of the ordered sum: F is symmetric). F: both parts of the kernel
+    expanded to ``order`` (1 or 2) in the cluster sizes around the centres, the same order
+    for both: they cancel for two pieces of one straight line (exact F = 0), and expanding one
+    part further than the other measured larger errors."""
     m = L.shape[0]
     eF = np.zeros(m)
     gL = np.zeros(m)
     gS = np.zeros((m, 3))
     gC = np.zeros((m, 3))
     gD = np.zeros((m, 3, 3))
+    gQ = np.zeros((m, 3, 3))
+    gT = np.zeros((m, 3, 3, 3))
     for aa in nb.prange(m):
         a = np.int64(aa)
         if foff[a] == foff[a + 1]:
@@ -380,12 +508,18 @@ def _far(L, C, S, D, nc, foff, fpart, grad):
         cx, cy, cz = C[a, 0], C[a, 1], C[a, 2]
         sax, say, saz = S[a, 0], S[a, 1], S[a, 2]
         Da = D[a]
+        Qa = Q[a]
+        trqa = Qa[0, 0] + Qa[1, 1] + Qa[2, 2]
         e = 0.0
         g_l = 0.0
         gs = np.zeros(3)
         gc = np.zeros(3)
         gx = np.zeros((3, 3))
+        gq = np.zeros((3, 3))
+        gt = np.zeros((3, 3, 3))
         scratch = np.zeros((3, 3))
+        v = np.zeros((7, 3))
+        x = np.zeros(3)
         for p in range(foff[a], foff[a + 1]):
             b = fpart[p]
             Lb = L[b]
@@ -393,6 +527,31 @@ def _far(L, C, S, D, nc, foff, fpart, grad):
             dy = cy - C[b, 1]
             dz = cz - C[b, 2]
             inv = 1.0 / (dx * dx + dy * dy + dz * dz)
+            if order == 2:
+                # length part, second order: ½ ∇²k : (L_B Q_A + L_A Q_B), k = 1/|d|²
+                x[0], x[1], x[2] = dx, dy, dz
+                Qb = Q[b]
+                i2 = inv * inv
+                i3 = i2 * inv
+                trqb = Qb[0, 0] + Qb[1, 1] + Qb[2, 2]
+                xqa = 0.0
+                xqb = 0.0
+                for i in range(3):
+                    v[0, i] = Qa[i, 0] * dx + Qa[i, 1] * dy + Qa[i, 2] * dz
+                    v[1, i] = Qb[i, 0] * dx + Qb[i, 1] * dy + Qb[i, 2] * dz
+                    xqa += x[i] * v[0, i]
+                    xqb += x[i] * v[1, i]
+                trq = Lb * trqa + La * trqb
+                xqx = Lb * xqa + La * xqb
+                e += 4.0 * i3 * xqx - i2 * trq
+                if grad:
+                    g_l += 4.0 * i3 * xqb - i2 * trqb
+                    for i in range(3):
+                        gc[i] += (4.0 * i3 * trq - 24.0 * i3 * inv * xqx) * x[i] + 8.0 * i3 * (
+                            Lb * v[0, i] + La * v[1, i])
+                        for j in range(3):
+                            gq[i, j] += 4.0 * Lb * i3 * x[i] * x[j]
+                        gq[i, i] -= Lb * i2
             if nc[a] == nc[b]:
                 sbx, sby, sbz = S[b, 0], S[b, 1], S[b, 2]
                 ab = sax * sbx + say * sby + saz * sbz
@@ -403,6 +562,13 @@ def _far(L, C, S, D, nc, foff, fpart, grad):
                 e += sv - 2.0 * q
                 e += _dipole(Da, sbx, sby, sbz, dx, dy, dz, inv, 1.0, grad, scratch[0], gx, gc)
                 e -= _dipole(D[b], sax, say, saz, dx, dy, dz, inv, -1.0, grad, gs, scratch, gc)
+                if order == 2:
+                    # tangent part, second order: ½ K4:(T_A⊗S_B) − K4:(D_A⊗D_B) + ½ K4:(S_A⊗T_B)
+                    e += 0.5 * _quadrupole(T[a], S[b], x, inv, 0.5, grad, False, grad, gt,
+                                           scratch[0], gc, v, scratch)
+                    e += 0.5 * _quadrupole(T[b], S[a], x, inv, 0.5, False, grad, grad, gt, gs,
+                                           gc, v, scratch)
+                    e -= _dipole_pair(Da, D[b], x, inv, -1.0, grad, gx, gc, v)
                 if grad:
                     g_l += Lb * inv
                     tb = 2.0 * db * inv
@@ -431,42 +597,72 @@ def _far(L, C, S, D, nc, foff, fpart, grad):
                 gC[a, k] = 2.0 * gc[k]
                 for j in range(3):
                     gD[a, k, j] = 2.0 * gx[k, j]
-    return eF, gL, gS, gC, gD
+                    gQ[a, k, j] = 2.0 * gq[k, j]
+                    for i in range(3):
+                        gT[a, k, j, i] = 2.0 * gt[k, j, i]
+    return eF, gL, gS, gC, gD, gQ, gT
 
 
 @nb.njit(cache=True)
-def _push_down(L, C, S, gL, gS, gC, gD, left, right):
-    """Sums over each node and its ancestors of what its edges receive from the far field.
+def _push_down(L, C, S, D, gL, gS, gC, gD, gQ, gT, left, right):
+    """What every leaf's edges receive from the far field of the leaf and its ancestors.
 
-    Chain rule through ``L = Σ l``, ``S = Σ e``, ``c = Σ l m / L`` and
-    ``D = Σ e (m − c)ᵀ`` (whose dependence on ``c`` adds ``−g_Dᵀ S`` to ``g_c``)::
-
-        ∂/∂e_I += P1 + t_I (P2 + <m_I, P3>) + G_D m_I − G_D c,   ∂/∂m_I += l_I P3 + G_Dᵀ e_I
-
-    with ``P1 = g_S``, ``P2 = g_L − <g_c, c>/L``, ``P3 = g_c / L``: columns 0–2 P1, 3 P2,
-    4–6 P3, 7–15 ``G_D`` (row-major), 16–18 ``G_D c``."""
+    A node's share of the derivative is the first variation of ``Σ_I l_I a(δ_I) + <e_I,
+    b(δ_I)>`` with the polynomials (``δ = m − c``) ``a = g_L + <g_c, δ>/L + δᵀ G_Q δ`` (the
+    centre ``c = Σ l m / L``, with ``g_c`` including the explicit dependence of ``D`` and ``T``
+    on ``c``: ``−G_Dᵀ S`` and ``−2 Σ G_T,ack D_ac``; ``Q``'s vanishes, ``Σ l δ = 0``) and
+    ``b_a = g_S,a + G_D,ac δ_c + G_T,acd δ_c δ_d``. The polynomials are moved to the
+    children's centres and summed down. Columns: 0 ``a0``, 1–3 ``a1``, 4–12 ``A2``, 13–15
+    ``b0``, 16–24 ``B1``, 25–51 ``B2`` (row-major, ``A2`` and ``B2`` symmetrized)."""
     m = L.shape[0]
-    acc = np.empty((m, 19))
+    acc = np.zeros((m, 52))
     for node in range(m):
-        inv = 1.0 / L[node]
         g = gD[node]
-        gc = np.empty(3)
+        t = gT[node]
+        r = acc[node]
+        inv = 1.0 / L[node]
         for k in range(3):
-            gc[k] = gC[node, k] - (g[0, k] * S[node, 0] + g[1, k] * S[node, 1]
-                                   + g[2, k] * S[node, 2])
-        for k in range(3):
-            acc[node, k] = gS[node, k]
-            acc[node, 4 + k] = gc[k] * inv
-            acc[node, 16 + k] = g[k, 0] * C[node, 0] + g[k, 1] * C[node, 1] + g[k, 2] * C[node, 2]
+            gc = gC[node, k]
+            for a in range(3):
+                gc -= g[a, k] * S[node, a]
+                for c in range(3):
+                    gc -= (t[a, c, k] + t[a, k, c]) * D[node, a, c]
+            r[1 + k] = gc * inv
+            r[13 + k] = gS[node, k]
             for j in range(3):
-                acc[node, 7 + 3 * k + j] = g[k, j]
-        acc[node, 3] = gL[node] - (gc[0] * C[node, 0] + gc[1] * C[node, 1]
-                                   + gc[2] * C[node, 2]) * inv
+                r[4 + 3 * k + j] = 0.5 * (gQ[node, k, j] + gQ[node, j, k])
+                r[16 + 3 * k + j] = g[k, j]
+                for i in range(3):
+                    r[25 + 9 * k + 3 * j + i] = 0.5 * (t[k, j, i] + t[k, i, j])
+        r[0] = gL[node]
+    h = np.empty(3)
     for node in range(m):  # parents come before their children
+        r = acc[node]
         for child in (left[node], right[node]):
-            if child >= 0:
-                for k in range(19):
-                    acc[child, k] += acc[node, k]
+            if child < 0:
+                continue
+            o = acc[child]
+            for k in range(3):
+                h[k] = C[child, k] - C[node, k]
+            # a(δ + h), b(δ + h) as polynomials in the child's δ
+            o[0] += r[0]
+            for k in range(3):
+                o[0] += r[1 + k] * h[k]
+                o[1 + k] += r[1 + k]
+                o[13 + k] += r[13 + k]
+                for j in range(3):
+                    a2 = r[4 + 3 * k + j]
+                    o[0] += a2 * h[k] * h[j]
+                    o[1 + k] += 2.0 * a2 * h[j]
+                    o[4 + 3 * k + j] += a2
+                    b1 = r[16 + 3 * k + j]
+                    o[13 + k] += b1 * h[j]
+                    o[16 + 3 * k + j] += b1
+                    for i in range(3):
+                        b2 = r[25 + 9 * k + 3 * j + i]
+                        o[13 + k] += b2 * h[j] * h[i]
+                        o[16 + 3 * k + j] += 2.0 * b2 * h[i]
+                        o[25 + 9 * k + 3 * j + i] += b2
     return acc
 
 
@@ -574,23 +770,42 @@ def _near(E, M, ln, cp, pos, size, lo, hi, pairs, nchunks, grad):
 
 
 @nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
-def _far_to_edges(E, M, ln, lo, hi, leaves, acc, part):
-    """Add what every edge receives from the far field (``acc`` of its leaf, see
-    :func:`_push_down`) to its partial derivatives ``part`` (rows 1–3: edge vector, 4–6:
-    midpoint)."""
+def _far_to_edges(E, M, ln, C, lo, hi, leaves, acc, part):
+    """Add what every edge receives from the far field (the polynomials ``acc`` of its leaf,
+    see :func:`_push_down`) to its partial derivatives ``part`` (rows 1–3: edge vector, 4–6:
+    midpoint): ``∂/∂e = b(δ) + a(δ) e / l``, ``∂/∂m = l ∇a(δ) + ∇b(δ)ᵀ e``."""
     for kk in nb.prange(leaves.shape[0]):
-        a = leaves[np.int64(kk)]
-        t = acc[a]
-        for q in range(lo[a], hi[a]):
-            ax, ay, az, li = E[q, 0], E[q, 1], E[q, 2], ln[q]
-            px, py, pz = M[q, 0], M[q, 1], M[q, 2]
-            far_t = (t[3] + px * t[4] + py * t[5] + pz * t[6]) / li
-            part[1, q] += t[0] + far_t * ax + t[7] * px + t[8] * py + t[9] * pz - t[16]
-            part[2, q] += t[1] + far_t * ay + t[10] * px + t[11] * py + t[12] * pz - t[17]
-            part[3, q] += t[2] + far_t * az + t[13] * px + t[14] * py + t[15] * pz - t[18]
-            part[4, q] += li * t[4] + t[7] * ax + t[10] * ay + t[13] * az
-            part[5, q] += li * t[5] + t[8] * ax + t[11] * ay + t[14] * az
-            part[6, q] += li * t[6] + t[9] * ax + t[12] * ay + t[15] * az
+        leaf = leaves[np.int64(kk)]
+        r = acc[leaf]
+        dl = np.empty(3)
+        av = np.empty(3)
+        for q in range(lo[leaf], hi[leaf]):
+            li = ln[q]
+            for k in range(3):
+                dl[k] = M[q, k] - C[leaf, k]
+            a = r[0]
+            for k in range(3):
+                ga = r[1 + k]
+                a += r[1 + k] * dl[k]
+                for j in range(3):
+                    a += r[4 + 3 * k + j] * dl[k] * dl[j]
+                    ga += 2.0 * r[4 + 3 * k + j] * dl[j]
+                av[k] = ga
+            for k in range(3):
+                b = r[13 + k]
+                for j in range(3):
+                    b += r[16 + 3 * k + j] * dl[j]
+                    for i in range(3):
+                        b += r[25 + 9 * k + 3 * j + i] * dl[j] * dl[i]
+                part[1 + k, q] += b + a * E[q, k] / li
+            for k in range(3):  # ∂b_a/∂δ_k e_a
+                gm = li * av[k]
+                for a2 in range(3):
+                    jb = r[16 + 3 * a2 + k]
+                    for i in range(3):
+                        jb += 2.0 * r[25 + 9 * a2 + 3 * k + i] * dl[i]
+                    gm += jb * E[q, a2]
+                part[4 + k, q] += gm
 
 
 # ------------------------------------------------------------------------------------------------
@@ -612,7 +827,8 @@ class Frame:
     """
 
     def __init__(self, X: np.ndarray, layout: Layout, theta: float = THETA,
-                 leaf_size: int = bvh.LEAF_SIZE):
+                 leaf_size: int = bvh.LEAF_SIZE, order: int = 2):
+        self.order = order
         self.layout = layout
         self.theta = check_theta(theta)
         tree = bvh.build(X, layout, leaf_size)
@@ -635,14 +851,16 @@ class Frame:
     def _evaluate(self, X: np.ndarray, grad: bool):
         lay, tree = self.layout, self.tree
         E, M, ln, cp, pos, size = _edge_arrays(X, lay.nxt, lay.comp, lay.starts, tree.perm)
-        L, C, S, D, nc = _cluster_data(E, M, ln, cp, tree.lo, tree.hi, tree.left, tree.right)
-        eF, gL, gS, gC, gD = _far(L, C, S, D, nc, self.foff, self.fpart, grad)
+        L, C, S, D, Q, T, nc = _cluster_data(E, M, ln, cp, tree.lo, tree.hi, tree.left,
+                                             tree.right)
+        eF, gL, gS, gC, gD, gQ, gT = _far(L, C, S, D, Q, T, nc, self.foff, self.fpart,
+                                          self.order, grad)
         part = _near(E, M, ln, cp, pos, size, tree.lo, tree.hi, self.near, _CHUNKS, grad)
         energy = 4.0 * lay.k + float(np.sum(part[0])) + float(np.sum(eF))
         if not grad:
             return energy, None
-        acc = _push_down(L, C, S, gL, gS, gC, gD, tree.left, tree.right)
-        _far_to_edges(E, M, ln, tree.lo, tree.hi, self.leaves, acc, part)
+        acc = _push_down(L, C, S, D, gL, gS, gC, gD, gQ, gT, tree.left, tree.right)
+        _far_to_edges(E, M, ln, C, tree.lo, tree.hi, self.leaves, acc, part)
         ga = part[1:4].T
         gm = part[4:7].T
         G = np.zeros_like(X)

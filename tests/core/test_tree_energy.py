@@ -20,27 +20,23 @@ from tests.conftest import ngon, trefoil
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _hess_log(d):
-    r2 = d @ d
-    return np.eye(3) / r2 - 2.0 * np.outer(d, d) / r2**2
-
-
-def _dipole(X, s, d):
-    """Σ_abc ∂_c H_ab(d) X_ac s_b by central differences of H (independent of the kernel's
-    closed form)."""
-    h = 1e-5 * np.sqrt(d @ d)
+def _taylor(f, d, u, order, points=64):
+    """Σ over the pairs of the Taylor polynomial of ``t ↦ f(d + t u)`` to ``order`` at t = 1,
+    its coefficients by Cauchy's formula on a circle inside the radius of convergence
+    ``|d| / |u|`` (f is rational in d; independent of the expansion's closed forms)."""
+    radius = 0.5 * np.sqrt(d @ d) / np.sqrt((u * u).sum(axis=-1)).max()
+    z = radius * np.exp(2j * np.pi * np.arange(points) / points)
+    vals = f(d + z[:, None, None, None] * u)  # (points, edges of A, edges of B)
     total = 0.0
-    for c in range(3):
-        dc = np.zeros(3)
-        dc[c] = h
-        dH = (_hess_log(d + dc) - _hess_log(d - dc)) / (2 * h)
-        total += X[:, c] @ dH @ s
+    for n in range(order + 1):
+        total += (np.tensordot(z**-n, vals, axes=1).sum() / points).real
     return total
 
 
-def slow_frame_energy(X, layout, frame):
+def slow_frame_energy(X, layout, frame, order=2):
     """The approximated sum of a frame, literally: every near pair with DESIGN.md's kernel,
-    every far pair of clusters with the kernel at the clusters' moments."""
+    every far pair of clusters ``(A, B)`` with the kernel of each pair of edges ``(I, J)``
+    expanded to ``order`` in ``u = δ_I − δ_J`` around the centres' difference ``d``."""
     tree = frame.tree
     perm = tree.perm
     nxt = layout.nxt
@@ -64,11 +60,10 @@ def slow_frame_energy(X, layout, frame):
             return ln[i] * ln[j] / r2
         return (ln[i] * ln[j] + e[i] @ e[j]) / r2 - 2 * (d @ e[i]) * (d @ e[j]) / r2**2
 
-    def moments(a):
+    def cluster(a):
         idx = perm[tree.lo[a]:tree.hi[a]]
-        L = ln[idx].sum()
-        c = (ln[idx, None] * m[idx]).sum(axis=0) / L
-        return L, c, e[idx].sum(axis=0), e[idx].T @ (m[idx] - c), set(comp[idx])
+        c = (ln[idx, None] * m[idx]).sum(axis=0) / ln[idx].sum()
+        return idx, m[idx] - c, c, set(comp[idx])
 
     total = 4.0 * layout.k
     for a, b in frame.near:  # unordered pairs of leaves
@@ -79,14 +74,21 @@ def slow_frame_energy(X, layout, frame):
     for a in range(tree.size):
         for p in range(frame.foff[a], frame.foff[a + 1]):
             b = frame.fpart[p]
-            La, ca, Sa, Da, ka = moments(a)
-            Lb, cb, Sb, Db, kb = moments(b)
+            ia, da, ca, ka = cluster(a)
+            ib, db, cb, kb = cluster(b)
             assert len(ka) == 1 and len(kb) == 1
-            d = ca - cb
-            r2 = d @ d
-            total += La * Lb / r2
-            if ka == kb:
-                total += Sa @ _hess_log(d) @ Sb + _dipole(Da, Sb, d) - _dipole(Db, Sa, d)
+            ll = ln[ia, None] * ln[ib]
+            ee = e[ia] @ e[ib].T
+
+            def kernel(x, ll=ll, ee=ee, ea=e[ia], eb=e[ib], same=ka == kb):
+                r2 = (x * x).sum(axis=-1)  # complex x: no conjugate (analytic in t)
+                if not same:
+                    return ll / r2
+                xa = np.einsum("pijk,ik->pij", x, ea)
+                xb = np.einsum("pijk,jk->pij", x, eb)
+                return (ll + ee) / r2 - 2 * xa * xb / r2**2
+
+            total += _taylor(kernel, ca - cb, da[:, None] - db[None, :], order)
     return total
 
 
