@@ -13,6 +13,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from . import barnes_hut
 from ._layout import Layout, as_unit_layout
 
 # Partial gradients go to a fixed number of buffers, independent of the thread count, so the
@@ -204,8 +205,6 @@ def energy_gradient_x(X: np.ndarray, layout: Layout) -> tuple[float, np.ndarray]
 
 def _engine_x(X, layout, engine, theta):
     """The Barnes–Hut frame for ``engine``/``theta`` at X, or None for the exact sum."""
-    from . import barnes_hut  # the tree engine builds on this module's kernel
-
     theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
     if not barnes_hut.uses_tree(engine, layout.n):
         return None
