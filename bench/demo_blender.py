@@ -155,10 +155,11 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     result = moebius.relax_object(knot, **moebius.relax_settings(s))
     seconds = time.perf_counter() - t0
+    keyed = moebius.keyed_frames(knot)  # the scene range may be longer (it only grows)
     print(f"relaxed: {s.last_iterations} iterations in {seconds:.1f} s "
           f"({seconds / max(s.last_iterations, 1):.3f} s/iteration), energy "
           f"{s.last_energy_start:.2f} -> {s.last_energy_end:.4f}, frames "
-          f"{scene.frame_start}-{scene.frame_end} ({s.last_message})", flush=True)
+          f"{keyed[0]}-{keyed[-1]} ({s.last_message})", flush=True)
 
     # 4. save and export
     moebius.export_flow(knot, out / "flow.abc")
@@ -166,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"saved {out / 'demo.blend'} and {out / 'flow.abc'}", flush=True)
 
     # 5. contact sheet and energy curve
-    frames = np.unique(np.linspace(scene.frame_start, scene.frame_end, args.tiles).round()
+    frames = np.unique(np.linspace(keyed[0], keyed[-1], args.tiles).round()
                        ).astype(int)
     allpts = np.concatenate([world_points(knot) for f in frames if scene.frame_set(f) is None])
     setup_render(scene, args.resolution)

@@ -503,7 +503,7 @@ class ObjectRelaxation:
     ----------
     obj : bpy.types.Object
         Curve of cyclic poly splines (see :func:`convert_object`); its shape at the current frame
-        is the start. Earlier flow keyframes on it are removed once the run is set up.
+        is the start. Earlier flow keyframes on it are replaced by this run's when it finishes.
     metric : str
         ``"hs"``, ``"hs_pure"``, ``"h2"``, ``"h1"`` or ``"l2"``.
     max_iterations : int
@@ -514,6 +514,10 @@ class ObjectRelaxation:
         Frame of the start shape.
     keyframe_stride : int
         Keyframe every this many iterates (1 = all).
+    append : bool
+        Continue the flow keyed on ``obj``: start from its last keyed iterate and key the new
+        iterates on the frames after it, keeping the earlier keys (``frame_start`` is not
+        used then). Without flow keys on ``obj`` this is a new run from the current shape.
     method : str
         Optimizer, one of ``core.METHODS`` (run by ``core.make_run``); the default
         ``"projected_gradient"`` is the paper's explicit method, ``core.Relaxation``.
@@ -536,11 +540,19 @@ class ObjectRelaxation:
     def __init__(self, obj: bpy.types.Object, metric: str = "hs", max_iterations: int = 200,
                  tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
                  method: str = DEFAULT_METHOD, penalty: float | None = None,
-                 **options) -> None:
+                 append: bool = False, **options) -> None:
         max_iterations, tolerance, keyframe_stride, frame_start, extra = check_relax_options(
             max_iterations, tolerance, keyframe_stride, frame_start, method, penalty)
         options.update(extra)
         polygons = geometry.curve_polygons(obj)
+        self._shown = [p.copy() for p in polygons]  # the shape at the current frame
+        self._cuts = np.cumsum([len(p) for p in polygons])[:-1]
+        # the earlier flow keys, continued from their last iterate (read by show() otherwise)
+        self._prior = keyframes.read_flow_keyframes(obj) if append else None
+        if self._prior is not None:
+            frames, points, _ = self._prior
+            polygons = np.split(points[-1], self._cuts)
+            frame_start = int(frames[-1])
         total = sum(len(p) for p in polygons)
         if total > EDGE_LIMIT and not options.pop("allow_large", False):
             raise ValueError(
@@ -555,6 +567,7 @@ class ObjectRelaxation:
         options.setdefault("target_lengths", "keep")
         self.obj = obj
         self.method = method
+        self.append = self._prior is not None
         self.frame_start = int(frame_start)
         self.stride = int(keyframe_stride)
         # make_run("projected_gradient", ...) is core.Relaxation itself: the default is the
@@ -598,15 +611,30 @@ class ObjectRelaxation:
         """Put the current iterate on the curve (for live display while running; the earlier
         run's keys are removed at the first call, or they would pull the curve back)."""
         if not self._live:
+            if self._prior is None:  # kept to be put back by restore() after a failure
+                try:
+                    self._prior = keyframes.read_flow_keyframes(self.obj)
+                except ValueError:  # keys edited by hand: a new run replaces them anyway
+                    pass
             keyframes.remove_flow_keyframes(self.obj)
             self._live = True
         geometry.write_polygons(self.obj.data, self.x)
 
+    def restore(self) -> None:
+        """Undo :meth:`show` after a failure: the earlier flow keys (removed for the live
+        display) written back and the curve as it was shown before the run."""
+        if self._live and self._prior is not None:
+            frames, points, energies = self._prior
+            keyframes.write_flow_keyframes(self.obj, [np.split(X, self._cuts) for X in points],
+                                           list(energies), int(frames[0]))
+        geometry.write_polygons(self.obj.data, self._shown)
+
     def finish(self, scene: bpy.types.Scene | None = None):
         """Keyframe the recorded iterates and return the core's result.
 
-        Sets the scene frame range to the keyed frames, jumps to the last one and stores the
-        statistics in ``scene.moebius`` (when the add-on is registered).
+        Grows the scene frame range to include the keyed frames (it never shrinks it: other
+        animation may need the rest), jumps to the last one and stores the statistics in
+        ``scene.moebius`` (when the add-on is registered).
 
         Returns
         -------
@@ -620,12 +648,20 @@ class ObjectRelaxation:
             self.iterates.append(self._pending[0])
             self.energies.append(self._pending[1])
             self._pending = None
-        _set_rest(self.obj, self.start)
-        geometry.write_polygons(self.obj.data, self.start)
-        frames = keyframes.write_flow_keyframes(self.obj, self.iterates, self.energies,
-                                                self.frame_start)
-        scene.frame_start = frames.start
-        scene.frame_end = max(frames.stop - 1, frames.start + 1)
+        iterates, energies, first = self.iterates, self.energies, self.frame_start
+        if self.append:  # the earlier keys, then this run's from the last of them on
+            frames0, points, energies0 = self._prior
+            iterates = [np.split(X, self._cuts) for X in points[:-1]] + iterates
+            energies = list(energies0[:-1]) + energies
+            first = int(frames0[0])
+        else:
+            _set_rest(self.obj, self.start)
+        # the curve's own (unanimated) shape: the rest shape Clear Flow goes back to
+        rest = _rest(self.obj)
+        geometry.write_polygons(self.obj.data, iterates[0] if rest is None else rest)
+        frames = keyframes.write_flow_keyframes(self.obj, iterates, energies, first)
+        scene.frame_start = min(scene.frame_start, frames.start)
+        scene.frame_end = max(scene.frame_end, frames.stop - 1)
         scene.frame_set(frames.stop - 1)
         stats = getattr(scene, "moebius", None)
         if stats is not None:
@@ -638,16 +674,17 @@ class ObjectRelaxation:
 def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: int = 200,
                  tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
                  method: str = DEFAULT_METHOD, penalty: float | None = None,
-                 callback: Callable | None = None, scene: bpy.types.Scene | None = None,
-                 **options):
-    """Relax a converted curve by the Möbius-energy flow and keyframe every iterate.
+                 append: bool = False, callback: Callable | None = None,
+                 scene: bpy.types.Scene | None = None, **options):
+    """Relax a converted curve by the Möbius-energy flow and keyframe its iterates (every
+    ``keyframe_stride``-th and the last).
 
     Parameters
     ----------
     obj : bpy.types.Object
         Curve of cyclic poly splines (see :func:`convert_object`).
-    metric, max_iterations, tolerance, frame_start, keyframe_stride, **options
-        See :class:`ObjectRelaxation`.
+    metric, max_iterations, tolerance, frame_start, keyframe_stride, append, **options
+        See :class:`ObjectRelaxation`; ``append=True`` continues the flow keyed on ``obj``.
     method : str
         Optimizer, one of ``core.METHODS``; default the paper's explicit projected gradient.
     penalty : float, optional
@@ -658,7 +695,7 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
         :class:`ObjectRelaxation` (``run.nit``, ``run.x``, ``run.energy``); returning True stops
         the run cleanly.
     scene : bpy.types.Scene, optional
-        Scene whose frame range is set; defaults to ``bpy.context.scene``.
+        Scene whose frame range grows to include the flow; defaults to ``bpy.context.scene``.
 
     Returns
     -------
@@ -678,7 +715,7 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
     """
     run = ObjectRelaxation(obj, metric=metric, max_iterations=max_iterations, tolerance=tolerance,
                            frame_start=frame_start, keyframe_stride=keyframe_stride,
-                           method=method, penalty=penalty, **options)
+                           method=method, penalty=penalty, append=append, **options)
     more = True
     try:
         while more:

@@ -113,7 +113,8 @@ def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.n
                          energies: Sequence[float], frame_start: int = 1) -> range:
     """Keyframe a sequence of polygons on the curve's splines and the energy on the object.
 
-    Replaces keys from an earlier call; other animation stays.
+    Replaces keys from an earlier call (to append, pass the earlier iterates too: see
+    :func:`read_flow_keyframes`); other animation stays.
 
     Parameters
     ----------
@@ -175,3 +176,55 @@ def keyed_energies(obj: bpy.types.Object) -> tuple[np.ndarray, np.ndarray]:
 def keyed_frames(obj: bpy.types.Object) -> list[int]:
     """Frames at which the energy of ``obj`` is keyed (empty when it has no flow keys)."""
     return keyed_energies(obj)[0].tolist()
+
+
+def read_flow_keyframes(obj: bpy.types.Object) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The flow keyed on ``obj``: what :func:`write_flow_keyframes` wrote, read back.
+
+    Returns
+    -------
+    None when the object has no flow keys, else
+    frames : (K,) int array
+    points : (K, N, 3) float array
+        The keyed positions of all N points of all splines (in spline order) on every frame.
+    energies : (K,) float array
+
+    Raises
+    ------
+    ValueError
+        When the keys are not a whole flow (a point without keys, or keyed on other frames
+        than the energy): they were edited by hand.
+    """
+    frames, energies = keyed_energies(obj)
+    if frames.size == 0:
+        return None
+    if not np.array_equal(frames, frames[0] + np.arange(len(frames))):
+        raise ValueError(
+            f"the flow keys of '{obj.name}' were edited (the energy is not keyed on every frame "
+            f"from {frames[0]} to {frames[-1]}): use Apply Frame, then Relax, to start a new "
+            f"flow from the current shape")
+    fcurves = _fcurves(obj.data, create=False)
+    by_path = {} if fcurves is None else {(fc.data_path, fc.array_index): fc for fc in fcurves}
+    sizes = [len(s.points) for s in obj.data.splines]
+    points = np.empty((len(frames), sum(sizes), 3))
+    co = np.empty(2 * len(frames))
+    offset = 0
+    for s, n in enumerate(sizes):
+        for i in range(n):
+            path = _POINT_PATH.format(s=s, i=i)
+            for c in range(3):
+                fc = by_path.get((path, c))
+                if fc is None or len(fc.keyframe_points) != len(frames):
+                    raise ValueError(
+                        f"the flow keys of '{obj.name}' were edited ({path}[{c}] is not keyed "
+                        f"on the {len(frames)} frames of the energy): use Apply Frame, then "
+                        f"Relax, to start a new flow from the current shape")
+                fc.keyframe_points.foreach_get("co", co)
+                if not np.array_equal(np.rint(co[0::2]), frames):
+                    raise ValueError(
+                        f"the flow keys of '{obj.name}' were edited ({path}[{c}] is keyed on "
+                        f"other frames than the energy): use Apply Frame, then Relax, to start "
+                        f"a new flow from the current shape")
+                points[:, offset + i, c] = co[1::2]
+        offset += n
+    return frames, points, energies

@@ -68,8 +68,8 @@ class MOEBIUS_OT_convert(bpy.types.Operator):
 
 
 class MOEBIUS_OT_relax(bpy.types.Operator):
-    """Relax the active curve by the Möbius energy flow, keyframing every iterate
-    (Esc stops and keeps the iterates so far)"""
+    """Relax the active curve by the Möbius energy flow from its shape at the current frame,
+    replacing its flow keys (Esc stops and keeps the iterates so far)"""
 
     bl_idname = "moebius.relax"
     bl_label = "Relax"
@@ -78,12 +78,26 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
     #: Seconds of computation per timer tick before the viewport is redrawn.
     TICK_BUDGET = 0.08
 
+    append: BoolProperty(
+        name="Continue",
+        description="Continue the keyed flow: start from its last iterate and key the new "
+                    "iterates after its last frame (off: a new flow from the shape at the "
+                    "current frame, replacing the flow keys)",
+        default=False, options={"SKIP_SAVE"})
+
     poll = classmethod(_poll_active_curve)
+
+    @classmethod
+    def description(cls, context, properties):
+        if properties.append:
+            return ("Continue the keyed flow of the active curve: from its last iterate, new "
+                    "keys after its last frame (Esc stops and keeps the iterates so far)")
+        return cls.bl_rna.description
 
     def _start(self, context):
         settings = context.scene.moebius
         try:
-            self._run = api.ObjectRelaxation(_active_curve(context),
+            self._run = api.ObjectRelaxation(_active_curve(context), append=self.append,
                                              **api.relax_settings(settings))
         except ValueError as err:
             self.report({"ERROR"}, str(err))
@@ -95,6 +109,7 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         run = self._run
         kind = "WARNING" if not result.success else "INFO"
         how = "" if run.method == api.DEFAULT_METHOD else f" ({run.method})"
+        how += " continued" if run.append else ""
         self.report({kind}, f"'{run.obj.name}'{how}: {run.nit} iterations, energy "
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
@@ -143,7 +158,7 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
 
     def _fail(self, context, err):
         try:
-            api.geometry.write_polygons(self._run.obj.data, self._run.start)
+            self._run.restore()
         except ReferenceError:  # the object was deleted while the flow ran
             pass
         if getattr(self, "_timer", None) is not None:

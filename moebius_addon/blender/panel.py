@@ -69,7 +69,11 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
             col.label(text="or add a knot (Polygon)")
         row = layout.row(align=True)
         row.scale_y = 1.4
-        row.operator("moebius.relax", icon="PLAY")
+        row.operator("moebius.relax", icon="PLAY").append = False
+        # Continue appends to the keyed flow; without one there is nothing to continue
+        sub = row.row(align=True)
+        sub.enabled = obj is not None and bool(keyed_frames(obj))
+        sub.operator("moebius.relax", text="Continue", icon="FF").append = True
         # the statistics of the previous run would be mistaken for the running one's
         if s.last_object and not s.running:
             box = layout.box()

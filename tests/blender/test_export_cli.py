@@ -15,7 +15,7 @@ def relaxed(scene, mb):
     scene.moebius.max_iterations = 5
     scene.moebius.tolerance = 0.0
     bpy.ops.moebius.relax()
-    assert scene.frame_end - scene.frame_start == 5
+    assert mb.keyed_frames(obj) == [1, 2, 3, 4, 5, 6]
     return obj
 
 
@@ -39,8 +39,8 @@ def _imported_points(frame):
 
 @pytest.mark.parametrize("suffix", [".abc", ".usda"])
 def test_export_round_trip(relaxed, mb, tmp_path, suffix):
-    scene = bpy.context.scene
-    frames = [scene.frame_start, scene.frame_start + 2, scene.frame_end]
+    keyed = mb.keyed_frames(relaxed)
+    frames = [keyed[0], keyed[2], keyed[-1]]
     expected = {f: points_at(relaxed, f) for f in frames}
     assert np.abs(expected[frames[0]] - expected[frames[-1]]).max() > 1e-3
     path = mb.export_flow(relaxed, tmp_path / f"flow{suffix}")
@@ -100,8 +100,8 @@ def test_cli_command(scene, mb, tmp_path, capfd):
                    "--frame-start", "5", "--save", str(blend)])
     assert rc == 0
     bpy.ops.wm.open_mainfile(filepath=str(blend))
-    assert (bpy.context.scene.frame_start, bpy.context.scene.frame_end) == (5, 7)
     assert mb.keyed_frames(bpy.data.objects["Knot 3_1"]) == [5.0, 6.0, 7.0]
+    assert bpy.context.scene.frame_start <= 5 and bpy.context.scene.frame_end >= 7
     assert cli.main(["--object", "Nope"]) == 1
     assert cli.main(["--knot", "no_such_knot"]) == 1
     assert cli.main(["--bogus"]) == 2
@@ -140,9 +140,9 @@ def test_panels_registered(mb):
 def test_export_takes_the_objects_keyed_range(relaxed, mb, tmp_path, suffix):
     # another run (or the user) shrank the scene range: the export still holds every iterate
     scene = bpy.context.scene
-    first, last = scene.frame_start, scene.frame_end
+    first, last = mb.keyed_frames(relaxed)[0], mb.keyed_frames(relaxed)[-1]
     expected = points_at(relaxed, last)
-    scene.frame_end = first + 2
+    scene.frame_start, scene.frame_end = first, first + 2
     path = mb.export_flow(relaxed, tmp_path / f"flow{suffix}")
     assert (scene.frame_start, scene.frame_end) == (first, first + 2)  # the scene is untouched
     bpy.ops.wm.read_homefile(use_empty=True)

@@ -24,6 +24,7 @@ def test_relax_keyframes_every_iterate(scene, mb, trefoil):
     s = scene.moebius
     s.max_iterations = 6
     s.frame_start = 10
+    scene.frame_start, scene.frame_end = 10, 11  # the range grows to hold the flow
     assert bpy.ops.moebius.relax() == {"FINISHED"}
     nit = s.last_iterations
     assert 1 <= nit <= 6 and s.last_keyframes == nit + 1
@@ -73,7 +74,7 @@ def test_keyframe_stride_keeps_the_last_iterate(scene, mb, trefoil):
     nit = s.last_iterations
     assert nit == 7
     assert s.last_keyframes == 4  # iterates 0, 3, 6 and 7
-    assert (scene.frame_start, scene.frame_end) == (1, 4)
+    assert mb.keyed_frames(trefoil) == [1, 2, 3, 4]
     assert "maximum number of iterations" in s.last_message
 
 
@@ -225,3 +226,76 @@ def test_interrupted_script_keeps_the_work(scene, mb, error):
     assert mb.keyed_frames(obj) == [1, 2, 3]  # the start and the two iterates computed
     assert "the 2 iterates computed before the interruption are keyed" in "".join(
         getattr(info.value, "__notes__", []))
+
+
+def _flow_keys(obj):
+    """Every flow F-curve's keys (frame, value) by channel."""
+    out = {}
+    for idblock in (obj.data, obj):
+        for fc in _fcurves(idblock):
+            co = np.empty(2 * len(fc.keyframe_points))
+            fc.keyframe_points.foreach_get("co", co)
+            out[fc.data_path, fc.array_index] = co.reshape(-1, 2)
+    return out
+
+
+def test_continue_appends_after_the_last_keyed_frame(scene, mb, core, trefoil):
+    # Relax replaced the previous run and restarted at frame 1 from the current shape; Continue
+    # starts from the last keyed iterate and keys the new iterates after it
+    start = spline_points(trefoil)
+    s = scene.moebius
+    s.max_iterations = 4
+    s.tolerance = 0.0
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    assert mb.keyed_frames(trefoil) == [1, 2, 3, 4, 5]
+    before = _flow_keys(trefoil)
+    scene.frame_set(5)
+    last = spline_points(trefoil)
+    scene.frame_set(2)  # the current frame does not matter for Continue
+    s.max_iterations = 3
+    assert bpy.ops.moebius.relax(append=True) == {"FINISHED"}
+    assert mb.keyed_frames(trefoil) == list(range(1, 9))
+    after = _flow_keys(trefoil)
+    assert after.keys() == before.keys()
+    for channel, keys in before.items():  # the earlier keys are untouched
+        np.testing.assert_array_equal(after[channel][:5], keys, err_msg=str(channel))
+    # the new iterates are the core's run from the last keyed iterate
+    ref = core.relax(last.astype(np.float64), max_iter=3, tol=0.0, target_lengths="keep")
+    scene.frame_set(8)
+    np.testing.assert_allclose(spline_points(trefoil), ref.x, atol=1e-6)
+    assert s.last_iterations == 3 and s.last_energy_start == pytest.approx(ref.history["energy"][0])
+    frames, energies = mb.keyed_energies(trefoil)
+    assert np.all(np.diff(energies) < 0)
+    # Clear Flow still goes back to the start of the first run
+    bpy.ops.moebius.clear_animation()
+    np.testing.assert_allclose(spline_points(trefoil), start, atol=1e-6)
+
+
+def test_continue_without_keys_is_a_new_run_and_edited_keys_are_refused(scene, mb, trefoil):
+    scene.moebius.max_iterations = 2
+    assert bpy.ops.moebius.relax(append=True) == {"FINISHED"}
+    assert mb.keyed_frames(trefoil) == [1, 2, 3]
+    _fcurves(trefoil.data)[0].keyframe_points.insert(10, 0.5)  # a key edited by hand
+    before = scene_state()
+    with pytest.raises(RuntimeError, match="were edited"):
+        bpy.ops.moebius.relax(append=True)
+    assert scene_state() == before
+
+
+def test_relax_only_grows_the_scene_range(scene, mb, trefoil):
+    # a relax overwrote the scene range: the user's location animation to frame 50 was left
+    # with a range of 1-17
+    scene.frame_start, scene.frame_end = 1, 50
+    trefoil.keyframe_insert("location", frame=50)
+    s = scene.moebius
+    s.max_iterations = 3
+    s.tolerance = 0.0
+    bpy.ops.moebius.relax()
+    assert mb.keyed_frames(trefoil) == [1, 2, 3, 4]
+    assert (scene.frame_start, scene.frame_end) == (1, 50) and scene.frame_current == 4
+    s.frame_start = 48
+    bpy.ops.moebius.relax()
+    assert (scene.frame_start, scene.frame_end) == (1, 51)
+    scene.frame_start, scene.frame_end = 40, 45
+    bpy.ops.moebius.relax(append=True)  # frames 48-54
+    assert (scene.frame_start, scene.frame_end) == (40, 54)
