@@ -663,6 +663,7 @@ class ObjectRelaxation:
         scene.frame_start = min(scene.frame_start, frames.start)
         scene.frame_end = max(scene.frame_end, frames.stop - 1)
         scene.frame_set(frames.stop - 1)
+        refresh_gradients(self.obj)  # drawn at the start, they would show a stale field
         stats = getattr(scene, "moebius", None)
         if stats is not None:
             stats.store_run(self.obj.name, self.nit, self.energies[0], self.energies[-1],
@@ -752,6 +753,7 @@ def clear_animation(obj: bpy.types.Object) -> None:
     if rest is not None:
         geometry.write_polygons(obj.data, rest)
         obj[ENERGY_PROP] = energy(rest)
+    refresh_gradients(obj)
 
 
 def apply_frame(obj: bpy.types.Object, frame: int | None = None,
@@ -773,6 +775,7 @@ def apply_frame(obj: bpy.types.Object, frame: int | None = None,
     geometry.write_polygons(obj.data, polygons)
     _set_rest(obj, polygons)
     obj[ENERGY_PROP] = energy(polygons)
+    refresh_gradients(obj)
     return polygons
 
 
@@ -870,7 +873,8 @@ def show_gradients(obj: bpy.types.Object, metrics: Sequence[str] = ("l2", "hs_pu
     from the vertex along the gradient. Each field is scaled on its own so that its longest
     arrow is ``length`` times the curve's bounding-box diagonal (the fields differ by orders of
     magnitude); the factor is stored as ``["moebius_arrow_scale"]``. Earlier fields of the same
-    curve and metric are replaced.
+    curve and metric are replaced. The fields show the shape they were drawn at; a relaxation,
+    *Clear Flow* and *Apply Frame* redraw them at the shape they leave (:func:`refresh_gradients`).
 
     Parameters
     ----------
@@ -922,8 +926,38 @@ def show_gradients(obj: bpy.types.Object, metrics: Sequence[str] = ("l2", "hs_pu
         arrows.color = _GRADIENT_COLOURS.get(metric, (1, 1, 1, 1))
         arrows["moebius_gradient"] = metric
         arrows["moebius_arrow_scale"] = scale
+        arrows["moebius_arrow_length"] = length
+        arrows["moebius_projected"] = bool(projected)
         out.append(arrows)
     return out
+
+
+def refresh_gradients(obj: bpy.types.Object,
+                      context: bpy.types.Context | None = None) -> list[bpy.types.Object]:
+    """Redraw the gradient fields of ``obj`` (:func:`show_gradients`) at its current shape,
+    with the metrics, length and projection they were drawn with; a field that cannot be drawn
+    there any more (the shape touches itself) is removed rather than left stale.
+
+    Returns
+    -------
+    list of bpy.types.Object
+        The redrawn fields (empty when ``obj`` has none).
+    """
+    fields = [c for c in obj.children if "moebius_gradient" in c]
+    if not fields:
+        return []
+    metrics = [c["moebius_gradient"] for c in fields]
+    length = float(fields[0].get("moebius_arrow_length", 0.15))
+    projected = bool(fields[0].get("moebius_projected", True))
+    try:
+        return show_gradients(obj, metrics, length=length, projected=projected, context=context)
+    except ValueError:
+        for c in fields:
+            mesh = c.data
+            bpy.data.objects.remove(c)
+            if mesh.users == 0:
+                bpy.data.meshes.remove(mesh)
+        return []
 
 
 def export_suffix(filepath: str | Path) -> str:

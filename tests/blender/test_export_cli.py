@@ -86,6 +86,36 @@ def test_show_gradient_arrows(scene, mb, core):
     assert len([o for o in bpy.data.objects if ".grad." in o.name]) == 3
 
 
+def _field(knot, metric):
+    arrows = bpy.data.objects[f"{knot.name}.grad.{metric}"]
+    V = np.array([v.co[:] for v in arrows.data.vertices])
+    n = len(V) // 2
+    return V[:n], V[n:] - V[:n], arrows["moebius_arrow_scale"]
+
+
+def test_gradient_fields_follow_the_relaxed_curve(scene, mb, core):
+    # the arrows stayed at the start after a relax, showing a stale field
+    bpy.ops.moebius.add_knot(kind="3_1", edges=60)
+    knot = bpy.context.active_object
+    start = mb.curve_polygons(knot)[0]
+    bpy.ops.moebius.show_gradient(l2=False, hs_pure=False, length=0.2, projected=False)
+    scene.moebius.max_iterations = 3
+    scene.moebius.tolerance = 0.0
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    for shape in ("relaxed", "cleared"):
+        P = mb.curve_polygons(knot)[0]
+        assert np.abs(P - start).max() > 1e-3 if shape == "relaxed" else np.allclose(P, start)
+        tails, D, scale = _field(knot, "hs")
+        np.testing.assert_allclose(tails, P, atol=1e-6)
+        G = core.sobolev_gradient(P, metric="hs", projected=False)  # as it was drawn
+        np.testing.assert_allclose(D, scale * G, atol=1e-5 * np.abs(scale * G).max())
+        assert np.linalg.norm(D, axis=1).max() == pytest.approx(
+            0.2 * np.linalg.norm(np.ptp(P, axis=0)), rel=1e-5)
+        assert [o.name for o in knot.children] == [f"{knot.name}.grad.hs"]
+        bpy.context.view_layer.objects.active = knot
+        bpy.ops.moebius.clear_animation()
+
+
 def test_cli_command(scene, mb, tmp_path, capfd):
     from importlib import import_module
 
