@@ -4,24 +4,33 @@ The energy of DESIGN.md is a sum over ordered pairs of disjoint edges (``energy.
 them). Here the pairs are split by a dual traversal of the hierarchy (:mod:`bvh`) into
 
 * the **far field**: pairs of clusters ``(A, B)`` of one component each whose boxes are apart,
-  ``max(diam A, diam B) ≤ θ · gap(A, B)``. The pair sum is replaced by the kernel at the
-  clusters' data, total length ``L``, length-weighted centre ``c``, summed edge vector ``S`` and
-  tangent dipole ``D = Σ e_I (m_I − c)ᵀ``:
+  ``max(diam A, diam B) ≤ θ · gap(A, B)``. The pair sum ``Σ_IJ l_I l_J k + e_Iᵀ H e_J`` (``k =
+  1/|d|²``, ``H = ∇² log|d|``) is replaced by its Taylor expansion to second order in the
+  offsets ``δ_I = m_I − c`` from the clusters' length-weighted centres, ``d = c_A − c_B``,
+  written with the clusters' moments: total length ``L``, summed edge vector ``S``, tangent
+  dipole ``D = Σ e δᵀ``, length quadrupole ``Q = Σ l δ δᵀ`` and tangent quadrupole
+  ``T = Σ e ⊗ δ ⊗ δ``:
 
-      F(A, B) = (L_A L_B + <S_A, S_B>) / |d|² − 2 <d, S_A><d, S_B> / |d|⁴ + T(D_A, S_B)
-                − T(D_B, S_A),   d = c_A − c_B
+      F(A, B) = L_A L_B k + ½ ∇²k : (L_B Q_A + L_A Q_B) + S_Aᵀ H S_B + T(D_A, S_B) − T(D_B, S_A)
+                + ½ K4 : (T_A ⊗ S_B) − K4 : (D_A ⊗ D_B) + ½ K4 : (S_A ⊗ T_B)
 
-  where ``<S_A, S_B>/|d|² − 2<d,S_A><d,S_B>/|d|⁴ = S_Aᵀ H(d) S_B`` with ``H = ∇² log|d|`` and
-  ``T`` is its first-order term (:func:`_dipole`); between components ``L_A L_B / |d|²``, the
-  O'Hara kernel of ``energy.py``. Both parts are exact to first order in the cluster sizes.
+  with ``T`` the first-order term (:func:`_dipole`) and ``K4 = ∇⁴ log|d|`` contracted through
+  traces and projections of the moments (:func:`_quadrupole`, :func:`_dipole_pair`); between
+  components the length part ``L_A L_B k + ½ ∇²k : (…)`` alone, the O'Hara kernel of
+  ``energy.py``. Both parts to the same order: for two pieces of one straight line they
+  cancel (the exact F is 0), and expanding the length part alone further measured larger
+  errors. At the default θ the relative errors measured at most 1e-5 (energy) and 6.3e-4
+  (gradient) on 7_2, FHW and a non-equilateral trefoil of 5 000 and 20 000 edges, the first
+  order's 1.7e-3 and 6.7e-3; the gradient's falls about like θ³.
 * the **near field**: every other pair (always the pairs close in space, and so those close
   along the curve: boxes of edges sharing a vertex touch), summed exactly with the kernel of
   ``energy.py``.
 
 The gradient is the exact derivative of this approximated sum for the fixed split: each
-cluster's derivative with respect to ``(L, S, c, D)`` is pushed down to its edges by the chain
-rule. Both passes are parallel over targets (each target sums its own ordered pairs, so nothing
-is shared between threads): the results are the same bits for every thread count.
+cluster's derivative with respect to ``(L, c, S, D, Q, T)`` is pushed down to its edges by the
+chain rule (:func:`_push_down`). Both passes are parallel over targets (each target sums its
+own ordered pairs, so nothing is shared between threads): the results are the same bits for
+every thread count.
 
 The split (the "frame": hierarchy and interaction lists) is a function of the polygon it was
 built at. :class:`Frame` keeps it so that several polygons can be evaluated with one split (a
@@ -36,7 +45,10 @@ import numpy as np
 from . import bvh
 from ._layout import Layout
 
-THETA = 0.0625  # default admissibility (docs/benchmarks.md, "Tree engine: accuracy")
+# Default admissibility: the largest of 0.15, 0.175, 0.2, 0.25 whose relative errors stay, with
+# a margin, below 1e-4 (energy) and 1e-3 (gradient) on 7_2, FHW and a non-equilateral trefoil at
+# 3 000 to 20 000 edges (worst measured: 9.8e-6 and 6.3e-4, FHW's gradient; 0.2 gave 9.5e-4).
+THETA = 0.175
 _FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
 # Fixed split of the traversal into chunks (the same lists for every thread count).
 _SPLIT_CHUNKS = 16
@@ -47,8 +59,8 @@ _CHUNKS = 8
 
 ENGINE_NAMES = ("auto", "exact", "tree")
 # From this many edges on, "auto" takes the tree: at the default theta its energy+gradient
-# measured 0.8x the exact speed at 2 000 edges, 1.7x at 5 000, 3.6x at 10 000, 7.8x at 20 000
-# (docs/benchmarks.md, "Tree engine").
+# (frame included, 7_2) measured 1.1x the exact speed at 2 000 edges, 1.5x at 3 000, 2.4x at
+# 5 000, 5.3x at 10 000, 11.9x at 20 000 (docs/benchmarks.md, "Tree engine").
 TREE_FROM = 5000
 
 
@@ -377,11 +389,14 @@ def _dipole(X, s0, s1, s2, d0, d1, d2, inv, w, grad, gs, gX, gd):
 
 
 @nb.njit(cache=True, inline="always")
-def _quadrupole(T, s, x, w, wt, grad_t, grad_s, grad_x, gT, gs, gx, v, Tx):
+def _quadrupole(T, s, x, w, wt, grad_t, grad_s, grad_x, gal, gbe, gs, gx, v, Tx):
     """Second-order tangent term ``K4 : (T ⊗ s) = Σ_abcd K4_abcd T_acd s_b`` (``K4 = ∇⁴ log|x|``,
     ``T`` symmetric in ``c, d``), contracted through the traces and projections of ``T``
     (``K4 = −2w²(δδ)₃ + 8w³(δxx)₆ − 48w⁴ xxxx``, ``w = 1/|x|²``); adds ``wt`` times its
-    derivatives in ``T``, ``s``, ``x`` (as asked) to ``gT``, ``gs``, ``gx``. ``v`` (7, 3) and
+    derivatives in ``s`` and ``x`` (as asked) to ``gs``, ``gx``. The derivative in ``T``,
+    ``δ_cd α_a + δ_ac α_d + δ_ad α_c + β_acd + β_cad + β_dac`` with ``α = −2w² s + 8w³<x,s> x``
+    and ``β = σ ⊗ x ⊗ x``, ``σ = 8w³ s − 16w⁴<x,s> x``, is summed as ``α`` into ``gal`` and
+    ``β`` (entries ``c ≤ d``) into ``gbe`` (see :func:`_quadrupole_gradient`). ``v`` (7, 3) and
     ``Tx`` (3, 3) are scratch."""
     w2 = w * w
     w3 = w2 * w
@@ -413,19 +428,14 @@ def _quadrupole(T, s, x, w, wt, grad_t, grad_s, grad_x, gT, gs, gx, v, Tx):
                            - 48.0 * w4 * x[k] * txxx)
     if grad_t:
         for a in range(3):
-            for c in range(3):
-                for d in range(c, 3):
-                    g = 8.0 * w3 * (s[a] * x[c] * x[d] + x[a] * (s[c] * x[d] + s[d] * x[c]))
-                    g -= 48.0 * w4 * xs * x[a] * x[c] * x[d]
-                    if c == d:
-                        g += 8.0 * w3 * x[a] * xs - 2.0 * w2 * s[a]
-                    if a == c:
-                        g += 8.0 * w3 * xs * x[d] - 2.0 * w2 * s[d]
-                    if a == d:
-                        g += 8.0 * w3 * xs * x[c] - 2.0 * w2 * s[c]
-                    gT[a, c, d] += wt * g
-                    if d != c:
-                        gT[a, d, c] += wt * g
+            gal[a] += wt * (8.0 * w3 * xs * x[a] - 2.0 * w2 * s[a])
+            sig = wt * (8.0 * w3 * s[a] - 16.0 * w4 * xs * x[a])
+            gbe[a, 0, 0] += sig * x[0] * x[0]
+            gbe[a, 0, 1] += sig * x[0] * x[1]
+            gbe[a, 0, 2] += sig * x[0] * x[2]
+            gbe[a, 1, 1] += sig * x[1] * x[1]
+            gbe[a, 1, 2] += sig * x[1] * x[2]
+            gbe[a, 2, 2] += sig * x[2] * x[2]
     if grad_x:
         for k in range(3):
             p = s[0] * Tx[0, k] + s[1] * Tx[1, k] + s[2] * Tx[2, k]
@@ -439,6 +449,23 @@ def _quadrupole(T, s, x, w, wt, grad_t, grad_s, grad_x, gT, gs, gx, v, Tx):
             g += 384.0 * w4 * w * xs * txxx * x[k]
             gx[k] += wt * g
     return val
+
+
+@nb.njit(cache=True, inline="always")
+def _quadrupole_gradient(gal, gbe, scale, out):
+    """``scale`` times the derivative in ``T`` summed by :func:`_quadrupole` into ``out``."""
+    for a in range(3):
+        for c in range(3):
+            for d in range(3):
+                g = (gbe[a, min(c, d), max(c, d)] + gbe[c, min(a, d), max(a, d)]
+                     + gbe[d, min(a, c), max(a, c)])
+                if c == d:
+                    g += gal[a]
+                if a == c:
+                    g += gal[d]
+                if a == d:
+                    g += gal[c]
+                out[a, c, d] = scale * g
 
 
 @nb.njit(cache=True, inline="always")
@@ -486,11 +513,11 @@ def _dipole_pair(P, R, x, w, wt, grad, gP, gx, v):
 
 
 @nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
-def _far(L, C, S, D, Q, T, nc, foff, fpart, order, grad):
+def _far(L, C, S, D, Q, T, nc, foff, fpart, grad):
     """Per target node: Σ_B F(A, B) and, with ``grad``, twice Σ_B ∂F(A, B)/∂(L_A, S_A, c_A, D_A,
     Q_A, T_A) (the derivative of the ordered sum: F is symmetric). F: both parts of the kernel
-    expanded to ``order`` (1 or 2) in the cluster sizes around the centres, the same order
-    for both: they cancel for two pieces of one straight line (exact F = 0), and expanding one
+    expanded to second order in the cluster sizes around the centres, the same order for
+    both: they cancel for two pieces of one straight line (exact F = 0), and expanding one
     part further than the other measured larger errors."""
     m = L.shape[0]
     eF = np.zeros(m)
@@ -516,7 +543,8 @@ def _far(L, C, S, D, Q, T, nc, foff, fpart, order, grad):
         gc = np.zeros(3)
         gx = np.zeros((3, 3))
         gq = np.zeros((3, 3))
-        gt = np.zeros((3, 3, 3))
+        gal = np.zeros(3)
+        gbe = np.zeros((3, 3, 3))
         scratch = np.zeros((3, 3))
         v = np.zeros((7, 3))
         x = np.zeros(3)
@@ -527,31 +555,31 @@ def _far(L, C, S, D, Q, T, nc, foff, fpart, order, grad):
             dy = cy - C[b, 1]
             dz = cz - C[b, 2]
             inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-            if order == 2:
-                # length part, second order: ½ ∇²k : (L_B Q_A + L_A Q_B), k = 1/|d|²
-                x[0], x[1], x[2] = dx, dy, dz
-                Qb = Q[b]
-                i2 = inv * inv
-                i3 = i2 * inv
-                trqb = Qb[0, 0] + Qb[1, 1] + Qb[2, 2]
-                xqa = 0.0
-                xqb = 0.0
+            # length part, second order: ½ ∇²k : (L_B Q_A + L_A Q_B), k = 1/|d|² (the first
+            # order vanishes: Σ l δ = 0)
+            x[0], x[1], x[2] = dx, dy, dz
+            Qb = Q[b]
+            i2 = inv * inv
+            i3 = i2 * inv
+            trqb = Qb[0, 0] + Qb[1, 1] + Qb[2, 2]
+            xqa = 0.0
+            xqb = 0.0
+            for i in range(3):
+                v[0, i] = Qa[i, 0] * dx + Qa[i, 1] * dy + Qa[i, 2] * dz
+                v[1, i] = Qb[i, 0] * dx + Qb[i, 1] * dy + Qb[i, 2] * dz
+                xqa += x[i] * v[0, i]
+                xqb += x[i] * v[1, i]
+            trq = Lb * trqa + La * trqb
+            xqx = Lb * xqa + La * xqb
+            e += 4.0 * i3 * xqx - i2 * trq
+            if grad:
+                g_l += 4.0 * i3 * xqb - i2 * trqb
                 for i in range(3):
-                    v[0, i] = Qa[i, 0] * dx + Qa[i, 1] * dy + Qa[i, 2] * dz
-                    v[1, i] = Qb[i, 0] * dx + Qb[i, 1] * dy + Qb[i, 2] * dz
-                    xqa += x[i] * v[0, i]
-                    xqb += x[i] * v[1, i]
-                trq = Lb * trqa + La * trqb
-                xqx = Lb * xqa + La * xqb
-                e += 4.0 * i3 * xqx - i2 * trq
-                if grad:
-                    g_l += 4.0 * i3 * xqb - i2 * trqb
-                    for i in range(3):
-                        gc[i] += (4.0 * i3 * trq - 24.0 * i3 * inv * xqx) * x[i] + 8.0 * i3 * (
-                            Lb * v[0, i] + La * v[1, i])
-                        for j in range(3):
-                            gq[i, j] += 4.0 * Lb * i3 * x[i] * x[j]
-                        gq[i, i] -= Lb * i2
+                    gc[i] += (4.0 * i3 * trq - 24.0 * i3 * inv * xqx) * x[i] + 8.0 * i3 * (
+                        Lb * v[0, i] + La * v[1, i])
+                    for j in range(3):
+                        gq[i, j] += 4.0 * Lb * i3 * x[i] * x[j]
+                    gq[i, i] -= Lb * i2
             if nc[a] == nc[b]:
                 sbx, sby, sbz = S[b, 0], S[b, 1], S[b, 2]
                 ab = sax * sbx + say * sby + saz * sbz
@@ -562,13 +590,12 @@ def _far(L, C, S, D, Q, T, nc, foff, fpart, order, grad):
                 e += sv - 2.0 * q
                 e += _dipole(Da, sbx, sby, sbz, dx, dy, dz, inv, 1.0, grad, scratch[0], gx, gc)
                 e -= _dipole(D[b], sax, say, saz, dx, dy, dz, inv, -1.0, grad, gs, scratch, gc)
-                if order == 2:
-                    # tangent part, second order: ½ K4:(T_A⊗S_B) − K4:(D_A⊗D_B) + ½ K4:(S_A⊗T_B)
-                    e += 0.5 * _quadrupole(T[a], S[b], x, inv, 0.5, grad, False, grad, gt,
-                                           scratch[0], gc, v, scratch)
-                    e += 0.5 * _quadrupole(T[b], S[a], x, inv, 0.5, False, grad, grad, gt, gs,
-                                           gc, v, scratch)
-                    e -= _dipole_pair(Da, D[b], x, inv, -1.0, grad, gx, gc, v)
+                # tangent part, second order: ½ K4:(T_A⊗S_B) − K4:(D_A⊗D_B) + ½ K4:(S_A⊗T_B)
+                e += 0.5 * _quadrupole(T[a], S[b], x, inv, 0.5, grad, False, grad, gal, gbe,
+                                       scratch[0], gc, v, scratch)
+                e += 0.5 * _quadrupole(T[b], S[a], x, inv, 0.5, False, grad, grad, gal, gbe, gs,
+                                       gc, v, scratch)
+                e -= _dipole_pair(Da, D[b], x, inv, -1.0, grad, gx, gc, v)
                 if grad:
                     g_l += Lb * inv
                     tb = 2.0 * db * inv
@@ -598,8 +625,7 @@ def _far(L, C, S, D, Q, T, nc, foff, fpart, order, grad):
                 for j in range(3):
                     gD[a, k, j] = 2.0 * gx[k, j]
                     gQ[a, k, j] = 2.0 * gq[k, j]
-                    for i in range(3):
-                        gT[a, k, j, i] = 2.0 * gt[k, j, i]
+            _quadrupole_gradient(gal, gbe, 2.0, gT[a])
     return eF, gL, gS, gC, gD, gQ, gT
 
 
@@ -827,8 +853,7 @@ class Frame:
     """
 
     def __init__(self, X: np.ndarray, layout: Layout, theta: float = THETA,
-                 leaf_size: int = bvh.LEAF_SIZE, order: int = 2):
-        self.order = order
+                 leaf_size: int = bvh.LEAF_SIZE):
         self.layout = layout
         self.theta = check_theta(theta)
         tree = bvh.build(X, layout, leaf_size)
@@ -853,8 +878,7 @@ class Frame:
         E, M, ln, cp, pos, size = _edge_arrays(X, lay.nxt, lay.comp, lay.starts, tree.perm)
         L, C, S, D, Q, T, nc = _cluster_data(E, M, ln, cp, tree.lo, tree.hi, tree.left,
                                              tree.right)
-        eF, gL, gS, gC, gD, gQ, gT = _far(L, C, S, D, Q, T, nc, self.foff, self.fpart,
-                                          self.order, grad)
+        eF, gL, gS, gC, gD, gQ, gT = _far(L, C, S, D, Q, T, nc, self.foff, self.fpart, grad)
         part = _near(E, M, ln, cp, pos, size, tree.lo, tree.hi, self.near, _CHUNKS, grad)
         energy = 4.0 * lay.k + float(np.sum(part[0])) + float(np.sum(eF))
         if not grad:
