@@ -89,6 +89,10 @@ SPECIAL_KNOTS = (
 )
 
 _REST = "moebius_rest"
+# Whether a run reached its first iterate in this Blender session: the first one pays for the
+# numerical kernels (numba compiles them once per installation, later sessions load them from
+# its cache) before its first iterate; see docs/blender.md, Install, for the times measured.
+_SESSION = {"warm": False}
 _SOURCE = "moebius_source"
 
 
@@ -492,6 +496,13 @@ def _check_method(method: str, penalty: float | None) -> dict:
     return {"alpha": alpha}
 
 
+def solver_warm() -> bool:
+    """Whether a relaxation has reached its first iterate in this session, so that the
+    numerical kernels are ready (False: the next run prepares them first, see
+    :attr:`ObjectRelaxation.first_run`)."""
+    return _SESSION["warm"]
+
+
 class ObjectRelaxation:
     """A relaxation of one curve object, stepped by a caller that may stop it at any time.
 
@@ -541,6 +552,11 @@ class ObjectRelaxation:
                  tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
                  method: str = DEFAULT_METHOD, penalty: float | None = None,
                  append: bool = False, **options) -> None:
+        self.t0 = time.perf_counter()
+        #: the first run of the session: it prepares the solver before its first iterate
+        self.first_run = not _SESSION["warm"]
+        #: seconds from the set-up to the first iterate (None before it)
+        self.seconds_to_first: float | None = None
         max_iterations, tolerance, keyframe_stride, frame_start, extra = check_relax_options(
             max_iterations, tolerance, keyframe_stride, frame_start, method, penalty)
         options.update(extra)
@@ -581,7 +597,6 @@ class ObjectRelaxation:
         self.iterates = [self.start]
         self.energies = [self.energy]
         self._pending = None
-        self.t0 = time.perf_counter()
         # the earlier run's keys stay until this run's are written (finish), so that a run
         # that fails before its first iterate leaves them; live display removes them first
         self._live = False
@@ -591,6 +606,9 @@ class ObjectRelaxation:
         before = self.run.nit
         more = self.run.step()
         if self.run.nit > before:  # an accepted iterate (the last one may come with False)
+            if self.seconds_to_first is None:
+                self.seconds_to_first = time.perf_counter() - self.t0
+                _SESSION["warm"] = True
             self.nit += 1
             x = _as_link(self.run.x)
             self.x = x

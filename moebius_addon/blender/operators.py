@@ -67,6 +67,24 @@ class MOEBIUS_OT_convert(bpy.types.Operator):
         return {"FINISHED"}
 
 
+#: A first run of a session that takes this long to its first iterate says why in its report
+#: (numba compiling the kernels right after installing, loading them from its cache in later
+#: sessions; the times measured are in docs/blender.md, Install).
+PREPARE_NOTE_FROM = 1.0
+
+
+def _first_run_note(run) -> str:
+    if (not run.first_run or run.seconds_to_first is None
+            or run.seconds_to_first < PREPARE_NOTE_FROM):
+        return ""
+    return (f"; first run in this session: {run.seconds_to_first:.1f} s to the first iterate, "
+            f"preparing the solver (later runs start at once)")
+
+
+#: Status bar text while the first run of a session prepares the solver (nothing moves then).
+PREPARING = "Möbius: preparing the solver (first run only) …"
+
+
 class MOEBIUS_OT_relax(bpy.types.Operator):
     """Relax the active curve by the Möbius energy flow from its shape at the current frame,
     replacing its flow keys (Esc stops and keeps the iterates so far)"""
@@ -113,7 +131,8 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         self.report({kind}, f"'{run.obj.name}'{how}: {run.nit} iterations, energy "
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
-                            f"({result.message}{api.method_hint(run.method, result)})")
+                            f"({result.message}{api.method_hint(run.method, result)})"
+                            f"{_first_run_note(run)}")
 
     def execute(self, context):
         if not self._start(context):
@@ -137,13 +156,19 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
     def invoke(self, context, event):
         if context.window is None or bpy.app.background:
             return self.execute(context)
-        if not self._start(context):
-            return {"CANCELLED"}
         settings = context.scene.moebius
+        if api.solver_warm():
+            if not self._start(context):
+                return {"CANCELLED"}
+            settings.live_energy = self._run.energy
+        else:
+            # seconds without a visible change follow: the status bar says why first, and the
+            # run is set up at the first timer tick, after that text is drawn
+            self._run = None
+            context.workspace.status_text_set(PREPARING)
         settings.running = True
         settings.progress = 0.0
         settings.live_iteration = 0
-        settings.live_energy = self._run.energy
         self._timer = context.window_manager.event_timer_add(0.01, window=context.window)
         context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}
@@ -167,12 +192,18 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         return {"CANCELLED"}
 
     def modal(self, context, event):
+        if event.type == "ESC" and event.value == "PRESS" and self._run is None:
+            self._cleanup(context)
+            return {"CANCELLED"}
         if event.type == "ESC" and event.value == "PRESS":
             self._run.stop("cancelled by the user (Esc)")
             self._cleanup(context)
             return self._finish(context)
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
+        if self._run is None and not self._start(context):  # set up at the first tick
+            self._cleanup(context)
+            return {"CANCELLED"}
         t0 = time.perf_counter()
         more = True
         try:

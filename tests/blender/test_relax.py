@@ -299,3 +299,22 @@ def test_relax_only_grows_the_scene_range(scene, mb, trefoil):
     scene.frame_start, scene.frame_end = 40, 45
     bpy.ops.moebius.relax(append=True)  # frames 48-54
     assert (scene.frame_start, scene.frame_end) == (40, 54)
+
+
+def test_first_run_of_a_session_says_it_prepares_the_solver(scene, mb, trefoil, capfd,
+                                                            monkeypatch):
+    # the first use compiled for seconds with no word of why nothing moved
+    import sys
+
+    monkeypatch.setitem(mb.api._SESSION, "warm", False)
+    # the kernels are compiled by now: a note however short the preparation
+    monkeypatch.setattr(sys.modules[mb.__name__ + ".operators"], "PREPARE_NOTE_FROM", 0.0)
+    scene.moebius.max_iterations = 2
+    capfd.readouterr()
+    bpy.ops.moebius.relax()
+    out = capfd.readouterr().out
+    assert "; first run in this session: " in out
+    assert " s to the first iterate, preparing the solver (later runs start at once)" in out
+    assert mb.api.solver_warm()
+    bpy.ops.moebius.relax()
+    assert "first run" not in capfd.readouterr().out
