@@ -4,6 +4,8 @@
     python bench/tree_bench.py --sizes 1000 5000    # some sizes only
     python bench/tree_bench.py --million            # only one E+g at 10^6 edges, with the
                                                     # peak memory of that process alone
+    python bench/tree_bench.py --flow 600 1648      # only the flow: FHW to E <= 4.01, exact
+                                                    # engine against the tree (iterations, s)
 
 Energy+gradient exact vs tree (exact up to 20 000 edges), the frame (hierarchy build and the
 far/near split) and the box refit, the contact step and the closest pairs (exact; all pairs up
@@ -30,7 +32,7 @@ from moebius_addon.core.collision import closest_pairs, contact_time_x
 from moebius_addon.core.energy import energy_gradient_x
 
 EXACT_UP_TO = 20000
-THETAS = (0.0625, 0.125, 0.25, 0.5)
+THETAS = (0.0625, 0.125, 0.175, 0.25, 0.5)
 CACHE = Path("out/bench_tree_curves")
 
 
@@ -118,6 +120,23 @@ def million(theta: float) -> None:
           f"compiled before); peak resident memory {peak:.0f} MB (before: {before:.0f} MB)")
 
 
+def flow(sizes: list[int], theta: float) -> list[dict]:
+    """The FHW unknot to E <= 4.01 with the exact engine and with the tree, one run each."""
+    rows = []
+    for n in sizes:
+        P = core.knots.freedman_unknot(n)
+        for engine in ("exact", "tree"):
+            t0 = time.perf_counter()
+            r = core.relax(P, max_iter=400, energy_target=4.01, engine=engine, theta=theta)
+            row = {"edges": n, "engine": engine, "theta": theta if engine == "tree" else None,
+                   "iterations": r.nit, "seconds": time.perf_counter() - t0,
+                   "energy": float(r.fun), "message": r.message}
+            rows.append(row)
+            print(f"  FHW N={n:5d} {engine:5s}: {row['iterations']} iterations, "
+                  f"{row['seconds']:.1f} s, E {row['energy']:.5f} ({r.message})", flush=True)
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--sizes", type=int, nargs="*", default=[1000, 2000, 5000, 10000, 20000,
@@ -125,12 +144,20 @@ def main() -> None:
     ap.add_argument("--error-sizes", type=int, nargs="*", default=[5000, 20000])
     ap.add_argument("--theta", type=float, default=barnes_hut.THETA)
     ap.add_argument("--million", action="store_true")
+    ap.add_argument("--flow", type=int, nargs="*", default=None,
+                    help="only the flow comparison at these edge counts")
     ap.add_argument("--json", default="out/bench_tree.json")
     args = ap.parse_args()
     out: dict = {"machine": machine(), "theta": args.theta, "leaf_size": bvh.LEAF_SIZE}
     print(out["machine"], flush=True)
     if args.million:
         million(args.theta)
+        return
+    if args.flow is not None:
+        print(f"\nFHW to E <= 4.01, exact against tree (theta={args.theta}):", flush=True)
+        out["flow"] = flow(args.flow or [600, 1184, 1648], args.theta)
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(out, indent=1))
         return
 
     print("\nresample to 100 000 edges (issue 'Tree engine, part 2': <= 2 s), seconds:", flush=True)
