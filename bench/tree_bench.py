@@ -6,6 +6,9 @@
                                                     # peak memory of that process alone
     python bench/tree_bench.py --flow 600 1648      # only the flow: FHW to E <= 4.01, exact
                                                     # engine against the tree (iterations, s)
+    python bench/tree_bench.py --banded 100000      # only the banded metrics (h1, h2) on the
+                                                    # tree path: solver and 5 iterations of
+                                                    # the flow, peak memory of this process
 
 Energy+gradient exact vs tree (exact up to 20 000 edges), the frame (hierarchy build and the
 far/near split) and the box refit, the contact step and the closest pairs (exact; all pairs up
@@ -137,6 +140,51 @@ def flow(sizes: list[int], theta: float) -> list[dict]:
     return rows
 
 
+def banded_runs(sizes: list[int], iterations: int = 5) -> list[dict]:
+    """The O(N) saddle solver of the banded metrics (core/banded.py) and the flow with it."""
+    from moebius_addon.core import banded, metrics
+    from moebius_addon.core._layout import as_unit_layout
+    from moebius_addon.core.constraints import jacobian, make_constraints
+
+    rows = []
+    rng = np.random.default_rng(0)
+    for n in sizes:
+        P = curve("7_2", n)
+        X, layout, _ = as_unit_layout(P)
+        X = X / np.linalg.norm(X[layout.nxt] - X, axis=1).sum()
+        ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
+        con = make_constraints(X, layout, ln)
+        jac = jacobian(X, con)
+        for metric in ("h1", "h2"):
+            parts = metrics.banded_parts(metric, X, layout)
+            row = {"edges": n, "metric": metric,
+                   "factor": best_of(lambda: banded.BandedSaddle(parts, jac), 2)}
+            solver = banded.BandedSaddle(parts, jac)
+            g = rng.standard_normal((n, 3))
+            r = np.zeros(con.size)
+            row["solve"] = best_of(lambda: solver.solve(g, r), 3)
+            u, _ = solver.solve(g, r)
+            row["constraint_residual"] = float(np.abs(jac.matvec(u)).max())
+            t0 = time.perf_counter()
+            res = core.relax(P, metric=metric, max_iter=iterations, engine="tree")
+            row["relax_seconds"] = time.perf_counter() - t0
+            row["iteration_seconds"] = list(np.diff(res.history["seconds"]))
+            row["energies"] = res.history["energy"]
+            row["relax_constraint_residual"] = max(res.history["constraint_residual"])
+            row["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+            rows.append(row)
+            its = row["iteration_seconds"]
+            print(f"  7_2 N={n:6d} {metric}: factor {row['factor']:.3f} s, solve "
+                  f"{row['solve']:.3f} s (|C u| {row['constraint_residual']:.1e}); relax "
+                  f"{iterations} iterations {row['relax_seconds']:.1f} s in all, per "
+                  f"iteration {' '.join(f'{t:.2f}' for t in its)} s (median "
+                  f"{np.median(its):.2f}), E {row['energies'][0]:.2f} -> "
+                  f"{row['energies'][-1]:.2f}, constraints <= "
+                  f"{row['relax_constraint_residual']:.1e}; peak memory so far "
+                  f"{row['peak_rss_mb']:.0f} MB", flush=True)
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--sizes", type=int, nargs="*", default=[1000, 2000, 5000, 10000, 20000,
@@ -146,12 +194,20 @@ def main() -> None:
     ap.add_argument("--million", action="store_true")
     ap.add_argument("--flow", type=int, nargs="*", default=None,
                     help="only the flow comparison at these edge counts")
+    ap.add_argument("--banded", type=int, nargs="*", default=None,
+                    help="only the banded metrics on the tree path at these edge counts")
     ap.add_argument("--json", default="out/bench_tree.json")
     args = ap.parse_args()
     out: dict = {"machine": machine(), "theta": args.theta, "leaf_size": bvh.LEAF_SIZE}
     print(out["machine"], flush=True)
     if args.million:
         million(args.theta)
+        return
+    if args.banded is not None:
+        print("\nBanded metrics on the tree path (O(N) saddle solves), 7_2:", flush=True)
+        out["banded"] = banded_runs(args.banded or [20000, 100000])
+        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.json).write_text(json.dumps(out, indent=1))
         return
     if args.flow is not None:
         print(f"\nFHW to E <= 4.01, exact against tree (theta={args.theta}):", flush=True)

@@ -30,7 +30,8 @@ from .collision import contact_time_x
 from .constraints import Jacobian
 from .energy import energy_gradient_x, energy_x
 from .linalg import SaddlePointSolver, spd_inverse
-from .metrics import gram_x
+from .banded import BANDED_METRICS, BandedSaddle
+from .metrics import banded_parts, gram_x
 
 # Deterministic refactorization rule (see SaddlePointSolver): one factorization costs about as
 # much as N / _FACTOR_PER_ITER preconditioned Krylov iterations (measured here at N = 3000:
@@ -110,6 +111,12 @@ class DenseEngine:
         )
         self._gram = None  # the Gram matrix's memory, refilled at every update
         self._penalty_factorizations = 0
+        self._banded_factorizations = 0
+        self._banded_solves = 0
+
+    #: Whether the metric is a dense N × N matrix (sizes are then bounded by
+    #: ``solvers.base.check_dense_size``).
+    dense_metric = True
 
     # -- energy, gradient, contact -------------------------------------------------------------
 
@@ -184,10 +191,58 @@ class TreeEngine(DenseEngine):
     """:class:`DenseEngine` with the energy and its gradient by Barnes–Hut: a hierarchy and a
     far/near split built at every evaluated polygon, so that the energy is one function of the
     polygon (the line search compares values of the same approximated sum) and the gradient
-    its exact derivative. ``theta``: admissibility in (0, 2), default ``barnes_hut.THETA``."""
+    its exact derivative. ``theta``: admissibility in (0, 2), default ``barnes_hut.THETA``.
+
+    With a banded metric (``l2``, ``h1``, ``h2``) the saddle-point solves are O(N) too
+    (:class:`banded.BandedSaddle`, factored afresh at every iterate): nothing dense, except
+    the penalty methods' metric (:meth:`penalty_solver`, dense as in the exact engine)."""
 
     name = "tree"
     _frame = None  # the last frame and the polygon it was built at
+    _saddle = None  # the banded solver of the current iterate
+
+    @property
+    def dense_metric(self) -> bool:
+        return self.metric not in BANDED_METRICS
+
+    def update(self, X: np.ndarray, jac: Jacobian) -> None:
+        if self.dense_metric or not (jac.con.edge_lengths and jac.con.barycenter):
+            super().update(X, jac)
+            return
+        self._saddle = BandedSaddle(banded_parts(self.metric, X, self.layout), jac)
+        self._banded_factorizations += 1
+
+    def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self._saddle is None:
+            return super().solve(g, r)
+        self._banded_solves += 1
+        return self._saddle.solve(g, r)
+
+    def pseudo_inverse(self, phi: np.ndarray) -> np.ndarray:
+        if self._saddle is None:
+            return super().pseudo_inverse(phi)
+        return self._saddle.pseudo_inverse(phi)
+
+    def metric_product(self, V: np.ndarray) -> np.ndarray:
+        if self._saddle is None:
+            return super().metric_product(V)
+        return self._saddle.metric_product(V)
+
+    def refactor(self) -> None:
+        if self._saddle is None:
+            super().refactor()  # the banded solver is factored afresh at every iterate
+
+    @property
+    def fresh(self) -> bool:
+        return True if self._saddle is not None else self.solver.fresh
+
+    @property
+    def factorizations(self) -> int:
+        return super().factorizations + self._banded_factorizations
+
+    @property
+    def krylov_iterations(self) -> list[int]:
+        return super().krylov_iterations + [0] * self._banded_solves
 
     def _frame_at(self, X: np.ndarray) -> barnes_hut.Frame:
         # a trial accepted by its energy is evaluated again with the gradient: same frame

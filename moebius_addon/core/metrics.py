@@ -189,27 +189,25 @@ def _sparse_to_dense(n: int, rows, cols, vals) -> np.ndarray:
     return A
 
 
-def _mass(ln, layout):
-    """P1 mass matrix of the polygon with edge lengths ``ln`` (the L² product)."""
+def _mass_triplets(ln, layout):
+    """P1 mass matrix of the polygon with edge lengths ``ln`` (the L² product), as triplets."""
     i = np.arange(len(ln))
     j = layout.nxt
-    return _sparse_to_dense(
-        len(ln), (i, j, i, j), (i, j, j, i), (ln / 3, ln / 3, ln / 6, ln / 6)
-    )
+    return (i, j, i, j), (i, j, j, i), (ln / 3, ln / 3, ln / 6, ln / 6)
 
 
-def _stiffness(ln, layout):
-    """``Dᵀ diag(l) D``: Σ_I |u[i+1] − u[i]|² / l_I."""
+def _stiffness_triplets(ln, layout):
+    """``Dᵀ diag(l) D``: Σ_I |u[i+1] − u[i]|² / l_I, as triplets."""
     i = np.arange(len(ln))
     j = layout.nxt
     k = 1.0 / ln
-    return _sparse_to_dense(len(ln), (i, j, i, j), (i, j, j, i), (k, k, -k, -k))
+    return (i, j, i, j), (i, j, j, i), (k, k, -k, -k)
 
 
-def _bending(ln, layout):
-    """``D2ᵀ diag(dual) D2`` with ``(D2 u)_p = ((Du)_p − (Du)_{p−1}) / dual_p``."""
-    n = len(ln)
-    p = np.arange(n)
+def _bending_triplets(ln, layout):
+    """``D2ᵀ diag(dual) D2`` with ``(D2 u)_p = ((Du)_p − (Du)_{p−1}) / dual_p``, as
+    triplets."""
+    p = np.arange(len(ln))
     q = layout.prv
     dual = 0.5 * (ln[q] + ln)
     # (D2 u)_p = c_prev u[prv p] + c_mid u[p] + c_next u[nxt p]
@@ -221,7 +219,19 @@ def _bending(ln, layout):
             rows.append(cols[a])
             cs.append(cols[b])
             vals.append(dual * coef[a] * coef[b])
-    return _sparse_to_dense(n, rows, cs, vals)
+    return rows, cs, vals
+
+
+def _mass(ln, layout):
+    return _sparse_to_dense(len(ln), *_mass_triplets(ln, layout))
+
+
+def _stiffness(ln, layout):
+    return _sparse_to_dense(len(ln), *_stiffness_triplets(ln, layout))
+
+
+def _bending(ln, layout):
+    return _sparse_to_dense(len(ln), *_bending_triplets(ln, layout))
 
 
 def _hs_family(X, layout, ln, total, out, low):
@@ -325,3 +335,23 @@ def gram_matrix(metric: str, P) -> np.ndarray:
         raise ValueError("the Gram matrix of a curve this size is outside the float64 range "
                          "(its entries scale as 1/length²); scale the curve towards size 1")
     return out
+
+
+def banded_parts(metric: str, X: np.ndarray, layout: Layout):
+    """The banded metrics (``l2``, ``h1``, ``h2``) without a matrix: ``(rows, cols, vals,
+    beta)``, the matrix of :func:`gram_x` as ``A = Σ vals at (rows, cols) + β βᵀ`` per
+    component (β: the barycenter term's weights). For :mod:`.banded`'s O(N) solver."""
+    if metric not in ("l2", "h1", "h2"):
+        raise ValueError(f"{metric!r} is not a banded metric (l2, h1, h2)")
+    E, ln = _lengths(X, layout)
+    total = float(ln.sum())
+    parts = [(_mass_triplets(ln, layout), 1.0 / total**3)]  # as _gram_l2 .. _gram_h2
+    if metric != "l2":
+        parts.append((_stiffness_triplets(ln, layout), 1.0 / total))
+    if metric == "h2":
+        parts.append((_bending_triplets(ln, layout), total))
+    rows = np.concatenate([np.concatenate(r) for (r, _, _), _ in parts]).astype(np.int64)
+    cols = np.concatenate([np.concatenate(c) for (_, c, _), _ in parts]).astype(np.int64)
+    vals = np.concatenate([np.concatenate(v) * f for (_, _, v), f in parts])
+    beta = _barycenter_weights(ln, layout) * np.sqrt(len(ln)) / total**2
+    return rows, cols, vals, beta

@@ -156,7 +156,9 @@ def check_dense_size(n: int) -> None:
             f"{n} vertices are more than the dense metric's factorization handles "
             f"({DENSE_MAX_VERTICES}: numpy's multithreaded OpenBLAS Cholesky crashes the process "
             f"from about 16 000 on): resample to at most {DENSE_MAX_VERTICES} vertices "
-            f"(core.resample(P, n)); a few hundred are plenty to untangle a knot"
+            f"(core.resample(P, n); a few hundred are plenty to untangle a knot), or use a "
+            f"banded metric on the tree engine (metric='h2' or 'h1', engine='tree'), which "
+            f"stores nothing dense"
         )
     total = _physical_memory()
     need = _BYTES_PER_PAIR * float(n) ** 2
@@ -189,6 +191,9 @@ class Run:
     """
 
     _GRADIENT = "projected gradient norm"
+    #: Whether the method needs the metric as a dense matrix whatever the engine (the penalty
+    #: methods' solver is dense).
+    _DENSE_METRIC = False
 
     def __init__(self, P, metric: str, max_iter: int, tol: float, *,
                  energy_target: float | None, ftol: float, max_seconds: float | None,
@@ -204,7 +209,10 @@ class Run:
         self.max_seconds = None if max_seconds is None else check_number("max_seconds",
                                                                          max_seconds, 0)
         X, layout, e2 = as_unit_layout(P)  # exact scaling of curves far from size 1
-        check_dense_size(layout.n)
+        # the engine is built first (cheap): it says whether its metric is a dense matrix
+        self.engine = make_engine(engine, layout, metric, theta=theta, **engine_options)
+        if self.engine.dense_metric or self._DENSE_METRIC:
+            check_dense_size(layout.n)
         if check:
             check_polygon(P)
         self.layout = layout
@@ -219,7 +227,6 @@ class Run:
         self.lengths0 = ln.copy() if target_lengths == "keep" else self._equal_lengths(
             ln, equilateral)
         self.eps = 1e-3 * float(self.lengths0.mean())  # contact distance
-        self.engine = make_engine(engine, layout, metric, theta=theta, **engine_options)
         self.nit = 0
         self.rejected = 0
         self.done = False

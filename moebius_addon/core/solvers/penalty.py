@@ -56,6 +56,8 @@ class _PenaltyRun(Run):
         As in :class:`.projected.Relaxation`; ``ftol`` applies to the penalized energy.
     """
 
+    _DENSE_METRIC = True  # engine.penalty_solver is dense for every engine
+
     _GRADIENT = "gradient norm"
 
     def __init__(self, P, metric="hs", max_iter=200, tol=1e-6, *,

@@ -1,0 +1,120 @@
+"""The O(N) saddle-point solver of the banded metrics (core/banded.py) against the dense one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from moebius_addon import core
+from moebius_addon.core import banded, metrics
+from moebius_addon.core._layout import as_unit_layout
+from moebius_addon.core.constraints import jacobian, make_constraints
+from moebius_addon.core.linalg import Factorization
+from moebius_addon.core.solvers.base import DENSE_MAX_VERTICES
+
+
+def _ring(n):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.c_[np.cos(t), np.sin(t), 0 * t]
+
+
+CURVES = {
+    "trefoil": lambda: core.resample(core.knots.named("3_1"), 200),
+    "fhw": lambda: core.knots.freedman_unknot(300),
+    "link": lambda: core.resample([_ring(60), _ring(60)[:, [0, 2, 1]] + [1.2, 0, 0],
+                                   _ring(60) + [2.4, 0, 0]], [40, 50, 60]),
+    # not equilateral, as the flow's iterates between back-projections are not exactly
+    "noneq": lambda: core.resample(core.knots.named("4_1"), 150)
+    + 0.05 / 150 * np.random.default_rng(3).standard_normal((150, 3)),
+}
+
+
+def _system(name):
+    X, lay, _ = as_unit_layout(CURVES[name]())
+    X = X / np.linalg.norm(X[lay.nxt] - X, axis=1).sum()
+    ln = np.linalg.norm(X[lay.nxt] - X, axis=1)
+    con = make_constraints(X, lay, ln)
+    return X, lay, con, jacobian(X, con)
+
+
+@pytest.mark.parametrize("name", sorted(CURVES))
+@pytest.mark.parametrize("metric", banded.BANDED_METRICS)
+def test_same_solution_as_the_dense_solver(name, metric):
+    X, lay, con, jac = _system(name)
+    A = metrics.gram_x(metric, X, lay)
+    solver = banded.BandedSaddle(metrics.banded_parts(metric, X, lay), jac)
+    dense = Factorization(A, jac, np.float64)
+    rng = np.random.default_rng(1)
+    V = rng.standard_normal((lay.n, 3))
+    assert np.allclose(solver.metric_product(V), A @ V, rtol=0, atol=1e-13 * np.abs(A @ V).max())
+    g = rng.standard_normal((lay.n, 3))
+    r = 1e-3 * rng.standard_normal(con.size)
+    u0, lam0 = dense.solve(g, r)
+    u1, lam1 = solver.solve(g, r)
+    assert np.linalg.norm(u1 - u0) <= 1e-8 * np.linalg.norm(u0)
+    assert np.linalg.norm(lam1 - lam0) <= 1e-7 * np.linalg.norm(lam0)
+    # its own residuals in the true system: G u + Cᵀλ = g, C u = r
+    assert np.linalg.norm(A @ u1 + jac.rmatvec(lam1) - g) <= 1e-9 * np.linalg.norm(g)
+    assert np.linalg.norm(jac.matvec(u1) - r) <= 1e-7 * np.linalg.norm(r)
+    p0 = dense.pseudo_inverse(r)
+    assert np.linalg.norm(solver.pseudo_inverse(r) - p0) <= 1e-8 * np.linalg.norm(p0)
+
+
+def test_band_lu_pivots_like_a_dense_solve():
+    # a saddle-like band with zeros on the diagonal: no solve without row exchanges
+    rng = np.random.default_rng(0)
+    n, kl, ku = 60, 3, 3
+    M = np.zeros((n, n))
+    for i in range(n):
+        for j in range(max(0, i - kl), min(n, i + ku + 1)):
+            M[i, j] = rng.standard_normal()
+    M[np.arange(0, n, 2), np.arange(0, n, 2)] = 0.0
+    ab = np.zeros((n, 2 * kl + ku + 1))
+    for i in range(n):
+        for j in range(max(0, i - kl), min(n, i + ku + 1)):
+            ab[i, j - i + kl] = M[i, j]
+    piv, bad = banded.band_lu(ab, kl, ku)
+    assert bad == -1
+    b = rng.standard_normal((n, 2))
+    x = b.copy()
+    banded.band_solve(ab, piv, kl, ku, x)
+    assert np.allclose(x, np.linalg.solve(M, b), rtol=1e-9, atol=1e-9)
+
+
+def test_zigzag_order_makes_every_closed_loop_a_band():
+    _, lay, _, _ = _system("link")
+    pos = banded.zigzag_positions(lay)
+    assert sorted(pos) == list(range(lay.n))
+    assert np.abs(pos[lay.nxt] - pos).max() <= 2
+    assert np.abs(pos[lay.nxt[lay.nxt]] - pos).max() <= 4
+
+
+def test_not_a_banded_metric_refused():
+    X, lay, _, _ = _system("trefoil")
+    with pytest.raises(ValueError, match="hs"):
+        metrics.banded_parts("hs", X, lay)
+
+
+def test_tree_engine_with_a_banded_metric_runs_past_the_dense_limit():
+    n = DENSE_MAX_VERTICES + 1000
+    P = core.knots.freedman_unknot(n)
+    with pytest.raises(ValueError, match="dense"):
+        core.relax(P, metric="hs", max_iter=1, engine="tree")
+    with pytest.raises(ValueError, match="dense"):
+        core.relax(P, metric="h2", max_iter=1, engine="exact")
+    with pytest.raises(ValueError, match="dense"):
+        core.relax(P, metric="h2", max_iter=1, engine="tree", method="lbfgs")
+    r = core.relax(P, metric="h2", max_iter=2, engine="tree")
+    assert r.nit == 2
+    assert r.history["energy"][-1] < r.history["energy"][0]
+    assert max(r.history["constraint_residual"]) < 1e-8
+    assert r.stats["engine"] == "tree"
+
+
+def test_banded_tree_flow_follows_the_exact_flow():
+    # the same metric solved two ways; the energies differ only by the tree's approximation
+    P = core.knots.freedman_unknot(600)
+    exact = core.relax(P, metric="h2", max_iter=15, engine="exact")
+    tree = core.relax(P, metric="h2", max_iter=15, engine="tree")
+    assert tree.nit == exact.nit == 15
+    assert tree.fun == pytest.approx(exact.fun, rel=1e-3)
