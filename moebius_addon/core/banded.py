@@ -214,7 +214,7 @@ class BandedSaddle:
         self.Z, self.Zlam = Z
         self.cap = np.empty((k, 12, 12))
         for c in range(k):
-            W = np.einsum("pnd,qnd->pq", self.U[c], self.Z[9 * c:9 * c + 9])
+            W = self.U[c].reshape(9, -1) @ self.Z[9 * c:9 * c + 9].reshape(9, -1).T
             Sinv = np.zeros((12, 12))
             Sinv[0:3, 0:3] = -np.eye(3) / mu[c]
             Sinv[3:6, 3:6] = np.eye(3)
@@ -263,10 +263,10 @@ class BandedSaddle:
         lam_b = yb.copy()
         for c in range(k):
             t = np.empty(12)
-            t[:9] = np.einsum("pnd,nd->p", self.U[c], y)
+            t[:9] = self.U[c].reshape(9, -1) @ y.ravel()
             t[9:] = yb[c]
             w = self.cap[c] @ t
-            u -= np.einsum("p,pnd->nd", w[:9], self.Z[9 * c:9 * c + 9])
+            u -= (w[:9] @ self.Z[9 * c:9 * c + 9].reshape(9, -1)).reshape(u.shape)
             lam_e -= w[:9] @ self.Zlam[9 * c:9 * c + 9]
             lam_b[c] -= w[9:]
         return u, np.concatenate([lam_e, lam_b.ravel()])
