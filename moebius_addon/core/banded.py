@@ -42,9 +42,11 @@ def band_lu(ab, kl, ku):
     scheme). Row ``r`` of ``ab`` (shape ``(n, 2 kl + ku + 1)``) holds the columns
     ``r − kl … r + kl + ku`` of the matrix (``A[r, j]`` at ``ab[r, j − r + kl]``; the first
     ``kl`` places of the upper side take the fill-in of the row exchanges). Returns the pivot
-    rows and the first zero pivot's index (−1: none)."""
+    rows, the multipliers of every column (``(n, kl)``, contiguous for the solves) and the
+    first zero pivot's index (−1: none)."""
     n = ab.shape[0]
     piv = np.empty(n, np.int64)
+    mult = np.zeros((n, max(kl, 1)))
     for k in range(n):
         last = min(n - 1, k + kl)
         p = k
@@ -56,7 +58,7 @@ def band_lu(ab, kl, ku):
                 p = r
         piv[k] = p
         if best == 0.0:
-            return piv, k
+            return piv, mult, k
         jmax = min(n - 1, k + kl + ku)
         if p != k:
             for j in range(k, jmax + 1):
@@ -66,37 +68,65 @@ def band_lu(ab, kl, ku):
         d = ab[k, kl]
         for r in range(k + 1, last + 1):
             f = ab[r, k - r + kl] / d
-            ab[r, k - r + kl] = f
+            mult[k, r - k - 1] = f
             if f != 0.0:
                 for j in range(k + 1, jmax + 1):
                     ab[r, j - r + kl] -= f * ab[k, j - k + kl]
-    return piv, -1
+    return piv, mult, -1
 
 
 @nb.njit(cache=True)
-def band_solve(ab, piv, kl, ku, b):
-    """Solve with the factors of :func:`band_lu` for the columns of ``b`` (n, m), in place."""
-    n = ab.shape[0]
-    m = b.shape[1]
+def _solve_vector(ab, mult, piv, kl, ku, x):
+    n = x.shape[0]
     for k in range(n):
         p = piv[k]
         if p != k:
-            for c in range(m):
-                a = b[k, c]
-                b[k, c] = b[p, c]
-                b[p, c] = a
-        for r in range(k + 1, min(n - 1, k + kl) + 1):
-            f = ab[r, k - r + kl]
-            if f != 0.0:
-                for c in range(m):
-                    b[r, c] -= f * b[k, c]
+            a = x[k]
+            x[k] = x[p]
+            x[p] = a
+        xk = x[k]
+        if xk != 0.0:
+            for t in range(min(kl, n - 1 - k)):
+                x[k + 1 + t] -= mult[k, t] * xk
     for k in range(n - 1, -1, -1):
-        jmax = min(n - 1, k + kl + ku)
-        for c in range(m):
-            s = b[k, c]
-            for j in range(k + 1, jmax + 1):
-                s -= ab[k, j - k + kl] * b[j, c]
-            b[k, c] = s / ab[k, kl]
+        s = x[k]
+        for j in range(k + 1, min(n - 1, k + kl + ku) + 1):
+            s -= ab[k, j - k + kl] * x[j]
+        x[k] = s / ab[k, kl]
+
+
+@nb.njit(cache=True, parallel=True)
+def band_solve(ab, mult, piv, kl, ku, b):
+    """Solve with the factors of :func:`band_lu` for the columns of ``b`` (n, m), in place
+    (columns in parallel, each alone: the same bits for any thread count)."""
+    for c in nb.prange(b.shape[1]):
+        x = np.ascontiguousarray(b[:, c])
+        _solve_vector(ab, mult, piv, kl, ku, x)
+        b[:, c] = x
+
+
+@nb.njit(cache=True, parallel=True)
+def _solve_fields(ab, mult, piv, kl, ku, D, pos, G, lam):
+    """Band solves for right-hand sides given as fields ``G`` (m, N, 3) and edge values
+    ``lam`` (m, N) (or (0, N): none), scaled by ``D`` on both sides; the solutions' fields
+    and edge multipliers."""
+    m, n = G.shape[0], G.shape[1]
+    X = np.empty((m, n, 3))
+    L = np.empty((m, n))
+    for q in nb.prange(m):
+        x = np.empty(4 * n)
+        for v in range(n):
+            i = 4 * pos[v]
+            for d in range(3):
+                x[i + d] = G[q, v, d] * D[i + d]
+            x[i + 3] = lam[q, v] * D[i + 3] if lam.shape[0] > 0 else 0.0
+        _solve_vector(ab, mult, piv, kl, ku, x)
+        for v in range(n):
+            i = 4 * pos[v]
+            for d in range(3):
+                X[q, v, d] = x[i + d] * D[i + d]
+            L[q, v] = x[i + 3] * D[i + 3]
+    return X, L
 
 
 def zigzag_positions(layout: Layout) -> np.ndarray:
@@ -111,11 +141,12 @@ def zigzag_positions(layout: Layout) -> np.ndarray:
 
 
 @nb.njit(cache=True)
-def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, kl, ku):
+def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, kl, ku, ab):
     """The band of ``D [[A_band ⊗ I₃ + μ springs, C_eᵀ], [C_e, 0]] D`` in the storage of
     :func:`band_lu` (4 unknowns per vertex: x, y, z and the multiplier of its edge) and the
     diagonal ``D`` (4N,). ``D`` balances the blocks: h2's entries grow like N³ and C_e's like
-    N, and without it pivoting on the unscaled band lost the constraints at 100 000 edges."""
+    N, and without it pivoting on the unscaled band lost the constraints at 100 000 edges.
+    ``ab``: the memory of the band (4N, 2 kl + ku + 1), overwritten."""
     n = pos.shape[0]
     diag = np.zeros(n)
     for t in range(rows.shape[0]):
@@ -131,7 +162,7 @@ def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, kl, ku):
         j = nxt[i]
         s = (diag[i] ** -1.0 + diag[j] ** -1.0) / (ln[i] * ln[i])
         D[4 * pos[i] + 3] = 1.0 / np.sqrt(s)
-    ab = np.zeros((4 * n, 2 * kl + ku + 1))
+    ab[:] = 0.0
     for t in range(rows.shape[0]):
         r0 = 4 * pos[rows[t]]
         c0 = 4 * pos[cols[t]]
@@ -143,14 +174,17 @@ def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, kl, ku):
             ab[r0 + d, kl] += mu[c] * D[r0 + d] * D[r0 + d]
     for i in range(n):
         lam = 4 * pos[i] + 3
-        j = nxt[i]
-        for v, sign in ((i, -1.0), (j, 1.0)):
-            x0 = 4 * pos[v]
-            for d in range(3):
-                coef = sign * T[i, d] / ln[i] * D[lam] * D[x0 + d]
-                ab[lam, x0 + d - lam + kl] += coef
-                ab[x0 + d, lam - x0 - d + kl] += coef
-    return ab, D
+        xi = 4 * pos[i]
+        xj = 4 * pos[nxt[i]]
+        for d in range(3):
+            t = T[i, d] / ln[i] * D[lam]
+            a = -t * D[xi + d]  # d(log l_i)/d(x_i)
+            b = t * D[xj + d]  # d(log l_i)/d(x_{i+1})
+            ab[lam, xi + d - lam + kl] += a
+            ab[xi + d, lam - xi - d + kl] += a
+            ab[lam, xj + d - lam + kl] += b
+            ab[xj + d, lam - xj - d + kl] += b
+    return D
 
 
 @nb.njit(cache=True)
@@ -168,12 +202,13 @@ def _band_product(rows, cols, vals, V):
 class BandedSaddle:
     """The saddle-point solver of a banded metric at one iterate (see the module's text).
 
-    ``parts``: the metric's banded part as triplets ``(rows, cols, vals)`` over vertices and
+    ``recycle``: the previous iterate's solver, whose memory this one takes over (it must
+    not be used afterwards). ``parts``: the metric's banded part as triplets ``(rows, cols, vals)`` over vertices and
     its barycenter weights ``beta`` (N,) (``B = β βᵀ`` per component), from
     :func:`metrics.banded_parts`; ``jac``: the constraint Jacobian (edge and barycenter rows).
     """
 
-    def __init__(self, parts, jac: Jacobian):
+    def __init__(self, parts, jac: Jacobian, recycle: BandedSaddle | None = None):
         rows, cols, vals, beta = parts
         con = jac.con
         if not (con.edge_lengths and con.barycenter):
@@ -193,10 +228,15 @@ class BandedSaddle:
         mu = diag[anchors]  # a spring as stiff as the metric's own diagonal there
         self.anchors, self.mu = anchors, mu
         T, inv_l = jac.edge_fields()
-        ab, self.D = _fill(rows, cols, vals, pos, anchors, mu, T, 1.0 / inv_l, lay.nxt,
-                           self.kl, self.ku)
+        shape = (4 * lay.n, 2 * self.kl + self.ku + 1)
+        # the previous iterate's band memory (182 MB at 100 000 edges with h2: a fresh array
+        # costs its page faults again)
+        ab = recycle.ab if recycle is not None and recycle.ab.shape == shape else np.empty(shape)
+        recycle = None  # its band is overwritten now: it must not be used again
+        self.D = _fill(rows, cols, vals, pos, anchors, mu, T, 1.0 / inv_l, lay.nxt, self.kl,
+                       self.ku, ab)
         self.ab = ab
-        self.piv, bad = band_lu(ab, self.kl, self.ku)
+        self.piv, self.mult, bad = band_lu(ab, self.kl, self.ku)
         if bad >= 0:
             raise np.linalg.LinAlgError(f"singular band at unknown {bad}")
         # the correction's columns per component: spring (3), barycenter term (3),
@@ -228,18 +268,10 @@ class BandedSaddle:
     def _band_inverse(self, G, lam=None):
         """Band solve for right-hand sides given as fields ``G`` (m, N, 3) and edge values
         ``lam`` (m, N): the core solution's fields and edge multipliers."""
-        m, n = G.shape[0], self.layout.n
-        b = np.zeros((4 * n, m))
-        p4 = 4 * self.pos
-        for d in range(3):
-            b[p4 + d] = G[:, :, d].T
-        if lam is not None:
-            b[p4 + 3] = lam.T
-        b *= self.D[:, None]
-        band_solve(self.ab, self.piv, self.kl, self.ku, b)
-        b *= self.D[:, None]
-        X = np.stack([b[p4 + d].T for d in range(3)], axis=-1)
-        return X, b[p4 + 3].T
+        G = np.ascontiguousarray(G, dtype=np.float64)
+        lam = np.zeros((0, G.shape[1])) if lam is None else np.ascontiguousarray(lam, float)
+        return _solve_fields(self.ab, self.mult, self.piv, self.kl, self.ku, self.D, self.pos,
+                             G, lam)
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(u, λ)`` of ``[[G, Cᵀ], [C, 0]] [u; λ] = [g; r]`` (λ: edge rows, then three
@@ -272,8 +304,10 @@ class BandedSaddle:
         return u, np.concatenate([lam_e, lam_b.ravel()])
 
     def pseudo_inverse(self, phi: np.ndarray) -> np.ndarray:
-        """``G⁻¹Cᵀ(CG⁻¹Cᵀ)⁻¹ φ``: the ``u`` of :meth:`solve` with ``g = 0``."""
-        return self.solve(np.zeros((self.layout.n, 3)), phi)[0]
+        """``G⁻¹Cᵀ(CG⁻¹Cᵀ)⁻¹ φ``: the ``u`` of :meth:`solve` with ``g = 0``, without its
+        refinement step (the back-projection's Newton iteration corrects what is left, and
+        a band solve is most of an iteration's solve time at 100 000 edges)."""
+        return self._solve(np.zeros((self.layout.n, 3)), phi)[0]
 
     def metric_product(self, V: np.ndarray) -> np.ndarray:
         """``A V`` for an (N, 3) field (band and barycenter term)."""

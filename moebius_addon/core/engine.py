@@ -209,7 +209,8 @@ class TreeEngine(DenseEngine):
         if self.dense_metric or not (jac.con.edge_lengths and jac.con.barycenter):
             super().update(X, jac)
             return
-        self._saddle = BandedSaddle(banded_parts(self.metric, X, self.layout), jac)
+        old, self._saddle = self._saddle, None  # its memory is reused: no longer usable
+        self._saddle = BandedSaddle(banded_parts(self.metric, X, self.layout), jac, old)
         self._banded_factorizations += 1
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -73,11 +73,11 @@ def test_band_lu_pivots_like_a_dense_solve():
     for i in range(n):
         for j in range(max(0, i - kl), min(n, i + ku + 1)):
             ab[i, j - i + kl] = M[i, j]
-    piv, bad = banded.band_lu(ab, kl, ku)
+    piv, mult, bad = banded.band_lu(ab, kl, ku)
     assert bad == -1
     b = rng.standard_normal((n, 2))
     x = b.copy()
-    banded.band_solve(ab, piv, kl, ku, x)
+    banded.band_solve(ab, mult, piv, kl, ku, x)
     assert np.allclose(x, np.linalg.solve(M, b), rtol=1e-9, atol=1e-9)
 
 
