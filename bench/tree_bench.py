@@ -140,7 +140,8 @@ def flow(sizes: list[int], theta: float) -> list[dict]:
     return rows
 
 
-def banded_runs(sizes: list[int], iterations: int = 5) -> list[dict]:
+def banded_runs(sizes: list[int], iterations: int = 5,
+                metric_names: tuple[str, ...] = ("h1", "h2")) -> list[dict]:
     """The O(N) saddle solver of the banded metrics (core/banded.py) and the flow with it."""
     from moebius_addon.core import banded, metrics
     from moebius_addon.core._layout import as_unit_layout
@@ -155,7 +156,7 @@ def banded_runs(sizes: list[int], iterations: int = 5) -> list[dict]:
         ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
         con = make_constraints(X, layout, ln)
         jac = jacobian(X, con)
-        for metric in ("h1", "h2"):
+        for metric in metric_names:
             parts = metrics.banded_parts(metric, X, layout)
             row = {"edges": n, "metric": metric,
                    "factor": best_of(lambda: banded.BandedSaddle(parts, jac), 2)}
@@ -196,6 +197,9 @@ def main() -> None:
                     help="only the flow comparison at these edge counts")
     ap.add_argument("--banded", type=int, nargs="*", default=None,
                     help="only the banded metrics on the tree path at these edge counts")
+    ap.add_argument("--iterations", type=int, default=5,
+                    help="iterations of the flow in --banded")
+    ap.add_argument("--metrics", nargs="*", default=["h1", "h2"], help="metrics of --banded")
     ap.add_argument("--json", default="out/bench_tree.json")
     args = ap.parse_args()
     out: dict = {"machine": machine(), "theta": args.theta, "leaf_size": bvh.LEAF_SIZE}
@@ -205,7 +209,8 @@ def main() -> None:
         return
     if args.banded is not None:
         print("\nBanded metrics on the tree path (O(N) saddle solves), 7_2:", flush=True)
-        out["banded"] = banded_runs(args.banded or [20000, 100000])
+        out["banded"] = banded_runs(args.banded or [20000, 100000], args.iterations,
+                                    args.metrics)
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(out, indent=1))
         return
