@@ -159,11 +159,11 @@ def banded_runs(sizes: list[int], iterations: int = 5,
         for metric in metric_names:
             parts = metrics.banded_parts(metric, X, layout)
             row = {"edges": n, "metric": metric,
-                   "factor": best_of(lambda: banded.BandedSaddle(parts, jac), 2)}
+                   "factor": best_of(lambda p=parts, j=jac: banded.BandedSaddle(p, j), 2)}
             solver = banded.BandedSaddle(parts, jac)
             g = rng.standard_normal((n, 3))
             r = np.zeros(con.size)
-            row["solve"] = best_of(lambda: solver.solve(g, r), 3)
+            row["solve"] = best_of(lambda s=solver, g=g, r=r: s.solve(g, r), 3)
             u, _ = solver.solve(g, r)
             row["constraint_residual"] = float(np.abs(jac.matvec(u)).max())
             t0 = time.perf_counter()

@@ -231,7 +231,8 @@ class BandedSaddle:
         shape = (4 * lay.n, 2 * self.kl + self.ku + 1)
         # the previous iterate's band memory (182 MB at 100 000 edges with h2: a fresh array
         # costs its page faults again)
-        ab = recycle.ab if recycle is not None and recycle.ab.shape == shape else np.empty(shape)
+        reuse = recycle is not None and recycle.ab.shape == shape
+        ab = recycle.ab if reuse else np.empty(shape)
         recycle = None  # its band is overwritten now: it must not be used again
         self.D = _fill(rows, cols, vals, pos, anchors, mu, T, 1.0 / inv_l, lay.nxt, self.kl,
                        self.ku, ab)

@@ -26,11 +26,11 @@ import numpy as np
 
 from . import barnes_hut
 from ._layout import Layout
+from .banded import BANDED_METRICS, BandedSaddle
 from .collision import contact_time_x
 from .constraints import Jacobian
 from .energy import energy_gradient_x, energy_x
 from .linalg import SaddlePointSolver, spd_inverse
-from .banded import BANDED_METRICS, BandedSaddle
 from .metrics import banded_parts, gram_x
 
 # Deterministic refactorization rule (see SaddlePointSolver): one factorization costs about as
