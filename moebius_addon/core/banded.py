@@ -202,10 +202,11 @@ def _band_product(rows, cols, vals, V):
 class BandedSaddle:
     """The saddle-point solver of a banded metric at one iterate (see the module's text).
 
-    ``recycle``: the previous iterate's solver, whose memory this one takes over (it must
-    not be used afterwards). ``parts``: the metric's banded part as triplets ``(rows, cols, vals)`` over vertices and
+    ``parts``: the metric's banded part as triplets ``(rows, cols, vals)`` over vertices and
     its barycenter weights ``beta`` (N,) (``B = β βᵀ`` per component), from
-    :func:`metrics.banded_parts`; ``jac``: the constraint Jacobian (edge and barycenter rows).
+    :func:`metrics.banded_parts`; ``jac``: the constraint Jacobian (edge and barycenter rows);
+    ``recycle``: the previous iterate's solver, whose memory this one takes over (it must
+    not be used afterwards).
     """
 
     def __init__(self, parts, jac: Jacobian, recycle: BandedSaddle | None = None):
