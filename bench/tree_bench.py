@@ -229,6 +229,10 @@ def main() -> None:
         core.resample(P, 100000)
         out["resample"][name] = time.perf_counter() - t0
         print(f"  {name}: {out['resample'][name]:.2f}", flush=True)
+    t0 = time.perf_counter()
+    core.resample(core.knots.named("3_1"), 1000000)
+    out["resample"]["3_1 at 10^6"] = time.perf_counter() - t0
+    print(f"  3_1 to 10^6 edges: {out['resample']['3_1 at 10^6']:.2f}", flush=True)
 
     print(f"\nEnergy+gradient (7_2, theta={args.theta}), seconds (best of 3):", flush=True)
     out["timings"] = []

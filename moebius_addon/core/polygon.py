@@ -35,7 +35,11 @@ _EQUAL = 5e-11
 # many chords, not at a corner: the table's trefoil missed by 3e-10 to 1.4e-9 from each of the
 # 16 starts at 20 000 edges and by 1.0e-7 to 1.9e-7 at 100 000 (corners make misses of 1e-3
 # and more), so the other starts are not tried (resampling it to 100 000 edges took 3.5 s).
+# That rounding grows like n²: 1.8e-7 at 100 000 edges, 3.3e-6 at 300 000, 3.1e-5 at 10⁶ (the
+# trefoil's first march), so the bound grows as 3e-16 n² from 57 735 edges on (ten times the
+# misses measured); with 1e-6 alone, 10⁶ edges tried all 16 starts and took 267 s.
 _ROUNDING_MISS = 1e-6
+_ROUNDING_PER_N2 = 3e-16
 
 
 @nb.njit(cache=True)
@@ -107,7 +111,7 @@ def _resample_one(P: np.ndarray, n: int, closed: bool) -> np.ndarray:
         return out
     if not closed:  # both ends are fixed: make the closest march equilateral between them
         return equalize(out, closed=False)
-    if miss <= _ROUNDING_MISS:  # other starts miss by as much: equalize corrects it
+    if miss <= max(_ROUNDING_MISS, _ROUNDING_PER_N2 * n * n):  # rounding: equalize corrects it
         return equalize(out)
     # Curves with sharp turns often have no equal-chord polygon through the first point (the
     # march jumps where a chord cuts a corner): start elsewhere, keep the closest miss.
