@@ -1,4 +1,4 @@
-"""Equilateral resampling and the checks every start must pass (DESIGN.md, "Constraints").
+"""Equilateral resampling and the checks every start must pass (docs/design.md, "Constraints").
 
 The flow keeps every edge at its target length, so a start has to be an equilateral polygon
 that is fine enough for its own shape: vertices several edges apart along the curve must be
@@ -15,7 +15,7 @@ from ._layout import Layout, as_unit_layout, unit_exponent
 from .collision import closest_pairs
 
 # Closest pair of vertices at least CONTACT_GAP edges apart, divided by the mean edge length,
-# must reach CONTACT_RATIO. DESIGN.md measured 0.71 for the FHW unknot at 300 edges (a true
+# must reach CONTACT_RATIO. docs/design.md measured 0.71 for the FHW unknot at 300 edges (a true
 # near-contact: every metric fails) against >= 1.06 at index distance >= 4 for curves that relax;
 # here the FHW unknot jammed at 460 edges (ratio 0.92) and relaxed at 500 (1.05).
 CONTACT_GAP = 4
@@ -339,10 +339,20 @@ def _split_count(parts, n):
     k = unit_exponent(np.concatenate([p.ravel() for p in parts]))
     lengths = np.array([np.linalg.norm(np.diff(np.vstack([q, q[:1]]), axis=0), axis=1).sum()
                         for q in (np.ldexp(p, -k) for p in parts)])
+    if n < MIN_VERTICES * len(parts):
+        raise ValueError(f"{n} vertices cannot make {len(parts)} closed components of at "
+                         f"least {MIN_VERTICES} vertices each: give at least "
+                         f"{MIN_VERTICES * len(parts)}, or a count per component")
     share = n * lengths / lengths.sum()
     ns = np.floor(share).astype(int)
     ns[np.argsort(ns - share)[: n - ns.sum()]] += 1
-    return list(np.maximum(MIN_VERTICES, ns))
+    # a short component raised to the minimum takes its vertices from the longest ones (by
+    # share per vertex), so that the counts still add up to n
+    ns = np.maximum(MIN_VERTICES, ns)
+    while ns.sum() > n:
+        over = np.flatnonzero(ns > MIN_VERTICES)
+        ns[over[np.argmin(share[over] / ns[over])]] -= 1
+    return [int(c) for c in ns]
 
 
 def contact_ratio(P, min_gap: int = CONTACT_GAP) -> float:

@@ -102,7 +102,7 @@ def test_self_intersection_is_located():
 
 
 def test_too_coarse_start_names_an_edge_count_that_works(fhw_raw):
-    # DESIGN.md: the FHW unknot at 300 edges is a true near-contact (ratio ~0.7)
+    # docs/design.md: the FHW unknot at 300 edges is a true near-contact (ratio ~0.7)
     P = resample(fhw_raw, 300)
     assert contact_ratio(P) < 0.75
     with pytest.raises(ValueError, match=r"too coarse.*at least (\d+) edges") as info:
@@ -233,3 +233,17 @@ def test_equalize_many_edges_down_to_rounding():
     ln = np.linalg.norm(np.roll(Q, -1, axis=0) - Q, axis=1)
     assert ln.max() / ln.min() - 1 < 1e-10
     assert np.abs(Q - P).max() < 1e-3
+
+
+def test_link_counts_add_up_to_the_total_with_tiny_components():
+    # a tiny component raised to the minimum of 4 vertices made the counts add up to more than
+    # n (19 + 4 + 4 for n = 20): the docstring promises n
+    t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    ring = np.c_[np.cos(t), np.sin(t), 0 * t]
+    link = [ring, 0.01 * ring + [3, 0, 0], 0.02 * ring[:, [0, 2, 1]] + [-3, 0, 0]]
+    for n in (12, 20, 57):
+        counts = [len(c) for c in resample(link, n)]
+        assert sum(counts) == n
+        assert min(counts) >= 4
+    with pytest.raises(ValueError, match="at least 12"):
+        resample(link, 11)
