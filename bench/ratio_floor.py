@@ -6,7 +6,7 @@
 For the FHW unknot at each N, a real run counts what one iteration calls (energy, contact
 test, back-projection steps, Krylov iterations of the gradient solve); every piece is then
 timed alone (best of several) at the run's iterate, in units of one energy+gradient
-evaluation. The floors add pieces the DESIGN.md iteration cannot do without, cheapest first:
+evaluation. The floors add pieces the docs/design.md iteration cannot do without, cheapest first:
 
 * ``no linear algebra``: E+g, Gram matrix, the trial energies and contact tests counted;
 * ``+ back-projection``: the counted modified Newton steps, each one application of the

@@ -11,7 +11,7 @@ SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 
 
 def trefoil(n: int) -> np.ndarray:
-    """DESIGN.md's trefoil (sin t + 2 sin 2t, cos t − 2 cos 2t, −sin 3t), n equal parameter
+    """docs/design.md's trefoil (sin t + 2 sin 2t, cos t − 2 cos 2t, −sin 3t), n equal parameter
     steps (not equilateral)."""
     t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
     return np.c_[np.sin(t) + 2 * np.sin(2 * t), np.cos(t) - 2 * np.cos(2 * t), -np.sin(3 * t)]

@@ -1,6 +1,6 @@
 """The test of one pair of edges, shared by the all-pairs searches of :mod:`collision` and the
 hierarchy's of :mod:`tree_contact` (private): the segment distance, and the conservative
-advancement of a moving pair (DESIGN.md, step 3; the method is described in :mod:`collision`).
+advancement of a moving pair (docs/design.md, step 3; the method is described in :mod:`collision`).
 """
 
 from __future__ import annotations

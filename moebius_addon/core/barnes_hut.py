@@ -1,7 +1,7 @@
 """Möbius energy and its exact derivative by Barnes–Hut on the edge hierarchy (the tree engine).
 
-The energy of DESIGN.md is a sum over ordered pairs of disjoint edges (``energy.py`` sums all of
-them). Here the pairs are split by a dual traversal of the hierarchy (:mod:`bvh`) into
+The energy of docs/design.md is a sum over ordered pairs of disjoint edges (``energy.py`` sums
+all of them). Here the pairs are split by a dual traversal of the hierarchy (:mod:`bvh`) into
 
 * the **far field**: pairs of clusters ``(A, B)`` of one component each whose boxes are apart,
   ``max(diam A, diam B) ≤ θ · gap(A, B)``. The pair sum ``Σ_IJ l_I l_J k + e_Iᵀ H e_J`` (``k =

@@ -1,4 +1,4 @@
-"""Continuous edge–edge collision detection (DESIGN.md, step 3) and static proximity queries.
+"""Continuous edge–edge collision detection (docs/design.md, step 3) and static proximity queries.
 
 The step bound ``τ*`` is the smallest ``τ`` at which ``P − τU`` touches itself. Each pair of
 disjoint edges is tested by conservative advancement: the distance between two segments changes

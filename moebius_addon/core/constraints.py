@@ -1,4 +1,4 @@
-"""Constraints and their sparse Jacobian (DESIGN.md, "Constraints"; the paper's "Discrete
+"""Constraints and their sparse Jacobian (docs/design.md, "Constraints"; the paper's "Discrete
 constraints").
 
     Φ(P) = ( log l_I − log l0_I  for every edge I ,  (Σ_I l_I m_I − b0) / L²  per component )

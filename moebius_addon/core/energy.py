@@ -1,4 +1,4 @@
-"""Discrete Möbius energy and its exact derivative (DESIGN.md, "Energy").
+"""Discrete Möbius energy and its exact derivative (docs/design.md, "Energy").
 
 Midpoint rule for the Ishizeki–Nagasawa integrand over ordered pairs of disjoint edges::
 
@@ -119,7 +119,7 @@ def _energy_gradient_parts(ex, ey, ez, mx, my, mz, ln, starts, comp, nchunks):
                     sv = (li * lj + ab) * inv
                     q = da * db * inv * inv
                     s += sv - 2.0 * q
-                    # ∂f/∂e_I, ∂f/∂e_J, ∂f/∂d (d = m_I − m_J); see DESIGN.md for f.
+                    # ∂f/∂e_I, ∂f/∂e_J, ∂f/∂d (d = m_I − m_J); see docs/design.md for f.
                     ci = lj / li
                     cj = li / lj
                     tb = 2.0 * db * inv
@@ -230,7 +230,7 @@ def moebius_energy(P, *, engine: str = "auto", theta: float | None = None) -> fl
     Returns
     -------
     float
-        ``4 + Σ`` over ordered pairs of disjoint edges (DESIGN.md); 4 for a regular polygon,
+        ``4 + Σ`` over ordered pairs of disjoint edges (docs/design.md); 4 for a regular polygon,
         invariant under similarities and reversal. Scale-free (computed at a size near 1 for
         curves spanning more than 2^64 or less than 2^-64).
     """

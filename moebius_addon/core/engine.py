@@ -2,19 +2,21 @@
 
 An engine is built per run from the polygon's layout and the metric. It evaluates the Möbius
 energy and its gradient, the first contact along a motion, and holds the metric at the current
-iterate with the saddle-point solver of DESIGN.md step 2 (``[[G, Cᵀ], [C, 0]]``, ``G = A ⊗ I₃``)
-or, for the penalty methods, the solver of the penalized metric. The optimizers never call the
-kernels (:mod:`.energy`, :mod:`.collision`, :mod:`.metrics`, :mod:`.linalg`) themselves, so a
-second engine that evaluates some of these differently (e.g. a tree approximation of the
-far field) is one subclass here and one entry in :data:`ENGINES`.
+iterate with the saddle-point solver of docs/design.md, step 2 (``[[G, Cᵀ], [C, 0]]``,
+``G = A ⊗ I₃``) or, for the penalty methods, the solver of the penalized metric. The
+optimizers never call the kernels (:mod:`.energy`, :mod:`.collision`, :mod:`.metrics`,
+:mod:`.linalg`, :mod:`.banded`) themselves, so a second engine that evaluates some of these
+differently (e.g. a tree approximation of the far field) is one subclass here and one entry
+in :data:`ENGINES`.
 
 Engines by name (the ``engine=`` option of ``relax``, ``make_run`` and every run class):
 
 * ``"exact"``: :class:`DenseEngine`, every pair of edges summed exactly, dense metric.
 * ``"tree"``: :class:`TreeEngine`, the energy and its gradient by Barnes–Hut
   (:mod:`.barnes_hut`, admissibility ``theta``); contacts exact (the hierarchy of
-  :mod:`.bvh` serves the contact search of every engine above its crossover); the metric and
-  its solves dense as in the exact engine (until a matrix-free metric lands).
+  :mod:`.bvh` serves the contact search of every engine above its crossover); the saddle-point
+  solves O(N) for the banded metrics (``l2``, ``h1``, ``h2``: :mod:`.banded`), dense as in the
+  exact engine for ``hs`` and ``hs_pure`` (until a matrix-free ``hs`` lands).
 * ``"auto"``: the tree from ``barnes_hut.TREE_FROM`` edges on, else exact.
 
 :func:`make_engine` is the one place that maps names to classes.
@@ -74,7 +76,7 @@ class PenaltyMetric:
 
 class DenseEngine:
     """Exact energy, gradient and contact times over all edge pairs; dense metric ``A`` with
-    a factorized saddle-point solver (DESIGN.md, steps 1–4).
+    a factorized saddle-point solver (docs/design.md, steps 1–4).
 
     Parameters
     ----------

@@ -1,7 +1,7 @@
 """Entry points of the relaxation: :func:`relax` runs any method of :mod:`.solvers` to the end
 (one call, scipy style), :func:`sobolev_gradient` gives the gradient field of one metric.
 
-The projected Sobolev-gradient flow itself (DESIGN.md, "One iteration") is
+The projected Sobolev-gradient flow itself (docs/design.md, "One iteration") is
 :class:`.solvers.projected.Relaxation`; the other optimizers live beside it in :mod:`.solvers`.
 """
 
@@ -45,7 +45,7 @@ def relax(
     callback : callable, optional
         ``callback(state)`` after every accepted iterate; returning True stops the run cleanly.
     method : str
-        ``projected_gradient`` (the paper's explicit method, DESIGN.md) or another optimizer
+        ``projected_gradient`` (the paper's explicit method, docs/design.md) or another optimizer
         of :mod:`moebius_addon.core.solvers` (``METHODS`` lists them).
     engine : str
         "exact", "tree" or "auto" (the tree from ``barnes_hut.TREE_FROM`` edges on;

@@ -11,7 +11,7 @@ Conventions shared by every generator:
 * Centred and scaled to the unit ball: the mean of all vertices is the origin and the farthest
   vertex lies at distance 1 (a circle has radius 1). For an equilateral polygon the vertex mean
   is also the length-weighted barycentre that the relaxation keeps fixed.
-* Every generator has a default ``n`` that passes the coarseness rule of DESIGN.md (checked by
+* Every generator has a default ``n`` that passes the coarseness rule of docs/design.md (checked by
   :func:`moebius_addon.core.check_polygon`: vertices at least 4 apart along the curve are more
   than one mean edge length apart in space) with a wide margin: the ``contact_ratio`` at the
   default is 2.5 to 4 (1.2 for the FHW unknot, whose strands nearly touch). The last column
@@ -280,7 +280,7 @@ def _lookup(name: str) -> str:
 
 
 def freedman_unknot(n: int = 600) -> np.ndarray:
-    """The Freedman–He–Wang "difficult" unknot (DESIGN.md, "Inputs the paper used").
+    """The Freedman–He–Wang "difficult" unknot (docs/design.md, "Inputs the paper used").
 
     The 1184-vertex polygon published with Repulsive Curves (``data/freedman_unknot_1184.obj``,
     MIT licence), resampled to ``n`` vertices. Below 470 vertices two strands come closer than

@@ -1,4 +1,4 @@
-"""The saddle-point system of the projected gradient (DESIGN.md, step 2) and the pseudoinverse
+"""The saddle-point system of the projected gradient (docs/design.md, step 2) and the pseudoinverse
 of the back-projection (step 4).
 
     [[G, Cᵀ], [C, 0]] [u; λ] = [g; r],   G = A ⊗ I₃ (A is N × N, dense, SPD)

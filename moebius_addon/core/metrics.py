@@ -1,4 +1,4 @@
-"""Gram matrices of the metrics (DESIGN.md, "Metrics"; the paper's "Discrete inner product").
+"""Gram matrices of the metrics (docs/design.md, "Metrics"; the paper's "Discrete inner product").
 
 Every metric is the ``N × N`` matrix ``A`` of one coordinate; the 3N × 3N Gram matrix is
 ``G = A ⊗ I₃``. With ``D`` the edge-difference operator ``(Du)_I = (u[i+1] − u[i]) / l_I``,
@@ -27,7 +27,7 @@ import numpy as np
 from ._layout import Layout, as_unit_layout
 
 # Tiny L² term that keeps the pure W^{3/2,2} matrix definite for 4-gons, where disjoint edge
-# pairs do not connect all edges (DESIGN.md: "+ a small L² term if needed").
+# pairs do not connect all edges (docs/design.md: "+ a small L² term if needed").
 _PURE_L2 = 1e-6
 # Fixed work split (independent of the thread count) so results are reproducible everywhere.
 _CHUNKS = 16

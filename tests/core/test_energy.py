@@ -1,4 +1,5 @@
-"""Energy and gradient against DESIGN.md's facts and a slow, obviously correct numpy version."""
+"""Energy and gradient against the facts of docs/design.md and a slow, obviously correct numpy
+version."""
 
 import numpy as np
 import pytest
@@ -8,7 +9,7 @@ from tests.conftest import ngon, random_rotation, trefoil
 
 
 def slow_energy(P) -> float:
-    """Double loop over ordered pairs of disjoint edges, literally DESIGN.md's formula."""
+    """Double loop over ordered pairs of disjoint edges, literally docs/design.md's formula."""
     comps = P if isinstance(P, list) else [P]
     edges = []
     for c, Q in enumerate(comps):
@@ -54,7 +55,7 @@ def test_regular_polygon_has_energy_four(n, rng):
 
 
 def test_trefoil_reference_value():
-    # DESIGN.md: 75.99452256688987 for this curve at N = 200
+    # docs/design.md: 75.99452256688987 for this curve at N = 200
     assert moebius_energy(trefoil(200)) == pytest.approx(75.99452256688987, rel=1e-13)
 
 

@@ -28,7 +28,7 @@ def linking_number(A, B):
 
 
 def test_trefoil_settles_at_the_reference_energy(trefoil300):
-    # DESIGN.md: with hs at 300 edges the energy settles near 74.436 within a few dozen
+    # docs/design.md: with hs at 300 edges the energy settles near 74.436 within a few dozen
     # iterations (the continuous minimum is about 74.41)
     r = relax(trefoil300, metric="hs", max_iter=40)
     assert r.success, r.message

@@ -59,7 +59,7 @@ def test_random_unknot_becomes_a_round_circle():
 
 @pytest.mark.slow
 def test_freedman_unknot_becomes_a_round_circle():
-    # DESIGN.md: ~237 iterations at 592 edges for the prototype
+    # docs/design.md: ~237 iterations at 592 edges for the prototype
     r = relax_watching_type(knots.freedman_unknot(600), "0_1", 400, every=20,
                             energy_target=4.01)
     assert r.success and r.nit <= 300

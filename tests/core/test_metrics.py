@@ -1,4 +1,4 @@
-"""Every Gram matrix against a slow numpy version of DESIGN.md's formula."""
+"""Every Gram matrix against a slow numpy version of docs/design.md's formula."""
 
 import numpy as np
 import pytest

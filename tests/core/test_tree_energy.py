@@ -34,7 +34,7 @@ def _taylor(f, d, u, points=64):
 
 
 def slow_frame_energy(X, layout, frame):
-    """The approximated sum of a frame, literally: every near pair with DESIGN.md's kernel,
+    """The approximated sum of a frame, literally: every near pair with docs/design.md's kernel,
     every far pair of clusters ``(A, B)`` with the kernel of each pair of edges ``(I, J)``
     expanded to second order in ``u = δ_I − δ_J`` around the centres' difference ``d``."""
     tree = frame.tree

@@ -8,7 +8,7 @@ Figs. 3 and 4), each usable with every metric, and the table that names them.
   Hessian products of the Lagrangian);
 * :mod:`.penalty`: ``ncg``, ``lbfgs``, ``nesterov`` (edge lengths held by a penalty).
 
-Feasible methods keep the constraints of DESIGN.md (edge lengths, barycenter) at every
+Feasible methods keep the constraints of docs/design.md (edge lengths, barycenter) at every
 iterate; infeasible ones replace the edge-length constraints by a penalty. Every run has the
 same interface: ``step()``, ``state()``, ``stop()``, ``result()``, ``x``, ``energy``, ``nit``,
 ``history`` (the Möbius energy ``E``, never the penalized one, so methods compare directly),

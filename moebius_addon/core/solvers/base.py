@@ -39,7 +39,7 @@ from ..polygon import check_polygon
 HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
 
 # A run that stops moving with a projected gradient above this many times tol is jammed, not
-# converged (near the minimum Armijo fails on round-off with sqrt(<g,u>) ≈ 1e-8, DESIGN.md).
+# converged (near the minimum Armijo fails on round-off with sqrt(<g,u>) ≈ 1e-8, docs/design.md).
 _STALL_FACTOR = 1e3
 # Memory a run holds at its peak, in bytes per vertex pair: the Gram matrix (float64), the
 # inverse from its factorization and the Schur complement, all N × N (measured peak at 3000
@@ -337,7 +337,7 @@ class Run:
 
     def _give_up(self, gu: float) -> bool:
         """End a run whose line search found no acceptable step: at the minimum the test fails
-        on round-off (DESIGN.md, step 6), which is convergence; anywhere else it is a failure
+        on round-off (docs/design.md, step 6), which is convergence; anywhere else it is a failure
         worth reporting (``gu``: the squared gradient norm in the metric). Returns False."""
         gn = float(np.sqrt(max(gu, 0.0)))
         if gn <= _STALL_FACTOR * self.tol:

@@ -170,7 +170,7 @@ class _PenaltyRun(Run):
     # -- weak Wolfe line search with collision truncation --------------------------------------
 
     def _contact_cap(self, X, D, tau_search):
-        """Largest allowed step along ``X + τD``: 2/3 of the first contact (DESIGN.md, step 3),
+        """Largest allowed step along ``X + τD``: 2/3 of the first contact (docs/design.md, step 3),
         or ``tau_search`` when there is none before it."""
         t = self.engine.contact_time(X, -D, 1.5 * tau_search, self.eps)
         return tau_search if t >= 1.5 * tau_search else 2.0 / 3.0 * t

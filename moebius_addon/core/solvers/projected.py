@@ -1,4 +1,4 @@
-"""The projected Sobolev-gradient flow, the paper's explicit method (DESIGN.md, "One
+"""The projected Sobolev-gradient flow, the paper's explicit method (docs/design.md, "One
 iteration"; the paper's "Projected gradient" and "Restoring feasibility and time step size
 rules").
 

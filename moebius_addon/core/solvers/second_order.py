@@ -1,6 +1,6 @@
 """Feasible second-order methods of the paper's comparison (section "Optimization methods
 employed", Figs. 3 and 4), each usable with every metric; they keep the constraints of
-DESIGN.md (edge lengths, barycenter) at every iterate, like :class:`.projected.Relaxation`:
+docs/design.md (edge lengths, barycenter) at every iterate, like :class:`.projected.Relaxation`:
 
 * ``projected_gradient_implicit``: backward Euler on the projected flow,
   ``G (Q − P)/τ + ∇L(Q) ⟂ T_P`` (L = E − λᵀΦ), solved inexactly by Newton–Krylov,
@@ -146,7 +146,7 @@ class ImplicitProjectedGradient(_Feasible):
     i.e. the stationarity condition of ``min L(P − δ) + |δ|²_G / (2τ)``, by at most
     ``newton_iter`` Newton steps whose systems ``(∇²L + G/τ) s = …`` are solved by projected
     CG (``cg_iter`` Hessian products at most, relative tolerance ``cg_rtol``). ``Q`` is then
-    back-projected onto the constraints (DESIGN.md, step 4), its straight path checked for
+    back-projected onto the constraints (docs/design.md, step 4), its straight path checked for
     contact, and accepted by Armijo ``E(Q) ≤ E(P) − σ <∇E, δ>``; otherwise ``τ`` is halved and
     the implicit equation solved again. The first trial is ``growth`` times the last accepted τ.
 
@@ -257,7 +257,7 @@ class TrustRegion(_Feasible):
     the projected gradient, the previous projected gradient moved to the current tangent space,
     and, once ``sqrt(<g,u>)`` is below ``newton_rtol`` times its start value, a truncated
     Newton direction (projected CG, ``cg_iter`` Hessian products at most). Steps are
-    back-projected (DESIGN.md, step 4) and collision-checked; the radius shrinks to 2/3 of the
+    back-projected (docs/design.md, step 4) and collision-checked; the radius shrinks to 2/3 of the
     first contact along a trial step. ``history["step"]`` holds ``|s|_G``.
 
     Extra options: ``newton_rtol`` [1e-2], ``cg_iter`` [20], ``cg_rtol`` [1e-2],
