@@ -17,6 +17,7 @@ from .constraints import Constraints  # noqa: E402
 from .energy import moebius_energy, moebius_gradient  # noqa: E402
 from .engine import ENGINES  # noqa: E402
 from .flow import relax, sobolev_gradient  # noqa: E402
+from .invariants import is_knotted, knot_determinant  # noqa: E402
 from .metrics import METRICS, gram_matrix  # noqa: E402
 from .objio import read_obj, write_obj  # noqa: E402
 from .polygon import check_polygon, contact_ratio, resample, suggest_edge_count  # noqa: E402
@@ -38,6 +39,8 @@ __all__ = [
     "check_polygon",
     "contact_ratio",
     "gram_matrix",
+    "is_knotted",
+    "knot_determinant",
     "knots",
     "make_run",
     "max_collision_free_step",

@@ -1,0 +1,65 @@
+"""The knot determinant from a projection, against KnotInfo's values for the whole table."""
+
+import numpy as np
+import pytest
+
+from moebius_addon import core
+from moebius_addon.core import invariants
+from moebius_addon.core.invariants import is_knotted, knot_determinant
+
+
+@pytest.mark.parametrize("name", core.knots.names())
+def test_determinant_of_every_table_knot_is_knotinfos(name):
+    # knots.info carries KnotInfo's determinant (tools/build_knot_table.py), computed there
+    # from the Alexander polynomial, not from a diagram of ours
+    assert knot_determinant(core.knots.named(name)) == core.knots.info(name)["determinant"]
+
+
+def test_determinant_does_not_depend_on_projection_size_or_resolution():
+    P = core.knots.named("7_2")
+    R, _ = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))
+    for Q in (P @ R.T, 1e-30 * P, 1e30 * P + 5.0, -P, P[::-1], core.resample(P, 5000)):
+        assert knot_determinant(Q) == 11
+
+
+@pytest.mark.parametrize("make", [lambda: core.knots.freedman_unknot(600),
+                                  lambda: core.knots.helix_unknot(300),
+                                  lambda: core.knots.random_unknot(400, seed=3),
+                                  lambda: core.knots.circle(16)])
+def test_unknots_have_determinant_one(make):
+    P = make()
+    assert knot_determinant(P) == 1
+    assert not is_knotted(P)
+
+
+def test_knots_are_knotted():
+    assert is_knotted(core.knots.named("3_1"))
+    assert is_knotted(core.knots.torus_knot(3, 4, 200))  # 8_19, the first non-alternating knot
+
+
+def _slow_crossing_count(X):
+    """Every pair of non-adjacent edges of the projection, by the plain formula."""
+    n, count = len(X), 0
+    for i in range(n):
+        for j in range(i + 2, n if i else n - 1):
+            a, d = X[i, :2], X[(i + 1) % n, :2] - X[i, :2]
+            b, e = X[j, :2], X[(j + 1) % n, :2] - X[j, :2]
+            den = d[0] * e[1] - d[1] * e[0]
+            q = b - a
+            s = (q[0] * e[1] - q[1] * e[0]) / den
+            t = (q[0] * d[1] - q[1] * d[0]) / den
+            count += 0 <= s <= 1 and 0 <= t <= 1
+    return count
+
+
+def test_sweep_finds_every_crossing():
+    X = core.knots.random_unknot(150, seed=7)
+    assert len(invariants._sweep(np.ascontiguousarray(X))) == _slow_crossing_count(X) > 10
+
+
+@pytest.mark.parametrize("bad, why", [(np.zeros((2, 3)), "n >= 3"),
+                                      (np.full((5, 3), np.nan), "NaN"),
+                                      ([core.knots.circle(8)] * 2, "one closed polygon")])
+def test_bad_input_is_refused(bad, why):
+    with pytest.raises(ValueError, match=why):
+        knot_determinant(bad)
