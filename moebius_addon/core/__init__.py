@@ -11,13 +11,18 @@ from ._threads import prefer_stable_layer
 
 prefer_stable_layer()  # before any parallel kernel runs: numba settles on a layer then
 
-from . import knots  # noqa: E402
+from . import invariants, knots  # noqa: E402
 from .collision import max_collision_free_step  # noqa: E402
 from .constraints import Constraints  # noqa: E402
 from .energy import moebius_energy, moebius_gradient  # noqa: E402
 from .engine import ENGINES  # noqa: E402
 from .flow import relax, sobolev_gradient  # noqa: E402
-from .invariants import is_knotted, knot_determinant  # noqa: E402
+from .invariants import (  # noqa: E402
+    alexander_polynomial,
+    is_knotted,
+    knot_determinant,
+    linking_numbers,
+)
 from .metrics import METRICS, gram_matrix  # noqa: E402
 from .objio import read_obj, write_obj  # noqa: E402
 from .polygon import check_polygon, contact_ratio, resample, suggest_edge_count  # noqa: E402
@@ -35,13 +40,16 @@ __all__ = [
     "RelaxResult",
     "Relaxation",
     "Status",
+    "alexander_polynomial",
     "check_number",
     "check_polygon",
     "contact_ratio",
     "gram_matrix",
+    "invariants",
     "is_knotted",
     "knot_determinant",
     "knots",
+    "linking_numbers",
     "make_run",
     "max_collision_free_step",
     "moebius_energy",

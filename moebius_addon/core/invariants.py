@@ -1,65 +1,116 @@
-"""Knot invariants of a closed polygon, read off a generic planar projection.
+"""Knot and link invariants of closed polygons, read off a generic planar projection.
 
-The determinant of a knot, ``|Δ(-1)|`` with ``Δ`` its Alexander polynomial, is computed from
-the colouring (Alexander) matrix of a diagram: one row per crossing, one column per arc (the
-strands between two undercrossings); a crossing whose over-arc is ``a`` and whose under-strand
-runs from arc ``b`` into arc ``c`` contributes ``2`` at ``a`` and ``-1`` at ``b`` and ``c``
-(the rows of ``(1 - t) a + t b - c`` at ``t = -1``; the sign of the crossing drops out there).
-Deleting one row and one column leaves a matrix whose determinant is ``±Δ(-1)`` for every
-diagram of the knot (Lickorish, *An Introduction to Knot Theory*, ch. 6), so it does not
-depend on the projection. The unknot has determinant 1, every knot of the table up to 9
-crossings more (3_1: 3, 4_1: 5, 8_19: 3); the first knots with determinant 1 have 10 crossings
-or more (10_124, the Conway knot). So a determinant above 1 proves the curve knotted; 1 means
-"no knot detected", not "unknot".
+A projection to a plane is a diagram: crossings, each with an over- and an under-strand and a
+sign, and arcs, the strands between two undercrossings. Its Alexander matrix has one row per
+crossing and one column per arc; a crossing whose over-arc is ``k`` and whose under-strand
+runs from arc ``i`` into arc ``j`` has the row ``(1 - t) k + t i - j`` when it is positive and
+``(1 - t) k - i + t j`` when it is negative (Fox derivatives of the Wirtinger relations).
+Deleting one row and one column leaves a matrix whose determinant is the Alexander polynomial
+``Δ(t)`` up to a factor ``±t^m``, the same for every diagram of the knot or link (Lickorish,
+*An Introduction to Knot Theory*, ch. 6); ``|Δ(-1)|`` is the determinant. The unknot has
+``Δ = 1``; so do a few knots of 11 and more crossings (11n_34, the Conway knot), and the
+determinant is 1 for a few from 10 crossings on (10_124), so a non-trivial value proves the
+curve knotted, a trivial one only fails to detect a knot. Linking numbers are half the sum of
+the signs of the crossings between two components.
 
-The crossings are found by a sweep over the edges sorted by their smallest x; the determinant
-by Gaussian elimination modulo two primes near 2^31 (exact for determinants below 2^61 in
-size), both O(c^3) in the crossing count ``c`` of the diagram.
+The crossings are found by a sweep over the edges sorted by their smallest x; of a dozen
+random projections the generic one with the fewest crossings is used. Determinants are taken
+by Gaussian elimination modulo two primes near 2^31 (exact below 2^61 in size); ``Δ(t)`` by
+interpolating the determinant at ``c`` points. Cost O(c^3) for the determinant and O(c^4) for
+``Δ(t)`` in the crossing count ``c`` (relaxed curves of up to 12 crossings have a few dozen).
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numba as nb
 import numpy as np
 
+from ._layout import as_layout
+
 # Two primes below 2^31: products of residues stay below 2^62 in int64.
 _PRIMES = (2147483647, 2147483629)
-_GENERIC_TRIES = 8
+_PROJECTIONS = 12
+# Alexander polynomials of diagrams with more crossings are not attempted (O(c^4)).
+MAX_ALEXANDER_CROSSINGS = 200
 
 
-def knot_determinant(P: np.ndarray) -> int:
-    """The determinant ``|Δ(-1)|`` of the knot traced by the closed polygon ``P``.
+@dataclass(frozen=True)
+class Diagram:
+    """Crossings of a generic projection of a knot or link.
+
+    ``over`` and ``under`` are positions along the curve (vertex index + parameter along the
+    edge, vertices numbered through all components), ``sign`` is +1 for a positive
+    (right-handed) crossing, ``starts`` the first vertex of each component, then N."""
+
+    over: np.ndarray
+    under: np.ndarray
+    sign: np.ndarray
+    starts: np.ndarray
+
+    @property
+    def crossings(self) -> int:
+        return len(self.over)
+
+    def component(self, position: np.ndarray) -> np.ndarray:
+        return np.searchsorted(self.starts, position, side="right") - 1
+
+
+def diagram(P) -> Diagram:
+    """The generic projection of the knot or link ``P`` with the fewest crossings among a dozen
+    random directions (the same for every call: the directions are seeded)."""
+    X, layout = as_layout(P)
+    if not np.isfinite(X).all():
+        raise ValueError("the curve has NaN or infinite coordinates")
+    if (np.diff(layout.starts) < 3).any():
+        raise ValueError("every component needs at least 3 vertices")
+    Q = X - X.mean(axis=0)
+    Q /= max(np.abs(Q).max(), np.finfo(float).tiny)  # only the shape matters
+    rng = np.random.default_rng(20261125)
+    best = None
+    for _ in range(_PROJECTIONS):
+        q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+        found = _sweep(np.ascontiguousarray(Q @ (q * np.sign(np.diag(r))).T), layout.nxt)
+        if (found[:, 3] == 0).any():  # a crossing at a vertex or of touching strands
+            continue
+        if best is None or len(found) < len(best):
+            best = found
+    if best is None:
+        raise ValueError("no generic projection found: the curve touches or nearly touches "
+                         "itself")
+    return Diagram(best[:, 0].copy(), best[:, 1].copy(), best[:, 2].astype(np.int64),
+                   layout.starts)
+
+
+def determinant(P) -> int:
+    """The determinant ``|Δ(-1)|`` of the knot or link traced by the closed polygon(s) ``P``.
 
     Parameters
     ----------
-    P : (n, 3) array
-        Vertices of one closed polygon (the edge from the last vertex back to the first is
-        implied). It must not intersect itself.
+    P : (n, 3) array or list of them
+        A closed polygon (the edge from the last vertex back to the first is implied) or a
+        link; it must not touch itself.
 
     Returns
     -------
     int
-        1 for the unknot and for a few knots of 10 and more crossings; 3 for the trefoil, 5
-        for the figure-eight knot, ... (the same for every projection and every polygon of the
-        same knot type).
+        1 for the unknot, 3 for the trefoil, 5 for the figure-eight knot, 2 for the Hopf link,
+        0 for a split link (the same for every polygon of one knot or link type).
     """
+    A0, A1 = _alexander_matrix(diagram(P))
+    if A0 is None:
+        return 0
+    return _exact(A0 - A1, lambda A, p: _det_mod(A, p))
+
+
+def knot_determinant(P: np.ndarray) -> int:
+    """:func:`determinant` of one closed polygon (an ``(n, 3)`` array; lists are refused)."""
     P = np.asarray(P, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3 or len(P) < 3:
         raise ValueError(f"expected one closed polygon as an (n, 3) array with n >= 3, got "
                          f"shape {P.shape}")
-    if not np.isfinite(P).all():
-        raise ValueError("the polygon has NaN or infinite coordinates")
-    Q = P - P.mean(axis=0)
-    Q /= max(np.abs(Q).max(), np.finfo(float).tiny)  # only the shape matters
-    rng = np.random.default_rng(20261125)
-    for _ in range(_GENERIC_TRIES):
-        R = _rotation(rng)
-        X = Q @ R.T
-        crossings = _crossings(np.ascontiguousarray(X))
-        if crossings is not None:
-            return _determinant(_colouring_matrix(crossings, len(X)))
-    raise ValueError("no generic projection found: the polygon touches or nearly touches "
-                     "itself")
+    return determinant(P)
 
 
 def is_knotted(P: np.ndarray) -> bool:
@@ -70,114 +121,146 @@ def is_knotted(P: np.ndarray) -> bool:
     return knot_determinant(P) != 1
 
 
-def _rotation(rng: np.random.Generator) -> np.ndarray:
-    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
-    return q * np.sign(np.diag(r))
+def alexander_polynomial(P) -> list[int]:
+    """Coefficients of the Alexander polynomial ``Δ(t)`` of a knot (or the one-variable
+    polynomial of a link), lowest degree first, normalized as KnotInfo writes it: the lowest
+    power is ``t^0`` and its coefficient positive (3_1: ``[1, -1, 1]``, 4_1: ``[1, -3, 1]``,
+    the unknot ``[1]``, a split link ``[0]``)."""
+    d = diagram(P)
+    if d.crossings > MAX_ALEXANDER_CROSSINGS:
+        raise ValueError(f"every projection tried has more than {MAX_ALEXANDER_CROSSINGS} "
+                         f"crossings ({d.crossings} at best); relax the curve first")
+    A0, A1 = _alexander_matrix(d)
+    if A0 is None:
+        return [0]
+    m = A0.shape[0]  # the determinant of an m x m matrix linear in t: degree at most m
+    coeffs = _exact((A0, A1), lambda A, p: _interpolate(A[0], A[1], m, p), vector=True)
+    nz = np.flatnonzero(coeffs)
+    if len(nz) == 0:
+        return [0]
+    c = coeffs[nz[0]: nz[-1] + 1]
+    return [int(x) for x in (c if c[0] > 0 else -c)]
 
 
-# A crossing closer than this (in units of the edge's own parameter) to a vertex, or two
-# strands whose heights differ by less than this fraction of the curve's size, make the
-# projection non-generic: another rotation is tried.
-_PARAM_MARGIN = 1e-9
-_HEIGHT_MARGIN = 1e-12
+def linking_numbers(P) -> np.ndarray:
+    """The (K, K) symmetric integer matrix of linking numbers of the K components of ``P``
+    (zero diagonal; the signs follow the components' orientations)."""
+    d = diagram(P)
+    K = len(d.starts) - 1
+    L = np.zeros((K, K), dtype=np.int64)
+    a, b = d.component(d.over), d.component(d.under)
+    mixed = a != b
+    np.add.at(L, (a[mixed], b[mixed]), d.sign[mixed])
+    L = L + L.T
+    return L // 2
 
 
-def _crossings(X: np.ndarray):
-    """Crossings of the projection of ``X`` to the xy-plane as rows ``(over position,
-    under position)``, a position being ``edge index + parameter along the edge``; None when
-    the projection is not generic."""
-    found = _sweep(X)
-    if found.shape[0] and (found[:, 2] < 0.0).any():
-        return None
-    return found[:, :2]
+def _alexander_matrix(d: Diagram):
+    """``(A0, A1)`` with ``A0 + t A1`` the Alexander matrix without its first row and column,
+    or ``(None, None)`` when a component of a link passes over everything (the link splits:
+    ``Δ = 0``)."""
+    K = len(d.starts) - 1
+    c = d.crossings
+    comp_under = d.component(d.under)
+    if len(np.unique(comp_under)) < K:
+        if K > 1:
+            return None, None
+        return np.zeros((0, 0), np.int64), np.zeros((0, 0), np.int64)  # no crossing: unknot
+    # arcs: component by component, arc k starts at the k-th undercrossing along the curve
+    order = np.argsort(d.under, kind="stable")
+    under = d.under[order]
+    comp = comp_under[order]
+    first = np.searchsorted(comp, np.arange(K))  # the first arc of each component
+    last = np.r_[first[1:], c] - 1
+
+    def arc(position):
+        k = np.searchsorted(under, position, side="right") - 1
+        cp = d.component(position)
+        # before the first undercrossing of its component: the component's last arc
+        return np.where(k < first[cp], last[cp], k)
+
+    over_arc = arc(d.over[order])
+    outgoing = np.arange(c)
+    incoming = np.where(outgoing == first[comp], last[comp], outgoing - 1)
+    positive = d.sign[order] > 0
+    A0 = np.zeros((c, c), dtype=np.int64)
+    A1 = np.zeros((c, c), dtype=np.int64)
+    rows = np.arange(c)
+    np.add.at(A0, (rows, over_arc), 1)
+    np.add.at(A1, (rows, over_arc), -1)
+    np.add.at(A1, (rows[positive], incoming[positive]), 1)
+    np.add.at(A0, (rows[positive], outgoing[positive]), -1)
+    np.add.at(A0, (rows[~positive], incoming[~positive]), -1)
+    np.add.at(A1, (rows[~positive], outgoing[~positive]), 1)
+    return np.ascontiguousarray(A0[1:, 1:]), np.ascontiguousarray(A1[1:, 1:])
+
+
+def _exact(A, residue, vector: bool = False):
+    """Integer value(s) from residues modulo the two primes (Chinese remainder theorem), the
+    representative nearest zero."""
+    p, q = _PRIMES
+    r0, r1 = (np.asarray(residue(A, m), dtype=object) for m in _PRIMES)
+    x = (r0 + p * ((r1 - r0) * pow(p, -1, q) % q)) % (p * q)
+    x = np.where(x > p * q // 2, x - p * q, x)
+    return np.array([int(v) for v in np.atleast_1d(x)]) if vector else abs(int(x))
 
 
 @nb.njit(cache=True)
-def _sweep(X):
+def _sweep(X, nxt):
+    """Rows ``(over position, under position, sign, generic)`` of the crossings of the
+    projection of ``X`` to the xy-plane (over: the larger z); ``generic`` is 0 for a crossing
+    within 1e-9 of a vertex or of strands closer than 1e-12 in height."""
     n = X.shape[0]
     lo = np.empty(n)
     hi = np.empty(n)
     for i in range(n):
-        a, b = X[i, 0], X[(i + 1) % n, 0]
+        a, b = X[i, 0], X[nxt[i], 0]
         lo[i] = min(a, b)
         hi[i] = max(a, b)
     order = np.argsort(lo, kind="mergesort")
-    span = 0.0
-    for k in range(3):
-        span = max(span, X[:, k].max() - X[:, k].min())
-    rows = [(0.0, 0.0, 0.0) for _ in range(0)]
+    rows = [(0.0, 0.0, 0.0, 0.0) for _ in range(0)]
+    margin, height = 1e-9, 1e-12
     for oi in range(n):
         i = order[oi]
         ax, ay, az = X[i, 0], X[i, 1], X[i, 2]
-        j1 = (i + 1) % n
-        dx, dy, dz = X[j1, 0] - ax, X[j1, 1] - ay, X[j1, 2] - az
+        dx, dy, dz = X[nxt[i], 0] - ax, X[nxt[i], 1] - ay, X[nxt[i], 2] - az
         for oj in range(oi + 1, n):
             j = order[oj]
             if lo[j] > hi[i]:
                 break
-            if j == (i + 1) % n or i == (j + 1) % n:
+            if j == nxt[i] or i == nxt[j]:
                 continue
             bx, by, bz = X[j, 0], X[j, 1], X[j, 2]
-            k1 = (j + 1) % n
-            ex, ey, ez = X[k1, 0] - bx, X[k1, 1] - by, X[k1, 2] - bz
+            ex, ey, ez = X[nxt[j], 0] - bx, X[nxt[j], 1] - by, X[nxt[j], 2] - bz
             den = dx * ey - dy * ex
-            qx, qy = bx - ax, by - ay
             if den == 0.0:
                 continue
+            qx, qy = bx - ax, by - ay
             s = (qx * ey - qy * ex) / den
             t = (qx * dy - qy * dx) / den
-            if s < -_PARAM_MARGIN or s > 1.0 + _PARAM_MARGIN or t < -_PARAM_MARGIN \
-                    or t > 1.0 + _PARAM_MARGIN:
+            if s < -margin or s > 1.0 + margin or t < -margin or t > 1.0 + margin:
                 continue
-            near = (s < _PARAM_MARGIN or s > 1.0 - _PARAM_MARGIN or t < _PARAM_MARGIN
-                    or t > 1.0 - _PARAM_MARGIN)
             zi = az + s * dz
             zj = bz + t * ez
-            flag = -1.0 if near or abs(zi - zj) <= _HEIGHT_MARGIN * span else 1.0
+            near = (s < margin or s > 1.0 - margin or t < margin or t > 1.0 - margin
+                    or abs(zi - zj) <= height)
+            # right-handed (positive) when the over-strand turns counter-clockwise into the
+            # under-strand, seen from above
             if zi > zj:
-                rows.append((i + s, j + t, flag))
+                sign = 1.0 if dx * ey - dy * ex > 0.0 else -1.0
+                rows.append((i + s, j + t, sign, 0.0 if near else 1.0))
             else:
-                rows.append((j + t, i + s, flag))
-    out = np.empty((len(rows), 3))
+                sign = 1.0 if ex * dy - ey * dx > 0.0 else -1.0
+                rows.append((j + t, i + s, sign, 0.0 if near else 1.0))
+    out = np.empty((len(rows), 4))
     for k in range(len(rows)):
-        out[k, 0], out[k, 1], out[k, 2] = rows[k]
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = rows[k]
     return out
-
-
-def _colouring_matrix(crossings: np.ndarray, n: int) -> np.ndarray:
-    """The (c, c) colouring matrix of the diagram: row ``k`` for the crossing whose
-    under-position is the ``k``-th along the curve; arc ``k`` runs from that undercrossing to
-    the next one."""
-    c = len(crossings)
-    if c == 0:
-        return np.zeros((0, 0), dtype=np.int64)
-    order = np.argsort(crossings[:, 1], kind="stable")
-    under = crossings[order, 1]
-    over = crossings[order, 0]
-    # the arc holding a position: the last undercrossing at or before it, cyclically
-    over_arc = (np.searchsorted(under, over, side="right") - 1) % c
-    M = np.zeros((c, c), dtype=np.int64)
-    rows = np.arange(c)
-    np.add.at(M, (rows, over_arc), 2)
-    np.add.at(M, (rows, (rows - 1) % c), -1)  # the arc arriving at the undercrossing
-    np.add.at(M, (rows, rows), -1)  # the arc leaving it
-    return M
-
-
-def _determinant(M: np.ndarray) -> int:
-    """``|det|`` of ``M`` without its first row and column, exact below 2^61."""
-    A = np.ascontiguousarray(M[1:, 1:])
-    if A.shape[0] == 0:
-        return 1
-    r = [_det_mod(A, p) for p in _PRIMES]
-    p, q = _PRIMES
-    # Chinese remainder: the value modulo p*q, then the representative nearest zero
-    x = (r[0] + p * ((r[1] - r[0]) * pow(p, -1, q) % q)) % (p * q)
-    return abs(x - p * q if x > p * q // 2 else x)
 
 
 @nb.njit(cache=True)
 def _det_mod(A, p):
+    """``det(A) mod p`` by Gaussian elimination over the integers modulo the prime ``p``."""
     n = A.shape[0]
     B = np.empty((n, n), dtype=np.int64)
     for i in range(n):
@@ -204,6 +287,30 @@ def _det_mod(A, p):
                 for j in range(k, n):
                     B[i, j] = (B[i, j] - f * B[k, j]) % p
     return det
+
+
+@nb.njit(cache=True)
+def _interpolate(A0, A1, m, p):
+    """Coefficients (lowest first, modulo ``p``) of the polynomial ``det(A0 + t A1)`` of
+    degree at most ``m``, from its values at ``t = 1 … m + 1`` (Newton's divided
+    differences)."""
+    npts = m + 1
+    xs = np.arange(1, npts + 1).astype(np.int64)
+    dd = np.empty(npts, dtype=np.int64)
+    for k in range(npts):
+        dd[k] = _det_mod((A0 + xs[k] * A1) % p, p)
+    for level in range(1, npts):
+        for k in range(npts - 1, level - 1, -1):
+            num = (dd[k] - dd[k - 1]) % p
+            dd[k] = num * _inverse_mod((xs[k] - xs[k - level]) % p, p) % p
+    # expand the Newton form into monomial coefficients
+    coeffs = np.zeros(npts, dtype=np.int64)
+    for k in range(npts - 1, -1, -1):
+        # coeffs = coeffs * (t - xs[k]) + dd[k]
+        for i in range(npts - 1, 0, -1):
+            coeffs[i] = (coeffs[i - 1] - xs[k] * coeffs[i]) % p
+        coeffs[0] = (dd[k] - xs[k] * coeffs[0]) % p
+    return coeffs
 
 
 @nb.njit(cache=True)

@@ -1,11 +1,20 @@
-"""The knot determinant from a projection, against KnotInfo's values for the whole table."""
+"""Invariants from a projection (determinant, Alexander polynomial, linking numbers), against
+KnotInfo's values for the whole table and known links."""
+
+import json
 
 import numpy as np
 import pytest
 
 from moebius_addon import core
 from moebius_addon.core import invariants
-from moebius_addon.core.invariants import is_knotted, knot_determinant
+from moebius_addon.core.invariants import (
+    alexander_polynomial,
+    determinant,
+    is_knotted,
+    knot_determinant,
+    linking_numbers,
+)
 
 
 @pytest.mark.parametrize("name", core.knots.names())
@@ -37,6 +46,42 @@ def test_knots_are_knotted():
     assert is_knotted(core.knots.torus_knot(3, 4, 200))  # 8_19, the first non-alternating knot
 
 
+def test_alexander_polynomial_of_every_table_knot_is_knotinfos():
+    knotinfo = pytest.importorskip("database_knotinfo")  # the build-time source of the table
+    rows = {r["name"]: r for r in knotinfo.link_list()}
+    for name in core.knots.names():
+        # KnotInfo's vector: lowest degree, highest degree, then the coefficients
+        want = [1] if name == "0_1" else json.loads(rows[name]["alexander_polynomial_vector"])[2:]
+        assert alexander_polynomial(core.knots.named(name)) == want, name
+
+
+def test_alexander_polynomial_of_a_fine_polygon():
+    P = core.resample(core.knots.named("8_19"), 20000)  # T(3, 4): 1 - t + t^3 - t^5 + t^6
+    assert alexander_polynomial(P) == [1, -1, 0, 1, 0, -1, 1]
+    assert alexander_polynomial(core.knots.freedman_unknot(600)) == [1]
+
+
+@pytest.mark.parametrize("word, lk, det, alexander", [
+    ([1, 1], 1, 2, [1, -1]),  # the positive Hopf link
+    ([-1, -1], -1, 2, [1, -1]),  # its mirror
+    ([1, 1, 1, 1], 2, 4, [1, -1, 1, -1]),  # T(2, 4), Solomon's link
+])
+def test_two_component_links(word, lk, det, alexander):
+    L = core.knots.braid_closure(word)
+    assert linking_numbers(L).tolist() == [[0, lk], [lk, 0]]
+    assert determinant(L) == det
+    assert alexander_polynomial(L) == alexander
+
+
+def test_borromean_rings_and_a_split_link():
+    B = core.knots.braid_closure([1, -2, 1, -2, 1, -2])
+    assert linking_numbers(B).tolist() == [[0] * 3] * 3  # linked, yet pairwise unlinked
+    assert determinant(B) == 16  # LinkInfo's L6a4
+    far = [core.knots.circle(16), core.knots.circle(16) + [5.0, 0.0, 0.0]]
+    assert determinant(far) == 0 and alexander_polynomial(far) == [0]
+    assert linking_numbers(far).tolist() == [[0, 0], [0, 0]]
+
+
 def _slow_crossing_count(X):
     """Every pair of non-adjacent edges of the projection, by the plain formula."""
     n, count = len(X), 0
@@ -54,7 +99,8 @@ def _slow_crossing_count(X):
 
 def test_sweep_finds_every_crossing():
     X = core.knots.random_unknot(150, seed=7)
-    assert len(invariants._sweep(np.ascontiguousarray(X))) == _slow_crossing_count(X) > 10
+    nxt = np.roll(np.arange(len(X)), -1)
+    assert len(invariants._sweep(np.ascontiguousarray(X), nxt)) == _slow_crossing_count(X) > 10
 
 
 @pytest.mark.parametrize("bad, why", [(np.zeros((2, 3)), "n >= 3"),
@@ -63,3 +109,11 @@ def test_sweep_finds_every_crossing():
 def test_bad_input_is_refused(bad, why):
     with pytest.raises(ValueError, match=why):
         knot_determinant(bad)
+
+
+def test_touching_curves_are_refused():
+    C = core.knots.circle(16)  # vertices at (1, 0, 0) and (-1, 0, 0)
+    with pytest.raises(ValueError, match="touches"):
+        determinant([C, C + [2.0, 0.0, 0.0]])  # the two circles share a vertex
+    with pytest.raises(ValueError, match="at least 3 vertices"):
+        linking_numbers([C, C[:2]])
