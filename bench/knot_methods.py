@@ -2,6 +2,7 @@
 
     python bench/knot_methods.py                  # all 36 entries, 200 iterations (about 8 min)
     python bench/knot_methods.py --names 4_1 7_3 --max-iter 600
+    python bench/knot_methods.py --equal-time    # explicit given the implicit run's seconds
 
 For each knot at its default edge count: iterations, seconds, final energy above the lowest
 of the three methods, and whether the run converged (``success``: gradient below ``tol`` or
@@ -22,8 +23,13 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--names", nargs="*", default=None)
     ap.add_argument("--max-iter", type=int, default=200)
+    ap.add_argument("--equal-time", action="store_true",
+                    help="per knot: the implicit method, then the explicit one with the same "
+                         "seconds and no iteration limit")
     args = ap.parse_args()
     names = args.names or core.knots.names()
+    if args.equal_time:
+        return equal_time(names, args.max_iter)
     for m in METHODS:  # compile every kernel before timing
         core.relax(core.knots.named("3_1"), method=m, max_iter=3)
     print(f"{'knot':5s} {'N':>4s} | " + " | ".join(f"{m[:24]:>24s}" for m in METHODS))
@@ -49,6 +55,31 @@ def main():
     for m, (sec, ok, low) in totals.items():
         print(f"  {m:28s} {sec:7.1f} s in all, converged on {ok}, lowest energy "
               f"(within 1e-3) on {low}")
+
+
+def equal_time(names, max_iter):
+    """Whether the explicit method, given the seconds the implicit one took on a knot (its
+    ``max_iter`` iterations or convergence), reaches as low an energy."""
+    for m in METHODS[:2]:
+        core.relax(core.knots.named("3_1"), method=m, max_iter=3)
+    print(f"{'knot':5s} {'N':>4s} | {'implicit':>30s} | {'explicit, same seconds':>30s} | diff")
+    lower = 0
+    for name in names:
+        P = core.knots.named(name)
+        t = time.perf_counter()
+        imp = core.relax(P, method="projected_gradient_implicit", max_iter=max_iter)
+        sec = time.perf_counter() - t
+        t = time.perf_counter()
+        exp = core.relax(P, method="projected_gradient", max_iter=100 * max_iter,
+                         max_seconds=sec)
+        sec_e = time.perf_counter() - t
+        diff = float(exp.fun) - float(imp.fun)
+        lower += diff > 1e-3
+        print(f"{name:5s} {len(P):4d} | {imp.nit:4d} it {sec:6.2f} s E={float(imp.fun):10.4f} | "
+              f"{exp.nit:4d} it {sec_e:6.2f} s E={float(exp.fun):10.4f} | {diff:+8.4f}",
+              flush=True)
+    print(f"{len(names)} knots: the implicit method ended lower (by more than 1e-3) than the "
+          f"explicit one in the same time on {lower}")
 
 
 if __name__ == "__main__":

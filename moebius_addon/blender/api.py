@@ -35,17 +35,29 @@ METRICS = (
     ("l2", "L²", "Plain L² gradient descent (needs tiny steps; for comparison only)"),
 )
 
-#: Default optimizer: the paper's explicit projected gradient (``core.Relaxation``).
-DEFAULT_METHOD = "projected_gradient"
+#: The paper's explicit projected gradient (``core.Relaxation``): best on unknots.
+EXPLICIT_METHOD = "projected_gradient"
+#: The implicit projected gradient: best on knots.
+KNOT_METHOD = "projected_gradient_implicit"
+#: Default: :data:`KNOT_METHOD` for a curve its knot determinant proves knotted, else
+#: :data:`EXPLICIT_METHOD` (:func:`choose_method`; measured in docs/benchmarks.md, "The
+#: automatic method": the implicit one ended lower on 32 of the 36 table knots in the same
+#: seconds, the explicit one is faster on the FHW unknot).
+AUTO_METHOD = "auto"
+DEFAULT_METHOD = AUTO_METHOD
 
 #: Default weight α of the edge-stretch penalty of the penalty methods (the core's default).
 DEFAULT_PENALTY = core.DEFAULT_PENALTY_WEIGHT
 
 _METHOD_TEXT = {
+    AUTO_METHOD: (
+        "Automatic",
+        "Implicit Gradient for a knotted curve (knot determinant above 1), Projected Gradient "
+        "for unknots and links: the faster of the two on each, as measured (default)"),
     "projected_gradient": (
         "Projected Gradient",
         "The paper's explicit projected Sobolev gradient with Armijo steps: keeps edge lengths "
-        "and barycenter exactly (default)"),
+        "and barycenter exactly; the fastest on unknots"),
     "projected_gradient_implicit": (
         "Implicit Gradient",
         "Backward Euler on the projected flow, solved by Newton–Krylov: keeps edge lengths and "
@@ -68,11 +80,12 @@ _METHOD_TEXT = {
         "stretch), barycenter free"),
 }
 
-#: Optimizers offered for the flow, as ``(core name, label, description)``: exactly
-#: ``core.METHODS``, in its order (a method without a text here gets its name as label).
+#: Optimizers offered for the flow, as ``(name, label, description)``: :data:`AUTO_METHOD`,
+#: then exactly ``core.METHODS`` in its order (a method without a text here gets its name as
+#: label).
 METHODS = tuple(
     (m, *_METHOD_TEXT.get(m, (m.replace("_", " ").title(), f"core.solvers '{m}'")))
-    for m in core.METHODS
+    for m in (AUTO_METHOD, *core.METHODS)
 )
 
 #: Methods that replace the edge-length constraints by a penalty of weight α.
@@ -377,15 +390,32 @@ def apply_conversion(obj: bpy.types.Object, polygons: Sequence[np.ndarray],
     return new
 
 
-def method_hint(method: str, result) -> str:
-    """Advice appended to the report of a run of the default method that hit its iteration
-    limit: the explicit flow's last stretch on a knot is slow (over the 36 entries of the knot
-    table, 200 iterations each: 5 converged with it, 12 with the implicit method, which ended
-    at the lowest energy of the three feasible methods on 35; docs/benchmarks.md). Decided by
-    ``result.status``, never by the words of the message."""
-    if method != DEFAULT_METHOD or result.status != core.Status.MAX_ITER:
+def choose_method(method: str, polygons: Sequence[np.ndarray]) -> tuple[str, str]:
+    """The core method a run of ``method`` uses on ``polygons``, and why (empty unless
+    ``method`` is :data:`AUTO_METHOD`): :data:`KNOT_METHOD` for one component whose knot
+    determinant is above 1 (``core.knot_determinant``: certainly knotted), else
+    :data:`EXPLICIT_METHOD` (unknots, links, and the rare knots of determinant 1)."""
+    if method != AUTO_METHOD:
+        return method, ""
+    if len(polygons) != 1:
+        return EXPLICIT_METHOD, f"a link of {len(polygons)} components"
+    det = core.knot_determinant(polygons[0])
+    if det > 1:
+        return KNOT_METHOD, f"knotted, determinant {det}"
+    return EXPLICIT_METHOD, "no knot detected"
+
+
+def method_hint(method: str, result, polygons: Sequence[np.ndarray]) -> str:
+    """Advice appended to the report of an explicit run that hit its iteration limit on a
+    knotted curve (``polygons``: its start): the explicit flow's last stretch on a knot is
+    slow (docs/benchmarks.md, "Knots of the table"). Decided by ``result.status``, never by
+    the words of the message; unknots and links get none (the explicit method is the faster
+    one on unknots)."""
+    if method != EXPLICIT_METHOD or result.status != core.Status.MAX_ITER:
         return ""
-    label = _METHOD_TEXT["projected_gradient_implicit"][0]
+    if len(polygons) != 1 or not core.is_knotted(polygons[0]):
+        return ""
+    label = _METHOD_TEXT[KNOT_METHOD][0]
     return f"; knots settle in fewer iterations with Advanced ▸ Method: {label}"
 
 
@@ -397,7 +427,8 @@ def acting_settings(method: str) -> frozenset:
     methods that keep the constraints, the penalty weight to the penalty methods."""
     if method in PENALTY_METHODS:
         return frozenset({"penalty"})
-    own = {"armijo", "growth"} if method == DEFAULT_METHOD else set()
+    # the automatic choice passes them on to the explicit method (unknots and links)
+    own = {"armijo", "growth"} if method in (EXPLICIT_METHOD, AUTO_METHOD) else set()
     return frozenset(own | {"backproject_iter", "backproject_digits", "keep_edge_lengths",
                             "keep_barycenter"})
 
@@ -473,8 +504,9 @@ def check_knot(kind: str, n: int | None = None) -> None:
 
 def _check_method(method: str, penalty: float | None) -> dict:
     """Validate ``method`` and ``penalty``; the extra options for ``core.make_run``."""
-    if method not in core.METHODS:
-        raise ValueError(f"unknown method '{method}'; choose one of {', '.join(core.METHODS)}")
+    if method not in (AUTO_METHOD, *core.METHODS):
+        raise ValueError(f"unknown method '{method}'; choose one of "
+                         f"{', '.join((AUTO_METHOD, *core.METHODS))}")
     if method not in PENALTY_METHODS:
         if penalty is not None:
             raise ValueError(
@@ -530,8 +562,9 @@ class ObjectRelaxation:
         iterates on the frames after it, keeping the earlier keys (``frame_start`` is not
         used then). Without flow keys on ``obj`` this is a new run from the current shape.
     method : str
-        Optimizer, one of ``core.METHODS`` (run by ``core.make_run``); the default
-        ``"projected_gradient"`` is the paper's explicit method, ``core.Relaxation``.
+        ``"auto"`` (default; :func:`choose_method` decides from the start, the attributes
+        ``method`` and ``why`` say what ran) or one of ``core.METHODS`` (run by
+        ``core.make_run``); ``requested`` keeps what was asked.
     penalty : float, optional
         Weight α of the edge-stretch penalty, for the penalty methods ``"ncg"``, ``"lbfgs"``
         and ``"nesterov"`` only (None: the core's default, 1e4); positive and finite.
@@ -582,13 +615,20 @@ class ObjectRelaxation:
             raise ValueError(f"'{obj.name}': {err}") from None
         options.setdefault("target_lengths", "keep")
         self.obj = obj
-        self.method = method
+        #: the method asked for (may be ``"auto"``), the core method run, and why
+        self.requested = method
+        self.method, self.why = choose_method(method, polygons)
+        if method == AUTO_METHOD and self.method != EXPLICIT_METHOD:
+            # the panel's Armijo constant and step growth are the explicit method's; the
+            # implicit one keeps its own (core.solvers), but bad values are refused all the same
+            core.solvers.projected.check_line_search(options.pop("armijo", 0.5),
+                                                     options.pop("growth", 8.0))
         self.append = self._prior is not None
         self.frame_start = int(frame_start)
         self.stride = int(keyframe_stride)
         # make_run("projected_gradient", ...) is core.Relaxation itself: the default is the
         # same run as before methods existed
-        self.run = core.make_run(method, _as_input(polygons), metric=metric,
+        self.run = core.make_run(self.method, _as_input(polygons), metric=metric,
                                  max_iter=max_iterations, tol=tolerance, **options)
         self.start = [p.copy() for p in polygons]
         self.x = [p.copy() for p in polygons]
@@ -705,7 +745,9 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
     metric, max_iterations, tolerance, frame_start, keyframe_stride, append, **options
         See :class:`ObjectRelaxation`; ``append=True`` continues the flow keyed on ``obj``.
     method : str
-        Optimizer, one of ``core.METHODS``; default the paper's explicit projected gradient.
+        ``"auto"`` (default: :func:`choose_method` picks the implicit gradient for a knotted
+        curve, the paper's explicit projected gradient for unknots and links) or one of
+        ``core.METHODS``.
     penalty : float, optional
         Penalty weight α of ``"ncg"``, ``"lbfgs"``, ``"nesterov"`` (None: 1e4); refused for
         the other methods.

@@ -40,7 +40,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="p and q of --knot torus")
     p.add_argument("--metric", default="hs", choices=[m for m, *_ in api.METRICS])
     p.add_argument("--method", default=api.DEFAULT_METHOD, choices=[m for m, *_ in api.METHODS],
-                   help="optimizer (default: the paper's explicit projected gradient); ncg, "
+                   help="optimizer (default auto: the implicit gradient for a knotted curve, "
+                        "the paper's explicit projected gradient for unknots and links); ncg, "
                         "lbfgs and nesterov hold the edge lengths by a penalty")
     p.add_argument("--penalty", type=float, default=None, metavar="ALPHA",
                    help="penalty weight of ncg, lbfgs and nesterov (default "
@@ -95,12 +96,13 @@ def main(argv: list[str]) -> int:
               f"energy {obj[api.ENERGY_PROP]:.6g}")
         if not args.no_relax:
             t0 = time.perf_counter()
-            result = api.relax_object(obj, metric=args.metric, method=args.method,
+            method, why = api.choose_method(args.method, geometry.curve_polygons(obj))
+            result = api.relax_object(obj, metric=args.metric, method=method,
                                       penalty=args.penalty, max_iterations=args.max_iterations,
                                       tolerance=args.tolerance, frame_start=args.frame_start,
                                       keyframe_stride=args.stride)
             scene = bpy.context.scene
-            print(f"moebius: {args.method}, {result.nit} iterations in "
+            print(f"moebius: {method}{f' ({why})' if why else ''}, {result.nit} iterations in "
                   f"{time.perf_counter() - t0:.2f} s, energy "
                   f"{result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, "
                   f"frames {scene.frame_start}-{scene.frame_end} ({result.message})")

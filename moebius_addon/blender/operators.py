@@ -126,12 +126,12 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
     def _report_result(self, result):
         run = self._run
         kind = "WARNING" if not result.success else "INFO"
-        how = "" if run.method == api.DEFAULT_METHOD else f" ({run.method})"
+        how = f" ({run.method}: {run.why})" if run.why else f" ({run.method})"
         how += " continued" if run.append else ""
         self.report({kind}, f"'{run.obj.name}'{how}: {run.nit} iterations, energy "
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
-                            f"({result.message}{api.method_hint(run.method, result)})"
+                            f"({result.message}{api.method_hint(run.method, result, run.start)})"
                             f"{_first_run_note(run)}")
 
     def execute(self, context):

@@ -159,6 +159,9 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.label(text="Method")
         col.prop(s, "method", text="")
+        if s.method == api.AUTO_METHOD:  # what the automatic choice does, measured best
+            col.label(text="Knots: Implicit Gradient")
+            col.label(text="Unknots, links: Projected")
         if "penalty" in acting:
             col.prop(s, "penalty")
         # settings the method does not use stay visible, greyed out (tooltips say which use
@@ -167,7 +170,7 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
         col.label(text="Line Search")
         col.prop(s, "initial_step")
         sub = col.column(align=True)
-        sub.active = "armijo" in acting
+        sub.active = "armijo" in acting  # with Automatic: for unknots and links
         sub.prop(s, "armijo")
         sub.prop(s, "growth")
         col = layout.column(align=True)

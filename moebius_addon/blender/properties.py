@@ -71,7 +71,8 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     method: EnumProperty(
         name="Method", default=api.DEFAULT_METHOD,
         items=[(key, label, desc) for key, label, desc in api.METHODS],
-        description="Optimizer of the paper's comparison. The three penalty methods let edge "
+        description="Optimizer of the paper's comparison; Automatic picks the faster of the "
+                    "two exact ones for the curve. The three penalty methods let edge "
                     "lengths stretch a little and the barycenter drift",
     )
     penalty: FloatProperty(
@@ -89,13 +90,14 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     armijo: FloatProperty(
         name="Armijo Constant", default=0.5, min=1e-6, max=0.999, precision=3,
         description="Sufficient-decrease constant σ of the explicit projected gradient's line "
-                    "search (the paper's 1/2; the other methods use their own)",
+                    "search (the paper's 1/2; also Automatic on unknots and links; the other "
+                    "methods use their own)",
     )
     growth: FloatProperty(
         name="Step Growth", default=8.0, min=1.0, soft_max=10.0,
         description="Largest factor by which the step may grow from one iteration to the next "
-                    "(explicit projected gradient; the first trial is also kept below 2/3 of "
-                    "the first contact)",
+                    "(explicit projected gradient, also Automatic on unknots and links; the "
+                    "first trial is also kept below 2/3 of the first contact)",
     )
     backproject_iter: IntProperty(
         name="Back-projection Iterations", default=10, min=1, max=100,

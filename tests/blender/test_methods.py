@@ -22,11 +22,11 @@ def trefoil(scene, mb):
     return bpy.context.active_object
 
 
-def test_method_enum_lists_exactly_the_core_methods(mb, core):
+def test_method_enum_lists_auto_then_exactly_the_core_methods(mb, core):
     settings = bpy.types.Scene.bl_rna.properties["moebius"].fixed_type
     method = settings.properties["method"]
-    assert [item.identifier for item in method.enum_items] == list(core.METHODS)
-    assert method.default == "projected_gradient"
+    assert [item.identifier for item in method.enum_items] == ["auto", *core.METHODS]
+    assert method.default == "auto"
     for item in method.enum_items:
         assert item.name and item.description
     assert settings.properties["penalty"].default == 1e4
@@ -204,4 +204,26 @@ def test_panel_and_run_agree_on_which_settings_act(scene, mb):
                                 ("penalty", "penalty"), ("backproject_iter", "backproject_iter"),
                                 ("keep_edge_lengths", "edge_lengths")):
             assert (setting in acting) == (option in passed), (method, setting)
-    assert {m for m in METHODS if "growth" in api.acting_settings(m)} == {api.DEFAULT_METHOD}
+    assert {m for m in ("auto", *METHODS) if "growth" in api.acting_settings(m)} == {
+        "auto", "projected_gradient"}
+
+
+def test_automatic_method_follows_the_knot_type(scene, mb, core, trefoil):
+    # measured (docs/benchmarks.md): the implicit method is faster to the relaxed shape on
+    # knots, the explicit one on the FHW unknot
+    s = scene.moebius
+    s.max_iterations = 2
+    s.armijo = 0.3  # the explicit method's; the implicit one keeps its own 1e-4
+    run = mb.api.ObjectRelaxation(trefoil, **mb.relax_settings(s))
+    assert (run.requested, run.method, run.why) == (
+        "auto", "projected_gradient_implicit", "knotted, determinant 3")
+    assert run.run.armijo == 1e-4
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    assert s.last_method == "projected_gradient_implicit"
+    bpy.ops.moebius.add_knot(kind="fhw", edges=600)
+    run = mb.api.ObjectRelaxation(bpy.context.active_object, **mb.relax_settings(s))
+    assert (run.method, run.why) == ("projected_gradient", "no knot detected")
+    assert run.run.armijo == pytest.approx(0.3)  # a float32 property
+    hopf = core.knots.braid_closure([1, 1])
+    assert mb.api.choose_method("auto", hopf) == ("projected_gradient", "a link of 2 components")
+    assert mb.api.choose_method("trust_region", hopf) == ("trust_region", "")

@@ -80,12 +80,16 @@ def test_keyframe_stride_keeps_the_last_iterate(scene, mb, trefoil):
 
 def test_relax_api_matches_core_relax(scene, mb, core, trefoil):
     start = mb.curve_polygons(trefoil)[0]
-    result = mb.relax_object(trefoil, max_iterations=4, tolerance=0.0)
-    ref = core.relax(start, max_iter=4, tol=0.0, target_lengths="keep")
-    assert result.nit == ref.nit == 4
-    np.testing.assert_allclose(result.x, ref.x, atol=1e-12)
-    np.testing.assert_allclose(spline_points(trefoil), ref.x, atol=1e-6)  # last frame shown
-    assert result.history["energy"] == ref.history["energy"]
+    # the default method on a knot is the implicit one (api.choose_method)
+    for method in ("projected_gradient", "auto"):
+        scene.frame_set(1)  # a run starts from the shape shown
+        result = mb.relax_object(trefoil, max_iterations=4, tolerance=0.0, method=method)
+        ref = core.relax(start, max_iter=4, tol=0.0, target_lengths="keep",
+                         method=mb.api.choose_method(method, [start])[0])
+        assert result.nit == ref.nit == 4
+        np.testing.assert_allclose(result.x, ref.x, atol=1e-12)
+        np.testing.assert_allclose(spline_points(trefoil), ref.x, atol=1e-6)  # last shown
+        assert result.history["energy"] == ref.history["energy"]
 
 
 def test_stopping_keeps_iterates_so_far_and_the_start(scene, mb, trefoil):
@@ -183,14 +187,26 @@ def test_failure_while_keyframing_restores_the_curve(scene, mb, trefoil, monkeyp
     assert trefoil.data.animation_data is None or trefoil.data.animation_data.action is None
 
 
-def test_iteration_limit_report_suggests_the_implicit_method(scene, mb, capfd):
+def test_iteration_limit_report_suggests_the_implicit_method_for_knots(scene, mb, capfd):
     mb.api.add_knot("4_1", None)
     scene.moebius.max_iterations = 3
+    scene.moebius.method = "projected_gradient"
     bpy.ops.moebius.relax()
     out, _ = capfd.readouterr()
     assert ("(maximum number of iterations (3) reached; knots settle in fewer iterations with "
             "Advanced ▸ Method: Implicit Gradient)") in out
     scene.moebius.method = "projected_gradient_implicit"
+    bpy.ops.moebius.relax()
+    out, _ = capfd.readouterr()
+    assert "maximum number of iterations (3) reached)" in out and "settle" not in out
+    scene.moebius.method = "auto"  # the default: the implicit method on a knot, named
+    bpy.ops.moebius.relax()
+    out, _ = capfd.readouterr()
+    assert "(projected_gradient_implicit: knotted, determinant 5)" in out
+    assert "settle" not in out
+    # an unknot: the explicit method is the faster one there, no advice
+    mb.api.add_knot("fhw", 600)
+    scene.moebius.method = "projected_gradient"
     bpy.ops.moebius.relax()
     out, _ = capfd.readouterr()
     assert "maximum number of iterations (3) reached)" in out and "settle" not in out
@@ -201,11 +217,17 @@ def test_method_hint_follows_the_status_not_the_words(mb, core):
         return core.RelaxResult(x=None, fun=0.0, nit=3, success=False, message=message,
                                 status=status)
 
-    hint = mb.api.method_hint
+    def hint(method, result):
+        return mb.api.method_hint(method, result, [core.knots.named("5_2")])
+
     assert "Implicit Gradient" in hint("projected_gradient", result(core.Status.MAX_ITER, ""))
     # the words alone decide nothing: a time budget that mentions an iteration limit
     assert hint("projected_gradient", result(core.Status.TIME, "maximum number of")) == ""
     assert hint("projected_gradient_implicit", result(core.Status.MAX_ITER, "")) == ""
+    # nor for an unknot or a link
+    unknot = mb.api.method_hint("projected_gradient", result(core.Status.MAX_ITER, ""),
+                                [core.knots.freedman_unknot(600)])
+    assert unknot == ""
 
 
 @pytest.mark.parametrize("error", [KeyboardInterrupt, RuntimeError])
@@ -260,7 +282,8 @@ def test_continue_appends_after_the_last_keyed_frame(scene, mb, core, trefoil):
     for channel, keys in before.items():  # the earlier keys are untouched
         np.testing.assert_array_equal(after[channel][:5], keys, err_msg=str(channel))
     # the new iterates are the core's run from the last keyed iterate
-    ref = core.relax(last.astype(np.float64), max_iter=3, tol=0.0, target_lengths="keep")
+    ref = core.relax(last.astype(np.float64), max_iter=3, tol=0.0, target_lengths="keep",
+                     method="projected_gradient_implicit")  # the default's choice on a knot
     scene.frame_set(8)
     np.testing.assert_allclose(spline_points(trefoil), ref.x, atol=1e-6)
     assert s.last_iterations == 3 and s.last_energy_start == pytest.approx(ref.history["energy"][0])

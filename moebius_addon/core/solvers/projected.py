@@ -38,6 +38,14 @@ _MAX_TRIAL_RESIDUAL = 0.12
 _EARLY = 1e-5
 
 
+def check_line_search(armijo: float, growth: float) -> tuple[float, float]:
+    """The explicit method's Armijo constant in (0, 1) and step growth >= 1, or ValueError
+    naming the option."""
+    if not 0 < armijo < 1:
+        raise ValueError("armijo must lie in (0, 1)")
+    return armijo, check_number("growth", growth, 1)
+
+
 class Relaxation(Run):
     """A projected Sobolev-gradient run that advances one accepted iterate per :meth:`step`.
 
@@ -115,9 +123,7 @@ class Relaxation(Run):
         theta: float | None = None,
     ):
         _check_names(metric, target_lengths)
-        if not 0 < armijo < 1:
-            raise ValueError("armijo must lie in (0, 1)")
-        growth = check_number("growth", growth, 1)
+        armijo, growth = check_line_search(armijo, growth)
         initial_step = check_number("initial_step", initial_step, 0, above=True)
         backproject_iter = check_number("backproject_iter", backproject_iter, 0, integer=True)
         backproject_tol = check_number("backproject_tol", backproject_tol, 0, above=True)
