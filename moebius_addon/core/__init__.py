@@ -26,7 +26,7 @@ from .invariants import (  # noqa: E402
 from .metrics import METRICS, gram_matrix  # noqa: E402
 from .objio import read_obj, write_obj  # noqa: E402
 from .polygon import check_polygon, contact_ratio, resample, suggest_edge_count  # noqa: E402
-from .solvers import METHODS, Relaxation, make_run  # noqa: E402
+from .solvers import METHODS, Relaxation, check_size, make_run  # noqa: E402
 from .solvers.base import IterationState, RelaxResult, Status, check_number  # noqa: E402
 from .solvers.penalty import DEFAULT_PENALTY_WEIGHT  # noqa: E402
 
@@ -43,6 +43,7 @@ __all__ = [
     "alexander_polynomial",
     "check_number",
     "check_polygon",
+    "check_size",
     "contact_ratio",
     "gram_matrix",
     "invariants",

@@ -116,9 +116,16 @@ class DenseEngine:
         self._banded_factorizations = 0
         self._banded_solves = 0
 
-    #: Whether the metric is a dense N × N matrix (sizes are then bounded by
-    #: ``solvers.base.check_dense_size``).
-    dense_metric = True
+    @classmethod
+    def holds_dense(cls, metric: str) -> bool:
+        """Whether this engine holds ``metric`` as a dense N × N matrix (run sizes are then
+        bounded by ``solvers.base.check_dense_size``)."""
+        return True
+
+    @property
+    def dense_metric(self) -> bool:
+        """:meth:`holds_dense` for this engine's metric."""
+        return self.holds_dense(self.metric)
 
     # -- energy, gradient, contact -------------------------------------------------------------
 
@@ -203,9 +210,9 @@ class TreeEngine(DenseEngine):
     _frame = None  # the last frame and the polygon it was built at
     _saddle = None  # the banded solver of the current iterate
 
-    @property
-    def dense_metric(self) -> bool:
-        return self.metric not in BANDED_METRICS
+    @classmethod
+    def holds_dense(cls, metric: str) -> bool:
+        return metric not in BANDED_METRICS
 
     def update(self, X: np.ndarray, jac: Jacobian) -> None:
         if self.dense_metric or not (jac.con.edge_lengths and jac.con.barycenter):
@@ -276,9 +283,15 @@ def make_engine(name: str, layout: Layout, metric: str, **options) -> DenseEngin
     ValueError
         For an unknown name (the message lists the valid ones).
     """
+    return engine_class(name, layout.n)(layout, metric, **options)
+
+
+def engine_class(name: str, n: int) -> type[DenseEngine]:
+    """The class the engine ``name`` runs for a polygon of ``n`` vertices ("auto" resolved by
+    size); ValueError naming the valid names for an unknown one."""
     if name == "auto":
-        name = "tree" if barnes_hut.uses_tree(name, layout.n) else "exact"
+        name = "tree" if barnes_hut.uses_tree(name, n) else "exact"
     if name not in ENGINES:
         raise ValueError(f"unknown engine {name!r}; choose one of "
                          f"{', '.join(barnes_hut.ENGINE_NAMES)}")
-    return ENGINES[name](layout, metric, **options)
+    return ENGINES[name]

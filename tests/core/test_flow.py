@@ -298,3 +298,24 @@ def test_sizes_whose_dense_factorization_crashes_are_refused():
                  lambda: sobolev_gradient(P)):
         with pytest.raises(ValueError, match=f"at most {base.DENSE_MAX_VERTICES} vertices"):
             call()
+
+
+def test_check_size_says_before_any_work_what_a_run_would_refuse():
+    # the Blender layer asks this before it converts or keys anything: same rule as the run
+    from moebius_addon.core import check_size
+
+    n = base.DENSE_MAX_VERTICES + 1
+    for metric, method, engine in (("hs", "projected_gradient", "exact"),
+                                   ("h2", "projected_gradient", "exact"),
+                                   ("h2", "lbfgs", "tree")):
+        with pytest.raises(ValueError, match=f"at most {base.DENSE_MAX_VERTICES} vertices"):
+            check_size(n, metric, method, engine)
+        with pytest.raises(ValueError, match=f"at most {base.DENSE_MAX_VERTICES} vertices"):
+            relax(ngon(n), metric=metric, method=method, engine=engine, max_iter=1)
+    check_size(n, "h2", "projected_gradient", "tree")  # the banded metric holds nothing dense
+    check_size(n, "h1", "projected_gradient", "auto")
+    for bad, word in ((("hs", "projected_gradient", "nope"), "engine"),
+                      (("nope", "projected_gradient", "auto"), "metric"),
+                      (("hs", "nope", "auto"), "method")):
+        with pytest.raises(ValueError, match=f"unknown {word}"):
+            check_size(100, *bad)

@@ -17,7 +17,9 @@ and reaches the numerics only through its engine (:mod:`..engine`).
 
 from __future__ import annotations
 
-from .base import Run
+from ..engine import engine_class
+from ..metrics import METRICS
+from .base import Run, check_dense_size
 from .penalty import LBFGS, Nesterov, NonlinearCG
 from .projected import Relaxation
 from .second_order import ImplicitProjectedGradient, TrustRegion
@@ -65,3 +67,24 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     return METHOD_CLASSES[method](P, metric, max_iter, tol, engine=engine, theta=theta,
                                   **options)
+
+
+def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
+               engine: str = "auto") -> None:
+    """Refuse, before any work, a polygon of ``n`` vertices (in all) that a run of ``method``
+    in ``metric`` on ``engine`` would refuse for its size: the same ``ValueError`` (naming the
+    way out) the run's constructor raises. Sizes are bounded where the metric is held as a
+    dense matrix (the exact engine; the penalty methods on every engine; ``hs`` and
+    ``hs_pure`` until the tree engine serves them without one).
+
+    Raises
+    ------
+    ValueError
+        For a size the run would refuse, or an unknown method, metric or engine.
+    """
+    if method not in METHOD_CLASSES:
+        raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if metric not in METRICS:
+        raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
+    if engine_class(engine, n).holds_dense(metric) or METHOD_CLASSES[method]._DENSE_METRIC:
+        check_dense_size(n)
