@@ -74,8 +74,7 @@ def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
     """Refuse, before any work, a polygon of ``n`` vertices (in all) that a run of ``method``
     in ``metric`` on ``engine`` would refuse for its size: the same ``ValueError`` (naming the
     way out) the run's constructor raises. Sizes are bounded where the metric is held as a
-    dense matrix (the exact engine; the penalty methods on every engine; ``hs`` and
-    ``hs_pure`` until the tree engine serves them without one).
+    dense matrix: the exact engine, and the penalty methods on every engine.
 
     Raises
     ------
@@ -86,5 +85,7 @@ def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     if metric not in METRICS:
         raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
-    if engine_class(engine, n).holds_dense(metric) or METHOD_CLASSES[method]._DENSE_METRIC:
+    if METHOD_CLASSES[method]._DENSE_METRIC:
+        check_dense_size(n, "method")
+    elif engine_class(engine, n).holds_dense(metric):
         check_dense_size(n)
