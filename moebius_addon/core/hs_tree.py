@@ -55,6 +55,10 @@ from .metrics import _PURE_L2, _barycenter_weights, banded_parts_of_lengths
 THETA = 0.5
 #: Edges per leaf at most.
 LEAF_SIZE = 8
+#: Pairs whose arc length exceeds this many times their distance are "folded" (strands that
+#: come close again along the curve, or other components): the lower-order weights of those
+#: pairs alone enter the preconditioner's diagonal (see :meth:`HsOperator.preconditioner_parts`).
+FOLDED = 2.0
 #: The metrics this module computes.
 METRICS = ("hs_pure", "hs")
 #: Relative tolerance of the gradient's Krylov solve (preconditioned residual norm).
@@ -262,9 +266,10 @@ def _split(left, right, bmin, bmax, nc, s0, s1, clen, theta2):
 
 @nb.njit(cache=True, parallel=True)
 def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart, rowoff,
-                  low, w, v, w1, v1):
+                  low, cross2, w, v, w1, v1, x1):
     """Exact weights of every near pair, stored per target edge as one row over the edges of
-    its leaf's partner leaves (in partner order), and their row sums."""
+    its leaf's partner leaves (in partner order), their row sums, and the row sums of ``v``
+    over the folded pairs (other components, or ``ρ² ≥ cross2 · |d|²``)."""
     for kk in nb.prange(leaves.shape[0]):
         a = leaves[np.int64(kk)]
         width = 0
@@ -277,6 +282,7 @@ def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart,
             sq = starts[cq + 1] - starts[cq]
             sw = 0.0
             sv = 0.0
+            sx = 0.0
             for p in range(noff[a], noff[a + 1]):
                 b = npart[p]
                 for r in range(lo[b], hi[b]):
@@ -294,8 +300,11 @@ def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart,
                             fwd = abs(arc[r] - arc[q])
                             rho = min(fwd, clen[cq] - fwd)
                             vq = low * wq * (inv - 1.0 / (rho * rho))
+                            if rho * rho * inv >= cross2:
+                                sx += vq
                         else:
                             vq = low * wq * inv
+                            sx += vq
                     w[pos] = wq
                     v[pos] = vq
                     sw += wq
@@ -303,17 +312,20 @@ def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart,
                     pos += 1
             w1[q] = sw
             v1[q] = sv
+            x1[q] = sx
 
 
 @nb.njit(cache=True, parallel=True)
-def _far_weights(L, C, nc, s0, s1, clen, foff, fpart, low, fw, fv, rw, rv):
+def _far_weights(L, C, nc, s0, s1, clen, foff, fpart, low, cross2, fw, fv, rw, rv, rx):
     """One weight pair per ordered far pair of clusters, and per target cluster the sums
-    ``Σ_B ω L_B`` (what its edges' row sums receive, times their own length)."""
+    ``Σ_B ω L_B`` (what its edges' row sums receive, times their own length), those of ``v``
+    over folded pairs (see :func:`_near_weights`) apart."""
     m = L.shape[0]
     for aa in nb.prange(m):
         a = np.int64(aa)
         sw = 0.0
         sv = 0.0
+        sx = 0.0
         for p in range(foff[a], foff[a + 1]):
             b = fpart[p]
             dx = C[a, 0] - C[b, 0]
@@ -326,14 +338,18 @@ def _far_weights(L, C, nc, s0, s1, clen, foff, fpart, low, fw, fv, rw, rv):
                 fwd = abs(ca - cb)
                 rho = min(fwd, clen[nc[a]] - fwd)
                 vv = low * inv * max(0.0, inv - 1.0 / (rho * rho))
+                if rho * rho * inv >= cross2:
+                    sx += vv * L[b]
             else:
                 vv = low * inv * inv
+                sx += vv * L[b]
             fw[p] = inv
             fv[p] = vv
             sw += inv * L[b]
             sv += vv * L[b]
         rw[a] = sw
         rv[a] = sv
+        rx[a] = sx
 
 
 @nb.njit(cache=True)
@@ -356,9 +372,24 @@ def _push_to_edges(acc, ln, lo, hi, left, right, out):
 # the product
 
 
+@nb.njit(cache=True, parallel=True)
+def _edge_fields(U, nxt, ln):
+    """``(D U, M U)`` per edge: ``(U[nxt] − U) / l`` and ``(U + U[nxt]) / 2``, as (N, 3) each."""
+    n = U.shape[0]
+    F = np.empty((n, 3))
+    G = np.empty((n, 3))
+    for ii in nb.prange(n):
+        i = np.int64(ii)
+        j = nxt[i]
+        for d in range(3):
+            F[i, d] = (U[j, d] - U[i, d]) / ln[i]
+            G[i, d] = 0.5 * (U[i, d] + U[j, d])
+    return F, G
+
+
 @nb.njit(cache=True, parallel=True, fastmath={"reassoc", "contract", "nsz", "arcp"})
-def _near_product(F, G, w, v, lo, hi, leaves, noff, npart, rowoff, yF, yG):
-    """``yF[q] = Σ w_qr F[r]``, ``yG[q] = Σ v_qr G[r]`` over the stored near rows."""
+def _near_product(F, G, w, v, lo, hi, leaves, noff, npart, rowoff, Y):
+    """``Y[q, :3] = Σ w_qr F[r]``, ``Y[q, 3:] = Σ v_qr G[r]`` over the stored near rows."""
     for kk in nb.prange(leaves.shape[0]):
         a = leaves[np.int64(kk)]
         width = 0
@@ -380,8 +411,37 @@ def _near_product(F, G, w, v, lo, hi, leaves, noff, npart, rowoff, yF, yG):
                     g1 += vq * G[r, 1]
                     g2 += vq * G[r, 2]
                     pos += 1
-            yF[q, 0], yF[q, 1], yF[q, 2] = f0, f1, f2
-            yG[q, 0], yG[q, 1], yG[q, 2] = g0, g1, g2
+            Y[q, 0], Y[q, 1], Y[q, 2] = f0, f1, f2
+            Y[q, 3], Y[q, 4], Y[q, 5] = g0, g1, g2
+
+
+@nb.njit(cache=True, parallel=True)
+def _assemble(U, F, G, Y, w1, v1, ln, prv, comp, starts, beta, mass):
+    """``2 Dᵀ(W̃1 ∘ F − Y_F) + 2 Mᵀ(Ṽ1 ∘ G − Y_G)`` per vertex, the barycenter term
+    ``β (βᵀU)`` per component and ``mass`` times the P1 mass matrix applied to ``U``."""
+    n = U.shape[0]
+    k = starts.shape[0] - 1
+    bu = np.zeros((k, 3))
+    for c in range(k):
+        for i in range(starts[c], starts[c + 1]):
+            for d in range(3):
+                bu[c, d] += beta[i] * U[i, d]
+    out = np.empty((n, 3))
+    for pp in nb.prange(n):
+        p = np.int64(pp)
+        q = prv[p]
+        c = comp[p]
+        for d in range(3):
+            hp = 2.0 * (w1[p] * F[p, d] - Y[p, d]) / ln[p]
+            hq = 2.0 * (w1[q] * F[q, d] - Y[q, d]) / ln[q]
+            gp = 2.0 * (v1[p] * G[p, d] - Y[p, 3 + d])
+            gq = 2.0 * (v1[q] * G[q, d] - Y[q, 3 + d])
+            o = hq - hp + 0.5 * (gp + gq) + beta[p] * bu[c, d]
+            if mass != 0.0:  # edges p and q: l/3 at this vertex, l/6 at the other end
+                o += mass * (ln[p] * (U[p, d] / 3 + F[p, d] * ln[p] / 6 + U[p, d] / 6)
+                             + ln[q] * (U[p, d] / 3 + (U[p, d] - F[q, d] * ln[q]) / 6))
+            out[p, d] = o
+    return out
 
 
 @nb.njit(cache=True)
@@ -462,21 +522,22 @@ class HsOperator:
         total = int(cells.sum())
         self.w = np.empty(total)
         self.v = np.empty(total)
-        w1 = np.empty(lay.n)
-        v1 = np.empty(lay.n)
+        rows = np.empty((3, lay.n))
+        cross2 = FOLDED**2
         _near_weights(ln, mid, arc, clen, lay.starts, lay.comp, tree.lo, tree.hi, self.leaves,
-                      self.noff, self.npart, self.rowoff, self.low, self.w, self.v, w1, v1)
+                      self.noff, self.npart, self.rowoff, self.low, cross2, self.w, self.v,
+                      rows[0], rows[1], rows[2])
         self.fw = np.empty(self.fpart.shape[0])
         self.fv = np.empty(self.fpart.shape[0])
-        rw = np.empty(m)
-        rv = np.empty(m)
-        _far_weights(L, C, nc, s0, s1, clen, self.foff, self.fpart, self.low, self.fw,
-                     self.fv, rw, rv)
-        rows = np.stack([w1, v1], axis=1)
-        _push_to_edges(np.stack([rw, rv], axis=1), ln, tree.lo, tree.hi, tree.left,
+        rfar = np.empty((3, m))
+        _far_weights(L, C, nc, s0, s1, clen, self.foff, self.fpart, self.low, cross2, self.fw,
+                     self.fv, rfar[0], rfar[1], rfar[2])
+        rows = np.ascontiguousarray(rows.T)
+        _push_to_edges(np.ascontiguousarray(rfar.T), ln, tree.lo, tree.hi, tree.left,
                        tree.right, rows)
         self.w1 = np.ascontiguousarray(rows[:, 0])
         self.v1 = np.ascontiguousarray(rows[:, 1])
+        self.x1 = np.ascontiguousarray(rows[:, 2])  # v's row sums over folded pairs
         # the barycenter term N b bᵀ / L⁴ as β βᵀ per component (metrics._add_barycenter_term)
         self.beta = _barycenter_weights(ln, lay) * np.sqrt(lay.n) / self.total**2
 
@@ -489,27 +550,16 @@ class HsOperator:
         """``Ã U`` for a field ``U`` (N, 3)."""
         lay, ln, tree = self.layout, self.ln, self.tree
         U = np.ascontiguousarray(U, dtype=np.float64)
-        F = (U[lay.nxt] - U) / ln[:, None]  # D U, per edge
-        G = 0.5 * (U + U[lay.nxt])  # M U
-        yF = np.empty_like(F)
-        yG = np.empty_like(G)
+        F, G = _edge_fields(U, lay.nxt, ln)
+        Y = np.empty((lay.n, 6))
         _near_product(F, G, self.w, self.v, tree.lo, tree.hi, self.leaves, self.noff,
-                      self.npart, self.rowoff, yF, yG)
+                      self.npart, self.rowoff, Y)
         S = _cluster_sums(F, G, ln, tree.lo, tree.hi, tree.left, tree.right)
         acc = _far_product(S, self.foff, self.fpart, self.fw, self.fv)
-        y = np.concatenate([yF, yG], axis=1)
-        _push_to_edges(acc, ln, tree.lo, tree.hi, tree.left, tree.right, y)
-        hF = 2.0 * (self.w1[:, None] * F - y[:, :3])  # 2 (diag(W̃1) − W̃) D U
-        hG = 2.0 * (self.v1[:, None] * G - y[:, 3:])
-        hF /= ln[:, None]
-        out = hF[lay.prv] - hF  # Dᵀ: vertex p ends edge prv[p], starts edge p
-        out += 0.5 * (hG + hG[lay.prv])
-        for c in range(lay.k):
-            s = slice(lay.starts[c], lay.starts[c + 1])
-            out[s] += np.outer(self.beta[s], self.beta[s] @ U[s])
-        if self.metric == "hs_pure":
-            out += _PURE_L2 / self.total**3 * _mass_product(ln, lay, U)
-        return out
+        _push_to_edges(acc, ln, tree.lo, tree.hi, tree.left, tree.right, Y)
+        mass = _PURE_L2 / self.total**3 if self.metric == "hs_pure" else 0.0
+        return _assemble(U, F, G, Y, self.w1, self.v1, ln, lay.prv, lay.comp, lay.starts,
+                         self.beta, mass)
 
     def diagonal(self) -> np.ndarray:
         """The diagonal of ``Ã`` (N,): ``2 Σ_{I ∋ p} W̃1_I / l_I² + ½ Σ_{I ∋ p} Ṽ1_I + β_p²``
@@ -531,17 +581,9 @@ class HsOperator:
         s = float((self.diagonal() - self.beta**2).sum() / vals[diag].sum())
         i = np.arange(lay.n)
         j = lay.nxt
-        h = 0.5 * self.v1
+        h = 0.5 * self.x1
         return (np.concatenate([rows, i, i, j, j]), np.concatenate([cols, i, j, i, j]),
                 np.concatenate([s * vals, h, h, h, h]), self.beta)
-
-
-def _mass_product(ln: np.ndarray, lay: Layout, U: np.ndarray) -> np.ndarray:
-    """The P1 mass matrix of the polygon (metrics._mass) applied to ``U``."""
-    Un = U[lay.nxt]
-    e = ln[:, None] * (U / 3 + Un / 6)  # edge I's share at its first vertex
-    f = ln[:, None] * (U / 6 + Un / 3)  # and at its second
-    return e + f[lay.prv]
 
 
 # ------------------------------------------------------------------------------------------------
