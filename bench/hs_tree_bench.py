@@ -99,7 +99,7 @@ def accuracy(n: int, thetas) -> list[dict]:
             row = {"curve": name, "edges": lay.n, "theta": theta, "random": err[0],
                    "smooth": err[1], "near_leaf_pairs": op.near_pairs,
                    "far_pairs": op.far_pairs, "stored_mb": op.nbytes / 1e6,
-                   "product_ms": 1e3 * best(lambda op=op: op.product(U), 5)}
+                   "product_ms": 1e3 * best(lambda op=op, U=U: op.product(U), 5)}
             rows.append(row)
             print(f"{name:6s} N={lay.n} theta {theta:5.3f}: relative error random "
                   f"{err[0]:.1e} smooth {err[1]:.1e}; near {op.near_pairs} far "
@@ -155,7 +155,7 @@ def flow(n: int, name: str, iterations: int, target: float | None, eg: bool) -> 
            "max_constraint_residual": float(max(res.history["constraint_residual"])),
            "krylov_mean": float(np.mean(its)), "message": res.message,
            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
-    for k, (t, e, c) in enumerate(marks, 1):
+    for k, (_t, e, c) in enumerate(marks, 1):
         if k <= 3 or k % 10 == 0 or k == len(marks):
             print(f"  iterate {k:4d}: {steps[k - 1]:7.3f} s, E {e:.6f}, constraints {c:.1e}",
                   flush=True)
