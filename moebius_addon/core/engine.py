@@ -17,7 +17,7 @@ Engines by name (the ``engine=`` option of ``relax``, ``make_run`` and every run
   :mod:`.bvh` serves the contact search of every engine above its crossover); the saddle-point
   solves O(N) for the banded metrics (``l2``, ``h1``, ``h2``: :mod:`.banded`), dense as in the
   exact engine for ``hs`` and ``hs_pure`` (until a matrix-free ``hs`` lands).
-* ``"auto"``: the tree from ``barnes_hut.TREE_FROM`` edges on, else exact.
+* ``"auto"``: the tree from ``AUTO_TREE_FROM`` vertices on, else exact.
 
 :func:`make_engine` is the one place that maps names to classes.
 """
@@ -286,6 +286,13 @@ class TreeEngine(DenseEngine):
         return self._frame_at(X).energy_gradient(X)
 
 
+#: From this many vertices on, "auto" runs on the tree engine: its whole iteration (energy,
+#: metric and solves) measured faster from about 900 edges on (FHW, median seconds per
+#: iteration exact / tree: 800: 36-40 / 41-44 ms, 1 000: 84-88 / 42-46 ms, 1 648: 248-252 /
+#: 64-76 ms; busy machine, alternated). The energy alone crosses over later
+#: (``barnes_hut.TREE_FROM``, what "auto" means for ``moebius_energy``).
+AUTO_TREE_FROM = 1000
+
 #: Engines by name; :func:`make_engine` resolves a run's ``engine=`` here ("auto" too).
 ENGINES: dict[str, type[DenseEngine]] = {"exact": DenseEngine, "tree": TreeEngine}
 
@@ -307,10 +314,11 @@ def make_engine(name: str, layout: Layout, metric: str, **options) -> DenseEngin
 
 
 def engine_class(name: str, n: int) -> type[DenseEngine]:
-    """The class the engine ``name`` runs for a polygon of ``n`` vertices ("auto" resolved by
-    size); ValueError naming the valid names for an unknown one."""
+    """The class the engine ``name`` runs for a polygon of ``n`` vertices ("auto": the tree
+    from ``AUTO_TREE_FROM`` vertices on); ValueError naming the valid names for an unknown
+    one."""
     if name == "auto":
-        name = "tree" if barnes_hut.uses_tree(name, n) else "exact"
+        name = "tree" if n >= AUTO_TREE_FROM else "exact"
     if name not in ENGINES:
         raise ValueError(f"unknown engine {name!r}; choose one of "
                          f"{', '.join(barnes_hut.ENGINE_NAMES)}")
