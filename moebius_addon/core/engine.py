@@ -237,7 +237,7 @@ class TreeEngine(DenseEngine):
             self._saddle = hs_tree.HsSaddle(
                 hs_tree.HsOperator(X, self.layout, self.metric), jac, rtol=self.krylov_rtol,
                 exact_backprojection=self.exact_backprojection, log=self._tree_krylov,
-                recycle=old if isinstance(old, hs_tree.HsSaddle) else None)
+                recycle=old if isinstance(old, hs_tree.HsSaddle) else None, X=X)
         self._banded_factorizations += 1
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -47,8 +47,10 @@ from . import bvh
 from ._layout import Layout
 from .banded import BandedSaddle
 from .barnes_hut import _by_target
-from .constraints import Jacobian
-from .metrics import _PURE_L2, _barycenter_weights, banded_parts_of_lengths
+from ._layout import layout_from_sizes
+from .constraints import Jacobian, jacobian, make_constraints
+from .linalg import Factorization
+from .metrics import _PURE_L2, _barycenter_weights, banded_parts_of_lengths, gram_x
 
 #: Admissibility of the metric's far field (its own, coarser than the energy's: the metric
 #: is any positive definite matrix close to hs, while the energy must be accurate).
@@ -63,6 +65,11 @@ FOLDED = 2.0
 METRICS = ("hs_pure", "hs")
 #: Relative tolerance of the gradient's Krylov solve (preconditioned residual norm).
 RTOL = 1e-2
+#: The coarse level of the preconditioner: about ``COARSE_PER_ROOT · √N`` vertices, at most
+#: ``COARSE_MAX`` (solved densely), none below ``COARSE_FROM`` vertices.
+COARSE_PER_ROOT = 8.0
+COARSE_MAX = 2500
+COARSE_FROM = 10000
 
 
 
@@ -590,6 +597,88 @@ class HsOperator:
 # saddle-point solves
 
 
+def coarse_size(n: int) -> int:
+    """Vertices of the preconditioner's coarse level for ``n`` fine ones (0: none)."""
+    if n < COARSE_FROM:
+        return 0
+    return int(min(COARSE_MAX, COARSE_PER_ROOT * np.sqrt(n)))
+
+
+class CoarseLevel:
+    """The coarse level of the preconditioner: the polygon of every ``m``-th vertex of each
+    component, its own metric (dense) and constraints, and linear interpolation along the
+    curve between the two (``P``). Applied to a residual ``r`` (one the constraint
+    preconditioner has already projected, ``C H⁻¹ r = 0``) it returns ``Π_H P S_c Pᵀ r``:
+    the coarse constrained solve ``S_c`` of the restricted residual, interpolated and moved
+    onto ``ker C`` by the fine constraint preconditioner (``Π_H``: its ``H``-orthogonal
+    projection). Added to the constraint preconditioner (a two-level additive Schwarz
+    preconditioner) it carries what the banded ``H`` misses most on smooth curves, the
+    lowest modes, whose hs energy grows one power of the frequency faster than h1's.
+
+    Parameters
+    ----------
+    X : (N, 3) array
+    layout : Layout
+    metric : {"hs", "hs_pure"}
+    K : BandedSaddle
+        The fine constraint preconditioner (its ``_solve`` projects onto ``ker C``).
+    jac : Jacobian
+        The fine constraint Jacobian.
+    size : int
+        Coarse vertices wanted in all; components keep at least 8 (or all they have).
+    """
+
+    def __init__(self, X: np.ndarray, layout: Layout, metric: str, K: BandedSaddle,
+                 jac: Jacobian, size: int):
+        self.K, self.jac = K, jac
+        m = max(1, int(round(layout.n / max(size, 1))))
+        idx, sizes, a, b, f = [], [], [], [], []
+        offset = 0
+        for c in range(layout.k):
+            s0, s1 = int(layout.starts[c]), int(layout.starts[c + 1])
+            step = m if (s1 - s0) // m >= 8 else 1
+            local = np.arange(s1 - s0)
+            ci = s0 + local[::step]
+            k = len(ci)
+            j = local // step  # the coarse vertex before each fine one, and the next
+            a.append(offset + j)
+            b.append(offset + (j + 1) % k)
+            f.append((local - j * step) / step)
+            idx.append(ci)
+            sizes.append(k)
+            offset += k
+        self.a, self.b = np.concatenate(a), np.concatenate(b)
+        self.f = np.concatenate(f)[:, None]
+        self.n = offset
+        idx = np.concatenate(idx)
+        clay = layout_from_sizes(sizes, layout.is_link)
+        Xc = X[idx]
+        lc = np.linalg.norm(Xc[clay.nxt] - Xc, axis=1)
+        self.jc = jacobian(Xc, make_constraints(Xc, clay, lc))
+        Ac = gram_x(metric, Xc, clay)
+        try:  # a preconditioner: single precision is plenty
+            self.fac = Factorization(Ac, self.jc, np.float32)
+        except np.linalg.LinAlgError:
+            self.fac = Factorization(Ac, self.jc, np.float64)
+
+    def prolong(self, Uc: np.ndarray) -> np.ndarray:
+        """``P Uc``: (coarse vertices, 3) to (N, 3), linear along the curve."""
+        return (1.0 - self.f) * Uc[self.a] + self.f * Uc[self.b]
+
+    def restrict(self, R: np.ndarray) -> np.ndarray:
+        """``Pᵀ R``: (N, 3) to (coarse vertices, 3)."""
+        out = np.empty((self.n, 3))
+        for d in range(3):
+            out[:, d] = (np.bincount(self.a, (1.0 - self.f[:, 0]) * R[:, d], self.n)
+                         + np.bincount(self.b, self.f[:, 0] * R[:, d], self.n))
+        return out
+
+    def __call__(self, R: np.ndarray) -> np.ndarray:
+        uc, _ = self.fac.solve(self.restrict(R), np.zeros(self.jc.con.size))
+        w = self.prolong(uc)
+        return w - self.K._solve(np.zeros_like(w), self.jac.matvec(w))[0]
+
+
 class HsSaddle:
     """Saddle-point solves with ``Ã`` (:class:`HsOperator`) at one iterate, by projected
     preconditioned conjugate gradients (see the module's text).
@@ -611,11 +700,16 @@ class HsSaddle:
         Where every solve appends its iteration count.
     recycle : HsSaddle, optional
         The previous iterate's solver, whose band memory this one takes over.
+    X : (N, 3) array, optional
+        The polygon (needed for the coarse level).
+    coarse : int, optional
+        Vertices of the coarse level (default :func:`coarse_size`; 0: none).
     """
 
     def __init__(self, op: HsOperator, jac: Jacobian, rtol: float = RTOL, max_iter: int = 200,
                  exact_backprojection: bool = False, log: list | None = None,
-                 recycle: HsSaddle | None = None):
+                 recycle: HsSaddle | None = None, X: np.ndarray | None = None,
+                 coarse: int | None = None):
         self.op = op
         self.jac = jac
         self.rtol = rtol
@@ -624,9 +718,18 @@ class HsSaddle:
         self.K = BandedSaddle(op.preconditioner_parts(), jac,
                               None if recycle is None else recycle.K)
         self.iterations: list[int] = [] if log is None else log
+        size = coarse_size(op.layout.n) if coarse is None else int(coarse)
+        self.coarse = None
+        if size and X is not None and size < op.layout.n:
+            self.coarse = CoarseLevel(X, op.layout, op.metric, self.K, jac, size)
 
-    def _project(self, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return self.K._solve(R, np.zeros(self.jac.con.size))
+    def _precondition(self, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(z, μ)``: the constraint preconditioner's ``H z + Cᵀμ = R``, ``C z = 0``, plus the
+        coarse level's correction of the projected residual ``R − Cᵀμ``."""
+        z, mu = self.K._solve(R, np.zeros(self.jac.con.size))
+        if self.coarse is not None:
+            z += self.coarse(R - self.jac.rmatvec(mu))
+        return z, mu
 
     def solve(self, g: np.ndarray, r: np.ndarray, rtol: float | None = None
               ) -> tuple[np.ndarray, np.ndarray]:
@@ -636,7 +739,7 @@ class HsSaddle:
         n = g.shape[0]
         x = self.K._solve(np.zeros((n, 3)), r)[0] if np.any(r) else np.zeros((n, 3))
         res = self.op.product(x) - g
-        z, mu = self._project(res)
+        z, mu = self._precondition(res)
         # the residual keeps only what the constraints cannot absorb, its Cᵀμ part moved into
         # the multipliers λ (Gould, Hribar & Nocedal's residual update; the same iterates in
         # exact arithmetic, res = Ã x − g + Cᵀλ throughout): without it, a residual dominated
@@ -656,7 +759,7 @@ class HsSaddle:
             a = rz / pAp
             x += a * p
             res += a * Ap
-            z, mu = self._project(res)
+            z, mu = self._precondition(res)
             lam -= mu
             res -= self.jac.rmatvec(mu)
             rz_new = float(np.einsum("ij,ij->", res, z))
