@@ -11,7 +11,7 @@ import time
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
 
-from . import api, keyframes
+from . import api, keyframes, labels
 
 _CONVERTIBLE = {"CURVE", "MESH"}
 
@@ -228,16 +228,6 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         return self._finish(context)
 
 
-def _knot_items():
-    from ..core import knots
-
-    items = [(k, label, desc) for k, label, desc in api.SPECIAL_KNOTS]
-    special = {key for key, *_ in items}
-    items += [(name, f"Knot {name}", f"Prime knot {name} of the knot table")
-              for name in knots.names() if name not in special]
-    return [(k, label, desc, i) for i, (k, label, desc) in enumerate(items)]
-
-
 class MOEBIUS_OT_add_knot(bpy.types.Operator):
     """Add a knot from the catalogue as a closed polygon ready to relax"""
 
@@ -374,7 +364,7 @@ classes = (
 
 def register() -> None:
     MOEBIUS_OT_add_knot.__annotations__["kind"] = EnumProperty(
-        name="Knot", items=_knot_items(), default="fhw", description="Catalogue entry")
+        name="Knot", items=labels.knot_items(), default="fhw", description="Catalogue entry")
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.VIEW3D_MT_curve_add.append(menu_add_knot)

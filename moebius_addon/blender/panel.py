@@ -11,10 +11,8 @@ import textwrap
 
 import bpy
 
-from . import api
+from . import labels, options
 from .keyframes import ENERGY_PROP, keyed_frames
-
-_METHOD_LABELS = {key: label for key, label, _ in api.METHODS}
 
 
 def wrap_text(text: str, width_px: float, ui_scale: float = 1.0) -> list[str]:
@@ -80,7 +78,7 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
             col = box.column(align=True)
             col.label(text="Last Run", icon="TIME")
             col.label(text=s.last_object)
-            col.label(text=_METHOD_LABELS.get(s.last_method, s.last_method))
+            col.label(text=labels.method_label(s.last_method))
             for name, value in (
                 ("Iterations", str(s.last_iterations)),
                 ("Energy", f"{s.last_energy_start:.5g} → {s.last_energy_end:.5g}"),
@@ -155,17 +153,17 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         s = context.scene.moebius
-        acting = api.acting_settings(s.method)
+        acting = options.acting_settings(s.method)
         col = layout.column(align=True)
         col.label(text="Method")
         col.prop(s, "method", text="")
-        if s.method == api.AUTO_METHOD:  # what the automatic choice does, measured best
+        if s.method == labels.AUTO_METHOD:  # what the automatic choice does, measured best
             col.label(text="Knots: Implicit Gradient")
             col.label(text="Unknots, links: Projected")
         if "penalty" in acting:
             col.prop(s, "penalty")
         # settings the method does not use stay visible, greyed out (tooltips say which use
-        # them); api.acting_settings is also what relax_settings passes on
+        # them); options.acting_settings is also what relax_settings passes on
         col = layout.column(align=True)
         col.label(text="Line Search")
         col.prop(s, "initial_step")

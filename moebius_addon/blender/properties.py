@@ -11,7 +11,7 @@ from bpy.props import (
     StringProperty,
 )
 
-from . import api
+from . import labels
 
 
 def _stat(key: str, default):
@@ -45,7 +45,7 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     # Flow
     metric: EnumProperty(
         name="Metric", default="hs",
-        items=[(key, label, desc) for key, label, desc in api.METRICS],
+        items=[(key, label, desc) for key, label, desc in labels.METRICS],
         description="Inner product that turns the energy's derivative into a gradient",
     )
     max_iterations: IntProperty(
@@ -69,14 +69,14 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     )
     # Advanced
     method: EnumProperty(
-        name="Method", default=api.DEFAULT_METHOD,
-        items=[(key, label, desc) for key, label, desc in api.METHODS],
+        name="Method", default=labels.DEFAULT_METHOD,
+        items=[(key, label, desc) for key, label, desc in labels.METHODS],
         description="Optimizer of the paper's comparison; Automatic picks the faster of the "
                     "two exact ones for the curve. The three penalty methods let edge "
                     "lengths stretch a little and the barycenter drift",
     )
     penalty: FloatProperty(
-        name="Penalty α", default=api.DEFAULT_PENALTY, min=0.0, soft_min=1.0, soft_max=1e7,
+        name="Penalty α", default=labels.DEFAULT_PENALTY, min=0.0, soft_min=1.0, soft_max=1e7,
         precision=1,
         description="Penalty methods only: weight α of the edge-stretch penalty "
                     "α Σ l0 log(l/l0)² (curve scaled to length 1). Larger keeps the edge "
@@ -151,7 +151,7 @@ class MoebiusSettings(bpy.types.PropertyGroup):
 
     def store_run(self, obj_name: str, iterations: int, energy_start: float, energy_end: float,
                   seconds: float, message: str, keyed: int,
-                  method: str = api.DEFAULT_METHOD) -> None:
+                  method: str = labels.DEFAULT_METHOD) -> None:
         """Record the statistics of a finished run (shown read-only in the panel)."""
         self["_stats"] = {
             "object": obj_name, "iterations": int(iterations),
