@@ -41,7 +41,6 @@ from .labels import (
 from .options import EDGE_LIMIT, acting_settings, check_relax_options, relax_settings
 from .polygons import energy
 from .relaxation import (
-    _SESSION,  # noqa: F401 - the tests reset it (test_first_run_of_a_session_...)
     ObjectRelaxation,
     choose_method,
     method_hint,
