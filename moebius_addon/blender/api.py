@@ -29,8 +29,11 @@ from .gradients import refresh_gradients, show_gradients
 from .keyframes import ENERGY_PROP
 from .labels import (
     AUTO_METHOD,
+    DEFAULT_ENGINE,
     DEFAULT_METHOD,
     DEFAULT_PENALTY,
+    DEFAULT_THETA,
+    ENGINES,
     EXPLICIT_METHOD,
     KNOT_METHOD,
     METHODS,
@@ -38,7 +41,14 @@ from .labels import (
     PENALTY_METHODS,
     SPECIAL_KNOTS,
 )
-from .options import EDGE_LIMIT, acting_settings, check_relax_options, relax_settings
+from .options import (
+    EDGE_LIMIT,
+    acting_settings,
+    check_edge_count,
+    check_relax_options,
+    edge_limit,
+    relax_settings,
+)
 from .polygons import energy
 from .relaxation import (
     ObjectRelaxation,
@@ -50,11 +60,12 @@ from .relaxation import (
 from .rest import apply_frame, clear_animation
 
 __all__ = [
-    "AUTO_METHOD", "DEFAULT_METHOD", "DEFAULT_PENALTY", "EDGE_LIMIT", "ENERGY_PROP",
-    "EXPLICIT_METHOD", "KNOT_METHOD", "METHODS", "METRICS", "PENALTY_METHODS", "SPECIAL_KNOTS",
-    "ObjectRelaxation", "acting_settings", "add_knot", "apply_conversion", "apply_frame",
-    "check_knot", "check_relax_options", "choose_method", "clear_animation", "convert_object",
-    "energy", "export_flow", "export_suffix", "knot_names", "knot_polygons",
-    "make_curve_object", "method_hint", "prepare_conversion", "refresh_gradients",
-    "relax_object", "relax_settings", "show_gradients", "solver_warm",
+    "AUTO_METHOD", "DEFAULT_ENGINE", "DEFAULT_METHOD", "DEFAULT_PENALTY", "DEFAULT_THETA",
+    "EDGE_LIMIT", "ENERGY_PROP", "ENGINES", "EXPLICIT_METHOD", "KNOT_METHOD", "METHODS", "METRICS",
+    "PENALTY_METHODS", "SPECIAL_KNOTS", "ObjectRelaxation", "acting_settings", "add_knot",
+    "apply_conversion", "apply_frame", "check_edge_count", "check_knot", "check_relax_options",
+    "choose_method", "clear_animation", "convert_object", "edge_limit", "energy", "export_flow",
+    "export_suffix", "knot_names", "knot_polygons", "make_curve_object", "method_hint",
+    "prepare_conversion", "refresh_gradients", "relax_object", "relax_settings", "show_gradients",
+    "solver_warm",
 ]

@@ -9,8 +9,8 @@ import numpy as np
 
 from .. import core
 from .conversion import make_curve_object
-from .labels import SPECIAL_KNOTS
-from .options import EDGE_LIMIT
+from .labels import DEFAULT_ENGINE, DEFAULT_METHOD, SPECIAL_KNOTS
+from .options import check_edge_count
 from .polygons import as_input, as_link
 
 
@@ -21,20 +21,20 @@ def knot_names() -> list[str]:
     return [*(key for key, *_ in SPECIAL_KNOTS), *knots.names()]
 
 
-def check_knot(kind: str, n: int | None = None) -> None:
+def check_knot(kind: str, n: int | None = None, metric: str = "hs",
+               method: str = DEFAULT_METHOD, engine: str = DEFAULT_ENGINE) -> None:
     """ValueError for a name :func:`knot_polygons` does not know (listing those it does) or
-    more edges than a run takes (``EDGE_LIMIT``): the same refusal in every door, before any
-    work."""
+    more edges than a run of ``method`` in ``metric`` on ``engine`` takes
+    (:func:`~.options.check_edge_count`): the same refusal in every door, before any work."""
     if kind not in knot_names():
         raise ValueError(f"unknown knot '{kind}'; choose one of {', '.join(knot_names())}")
-    if n and int(n) > EDGE_LIMIT:
-        raise ValueError(f"{int(n)} edges is too many: runs above {EDGE_LIMIT} edges are "
-                         f"refused (the cost per iteration grows as N²); use at most "
-                         f"{EDGE_LIMIT} (a few hundred are plenty to untangle a knot)")
+    if n:
+        check_edge_count(n, metric, method, engine)
 
 
 def knot_polygons(kind: str, n: int | None = None, p: int = 2, q: int = 3,
-                  seed: int = 0) -> list:
+                  seed: int = 0, *, metric: str = "hs", method: str = DEFAULT_METHOD,
+                  engine: str = DEFAULT_ENGINE) -> list:
     """Polygons of a catalogue entry, equilateral and ready to relax.
 
     Parameters
@@ -49,6 +49,9 @@ def knot_polygons(kind: str, n: int | None = None, p: int = 2, q: int = 3,
         Torus knot parameters.
     seed : int
         Seed of the random unknot.
+    metric, method, engine : str
+        The run the knot is made for: more edges than it takes are refused before any work
+        (:func:`check_knot`).
 
     Returns
     -------
@@ -56,7 +59,7 @@ def knot_polygons(kind: str, n: int | None = None, p: int = 2, q: int = 3,
     """
     from ..core import knots
 
-    check_knot(kind, n)
+    check_knot(kind, n, metric, method, engine)
     n = n or None
     makers = {
         "fhw": lambda: knots.freedman_unknot(*(n,) if n else ()),
@@ -83,12 +86,13 @@ def knot_polygons(kind: str, n: int | None = None, p: int = 2, q: int = 3,
 
 def add_knot(kind: str = "fhw", n: int | None = None, p: int = 2, q: int = 3, seed: int = 0,
              size: float = 2.0, location: Sequence[float] = (0.0, 0.0, 0.0),
-             context: bpy.types.Context | None = None) -> bpy.types.Object:
+             context: bpy.types.Context | None = None, *, metric: str = "hs",
+             method: str = DEFAULT_METHOD, engine: str = DEFAULT_ENGINE) -> bpy.types.Object:
     """Add a catalogue knot as a curve object ready to relax.
 
     Parameters
     ----------
-    kind, n, p, q, seed
+    kind, n, p, q, seed, metric, method, engine
         See :func:`knot_polygons`.
     size : float
         Largest extent of the bounding box, in scene units (the energy is scale invariant).
@@ -101,7 +105,7 @@ def add_knot(kind: str = "fhw", n: int | None = None, p: int = 2, q: int = 3, se
     bpy.types.Object
         The new, selected and active curve object.
     """
-    polygons = knot_polygons(kind, n, p, q, seed)
+    polygons = knot_polygons(kind, n, p, q, seed, metric=metric, method=method, engine=engine)
     X = np.concatenate(polygons)
     centre = X.mean(axis=0)
     scale = size / max(float(np.ptp(X, axis=0).max()), 1e-300)

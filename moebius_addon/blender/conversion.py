@@ -11,8 +11,9 @@ import numpy as np
 from .. import core
 from . import geometry
 from .keyframes import ENERGY_PROP
+from .labels import DEFAULT_ENGINE, DEFAULT_METHOD
 from .objects import copy_transform, deselect_all, link_like
-from .options import EDGE_LIMIT
+from .options import EDGE_LIMIT, check_edge_count, edge_limit
 from .polygons import as_input, energy
 from .rest import set_rest_shape
 
@@ -33,7 +34,9 @@ def _dedupe(points: np.ndarray, closed: bool) -> np.ndarray:
 
 
 def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: float | None = None,
-                       close_open: bool = False, allow_large: bool = False) -> list[np.ndarray]:
+                       close_open: bool = False, allow_large: bool = False, *,
+                       metric: str = "hs", method: str = DEFAULT_METHOD,
+                       engine: str = DEFAULT_ENGINE) -> list[np.ndarray]:
     """Check ``obj`` and compute its equal-edge polygons without touching the scene.
 
     Parameters
@@ -48,7 +51,11 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
     close_open : bool
         Join the ends of open splines/chains instead of refusing them.
     allow_large : bool
-        Accept more than :data:`EDGE_LIMIT` edges in total.
+        Accept more than :data:`~.options.EDGE_LIMIT` edges in total on the tree engine (the
+        core's own size refusals stand).
+    metric, method, engine : str
+        The run the curve is converted for: its edge count is refused where that run would
+        refuse it (:func:`~.options.check_edge_count`).
 
     Returns
     -------
@@ -110,41 +117,50 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
             f"unknotted (the trefoil at 5 to 7 edges did); use at least {few}"
             + (" or a shorter edge length" if edge_length is not None else "")
         )
-    total = sum(counts)
-    if total > EDGE_LIMIT and not allow_large:
-        raise ValueError(
-            f"{total} edges is too many: the energy couples every pair of edges, so time and "
-            f"memory per iteration grow as N² (10× the edges ≈ 100× slower). Use at most "
-            f"{EDGE_LIMIT} edges (a few hundred are plenty to untangle a knot)"
-            + (" or a longer edge length" if edge_length is not None else "")
-        )
+    try:  # before resampling: no size may crash the process
+        check_edge_count(sum(counts), metric, method, engine, allow_large)
+    except ValueError as err:
+        raise ValueError(f"'{obj.name}': {err}"
+                         + (" (or set a longer edge length)" if edge_length is not None else "")
+                         ) from None
     polygons = [core.resample(p, n, closed=True) for p, n in zip(cleaned, counts, strict=True)]
     try:
         core.check_polygon(as_input(polygons), coarseness=False)
     except ValueError as err:
         raise ValueError(f"'{obj.name}' after resampling to {counts} edges: {err}") from None
     if core.contact_ratio(as_input(polygons)) < core.polygon.CONTACT_RATIO:
+        limit = EDGE_LIMIT if allow_large else edge_limit(metric, method, engine)
         raise ValueError(f"'{obj.name}' is too coarse at {counts} edges for its shape: strands "
                          f"far apart along the curve come closer than one edge length, and the "
                          f"energy cannot keep them apart — "
-                         f"{_finer_conversion(cleaned, counts, edge_length)}")
+                         f"{_finer_conversion(cleaned, counts, edge_length, limit)}")
     return polygons
 
 
-def _finer_conversion(cleaned, counts, edge_length) -> str:
+def _finer_conversion(cleaned, counts, edge_length, limit: int) -> str:
     """The fix for a too coarse conversion, in the unit of the field the user set: the
     smallest count per component (or the largest edge length) in 10% steps that passes the
-    contact check, or a plain advice when none does up to EDGE_LIMIT edges."""
+    contact check, or a plain advice when none does up to ``limit`` edges (what the run
+    takes)."""
+    def finer(factor):
+        return [max(4, int(np.ceil(n * factor))) for n in counts]
+
+    def passes(trial):
+        polygons = [core.resample(p, n, closed=True) for p, n in zip(cleaned, trial, strict=True)]
+        return core.contact_ratio(as_input(polygons)) >= core.polygon.CONTACT_RATIO
+
+    # the largest count first: a search in 10% steps up to the limit would take long for
+    # nothing when even that fails
+    top = limit / sum(counts)
+    if top < 1.1 or not passes(finer(top)):
+        return f"move the strands apart; no conversion up to {limit} edges resolves them"
     factor = 1.1
-    while sum(counts) * factor <= EDGE_LIMIT:
-        finer = [max(4, int(np.ceil(n * factor))) for n in counts]
-        polygons = [core.resample(p, n, closed=True) for p, n in zip(cleaned, finer, strict=True)]
-        if core.contact_ratio(as_input(polygons)) >= core.polygon.CONTACT_RATIO:
-            if edge_length is not None:
-                return f"use an edge length of at most {edge_length / factor:.4g}"
-            return f"use at least {finer[0]} edges per component (the Edges field)"
+    while factor < top and not passes(finer(factor)):
         factor *= 1.1
-    return f"move the strands apart; no conversion up to {EDGE_LIMIT} edges resolves them"
+    factor = min(factor, top)
+    if edge_length is not None:
+        return f"use an edge length of at most {edge_length / factor:.4g}"
+    return f"use at least {finer(factor)[0]} edges per component (the Edges field)"
 
 
 def make_curve_object(name: str, polygons: Sequence[np.ndarray],
@@ -189,14 +205,16 @@ def make_curve_object(name: str, polygons: Sequence[np.ndarray],
 
 def convert_object(obj: bpy.types.Object, edges: int = 100, edge_length: float | None = None,
                    close_open: bool = False, allow_large: bool = False,
-                   context: bpy.types.Context | None = None) -> bpy.types.Object:
+                   context: bpy.types.Context | None = None, *, metric: str = "hs",
+                   method: str = DEFAULT_METHOD,
+                   engine: str = DEFAULT_ENGINE) -> bpy.types.Object:
     """Make an equal-edge poly curve from ``obj``; the original is kept, hidden.
 
     Parameters
     ----------
     obj : bpy.types.Object
         Curve (poly, Bezier, NURBS) or mesh made of closed edge loops.
-    edges, edge_length, close_open, allow_large
+    edges, edge_length, close_open, allow_large, metric, method, engine
         See :func:`prepare_conversion`.
     context : bpy.types.Context, optional
         Defaults to ``bpy.context``.
@@ -212,7 +230,8 @@ def convert_object(obj: bpy.types.Object, edges: int = 100, edge_length: float |
     ValueError
         See :func:`prepare_conversion`; the scene is unchanged then.
     """
-    polygons = prepare_conversion(obj, edges, edge_length, close_open, allow_large)
+    polygons = prepare_conversion(obj, edges, edge_length, close_open, allow_large,
+                                  metric=metric, method=method, engine=engine)
     return apply_conversion(obj, polygons, context)
 
 

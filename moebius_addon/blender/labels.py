@@ -7,6 +7,7 @@ No bpy: the properties, the panel, the operators and the command line all read t
 from __future__ import annotations
 
 from .. import core
+from ..core import barnes_hut
 
 #: Metrics offered for the flow, as ``(core name, label, description)``.
 METRICS = (
@@ -74,9 +75,42 @@ METHODS = tuple(
 PENALTY_METHODS = core.solvers.INFEASIBLE
 
 
+#: Default engine: the tree from ``barnes_hut.TREE_FROM`` edges on, exact below (the core's).
+DEFAULT_ENGINE = "auto"
+#: Default admissibility θ of the tree (the core's).
+DEFAULT_THETA = barnes_hut.THETA
+
+_ENGINE_TEXT = {
+    "auto": (
+        "Automatic",
+        f"Exact below {barnes_hut.TREE_FROM} edges, the tree from there on (default)"),
+    "exact": (
+        "Exact",
+        "Every pair of edges summed exactly: time per iteration grows as N²"),
+    "tree": (
+        "Tree",
+        "Barnes–Hut: energy and gradient in about N log N (at the default θ within 1e-5 and "
+        "7e-4 of the exact sums); large curves need a metric it holds without a dense "
+        "matrix: " + ", ".join(label for key, label, _ in METRICS
+                               if not core.ENGINES["tree"].holds_dense(key))),
+}
+
+#: Engines that evaluate the energy, as ``(name, label, description)``: exactly
+#: ``core.barnes_hut.ENGINE_NAMES`` in its order.
+ENGINES = tuple(
+    (e, *_ENGINE_TEXT.get(e, (e.title(), f"core.engine '{e}'")))
+    for e in barnes_hut.ENGINE_NAMES
+)
+
+
 def method_label(method: str) -> str:
     """The label the panel shows for ``method`` (its name when it has none)."""
     return next((label for key, label, _ in METHODS if key == method), method)
+
+
+def engine_label(engine: str) -> str:
+    """The label the panel shows for ``engine`` (its name when it has none)."""
+    return next((label for key, label, _ in ENGINES if key == engine), engine)
 
 
 #: Catalogue entries besides the named knots of ``core.knots.names()``.

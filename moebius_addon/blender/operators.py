@@ -55,7 +55,7 @@ class MOEBIUS_OT_convert(bpy.types.Operator):
             for obj in objs:
                 prepared.append(api.prepare_conversion(
                     obj, edges=s.edges, edge_length=s.edge_length if s.use_edge_length else None,
-                    close_open=s.close_open))
+                    close_open=s.close_open, metric=s.metric, method=s.method, engine=s.engine))
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
@@ -128,6 +128,7 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         kind = "WARNING" if not result.success else "INFO"
         how = f" ({run.method}: {run.why})" if run.why else f" ({run.method})"
         how += " continued" if run.append else ""
+        how += f", {run.engine} engine"
         self.report({kind}, f"'{run.obj.name}'{how}: {run.nit} iterations, energy "
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
@@ -259,9 +260,11 @@ class MOEBIUS_OT_add_knot(bpy.types.Operator):
 
     def execute(self, context):
         try:
+            s = context.scene.moebius  # the run the knot is added for
             obj = api.add_knot(self.kind, self.edges, p=self.p, q=self.q, seed=self.seed,
                                size=self.size, location=context.scene.cursor.location,
-                               context=context)
+                               context=context, metric=s.metric, method=s.method,
+                               engine=s.engine)
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}

@@ -84,6 +84,7 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
                 ("Energy", f"{s.last_energy_start:.5g} → {s.last_energy_end:.5g}"),
                 ("Time", f"{s.last_seconds:.2f} s"),
                 ("Keyed", f"{s.last_keyframes} frames"),
+                ("Engine", labels.engine_label(s.last_engine)),
             ):
                 split = col.split(factor=0.38)
                 split.label(text=name)
@@ -153,7 +154,7 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         s = context.scene.moebius
-        acting = options.acting_settings(s.method)
+        acting = options.acting_settings(s.method, s.engine)
         col = layout.column(align=True)
         col.label(text="Method")
         col.prop(s, "method", text="")
@@ -162,6 +163,11 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
             col.label(text="Unknots, links: Projected")
         if "penalty" in acting:
             col.prop(s, "penalty")
+        col = layout.column(align=True)
+        col.label(text="Engine")
+        col.prop(s, "engine", text="")
+        if "theta" in acting:  # only where the tree can run
+            col.prop(s, "theta")
         # settings the method does not use stay visible, greyed out (tooltips say which use
         # them); options.acting_settings is also what relax_settings passes on
         col = layout.column(align=True)

@@ -82,6 +82,18 @@ class MoebiusSettings(bpy.types.PropertyGroup):
                     "α Σ l0 log(l/l0)² (curve scaled to length 1). Larger keeps the edge "
                     "lengths closer to their start; must be positive",
     )
+    engine: EnumProperty(
+        name="Engine", default=labels.DEFAULT_ENGINE,
+        items=[(key, label, desc) for key, label, desc in labels.ENGINES],
+        description="How the energy and its gradient are evaluated: exactly over every pair "
+                    "of edges, or by the Barnes–Hut tree (large curves)",
+    )
+    theta: FloatProperty(
+        name="Theta", default=labels.DEFAULT_THETA, min=0.0, max=2.0, soft_min=0.05,
+        soft_max=1.0, precision=3,
+        description="Tree engine only: admissibility θ of its far field, in (0, 2). Smaller "
+                    "is more accurate and slower",
+    )
     initial_step: FloatProperty(
         name="Initial Step", default=1.0, min=1e-12, precision=4,
         description="First trial step size of the line search (trust region: initial radius, "
@@ -148,16 +160,17 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     last_message: StringProperty(name="Stopped Because", get=_stat("message", ""))
     last_keyframes: IntProperty(name="Keyed Frames", get=_stat("keyframes", 0))
     last_method: StringProperty(name="Method", get=_stat("method", ""))
+    last_engine: StringProperty(name="Engine", get=_stat("engine", ""))
 
     def store_run(self, obj_name: str, iterations: int, energy_start: float, energy_end: float,
                   seconds: float, message: str, keyed: int,
-                  method: str = labels.DEFAULT_METHOD) -> None:
+                  method: str = labels.DEFAULT_METHOD, engine: str = "") -> None:
         """Record the statistics of a finished run (shown read-only in the panel)."""
         self["_stats"] = {
             "object": obj_name, "iterations": int(iterations),
             "energy_start": float(energy_start), "energy_end": float(energy_end),
             "seconds": float(seconds), "message": message, "keyframes": int(keyed),
-            "method": method,
+            "method": method, "engine": engine,
         }
 
 

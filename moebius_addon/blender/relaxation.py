@@ -12,8 +12,15 @@ import numpy as np
 from .. import core
 from . import geometry, keyframes
 from .gradients import refresh_gradients
-from .labels import AUTO_METHOD, DEFAULT_METHOD, EXPLICIT_METHOD, KNOT_METHOD, method_label
-from .options import EDGE_LIMIT, check_relax_options
+from .labels import (
+    AUTO_METHOD,
+    DEFAULT_ENGINE,
+    DEFAULT_METHOD,
+    EXPLICIT_METHOD,
+    KNOT_METHOD,
+    method_label,
+)
+from .options import check_edge_count, check_relax_options
 from .polygons import as_input, as_link
 from .rest import rest_shape, set_rest_shape
 
@@ -92,30 +99,39 @@ class ObjectRelaxation:
     penalty : float, optional
         Weight α of the edge-stretch penalty, for the penalty methods ``"ncg"``, ``"lbfgs"``
         and ``"nesterov"`` only (None: the core's default, 1e4); positive and finite.
+    engine : str
+        ``"auto"`` (default: the tree from ``barnes_hut.TREE_FROM`` edges on), ``"exact"`` or
+        ``"tree"`` (``core.make_run``); the attribute ``engine`` says which one runs.
+    theta : float, optional
+        Admissibility θ of the tree in (0, 2) (None: the core's ``barnes_hut.THETA``).
     **options
         Passed on to the core's run (``initial_step``, ``armijo``, ``growth``,
         ``backproject_iter``, ``backproject_tol``, ``edge_lengths``, ``barycenter``,
         ``energy_target``, ``ftol``, ``max_seconds``, and the method's own options); the
-        penalty methods ignore the options that need hard constraints.
+        penalty methods ignore the options that need hard constraints. ``allow_large=True``
+        lifts :data:`~.options.EDGE_LIMIT` (never the core's own size refusals).
 
     Raises
     ------
     ValueError
-        If the curve is not a closed poly curve, the core refuses it (touching itself, ...), or
-        the method or penalty is invalid; nothing is changed then.
+        If the curve is not a closed poly curve, the core refuses it (touching itself, too many
+        edges for the metric and engine, ...), or the method, penalty, engine or θ is invalid;
+        nothing is changed then.
     """
 
     def __init__(self, obj: bpy.types.Object, metric: str = "hs", max_iterations: int = 200,
                  tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
                  method: str = DEFAULT_METHOD, penalty: float | None = None,
-                 append: bool = False, **options) -> None:
+                 append: bool = False, engine: str = DEFAULT_ENGINE,
+                 theta: float | None = None, **options) -> None:
         self.t0 = time.perf_counter()
         #: the first run of the session: it prepares the solver before its first iterate
         self.first_run = not _SESSION["warm"]
         #: seconds from the set-up to the first iterate (None before it)
         self.seconds_to_first: float | None = None
         max_iterations, tolerance, keyframe_stride, frame_start, extra = check_relax_options(
-            max_iterations, tolerance, keyframe_stride, frame_start, method, penalty)
+            max_iterations, tolerance, keyframe_stride, frame_start, method, penalty, engine,
+            theta)
         options.update(extra)
         polygons = geometry.curve_polygons(obj)
         self._shown = [p.copy() for p in polygons]  # the shape at the current frame
@@ -126,13 +142,11 @@ class ObjectRelaxation:
             frames, points, _ = self._prior
             polygons = np.split(points[-1], self._cuts)
             frame_start = int(frames[-1])
-        total = sum(len(p) for p in polygons)
-        if total > EDGE_LIMIT and not options.pop("allow_large", False):
-            raise ValueError(
-                f"'{obj.name}' has {total} edges; the cost per iteration grows as N², so runs "
-                f"above {EDGE_LIMIT} edges are refused. Convert it again with fewer edges"
-            )
-        options.pop("allow_large", None)
+        try:  # before any work: no size may crash the process
+            check_edge_count(sum(len(p) for p in polygons), metric, method, engine,
+                             options.pop("allow_large", False))
+        except ValueError as err:
+            raise ValueError(f"'{obj.name}': {err}") from None
         try:
             core.check_polygon(as_input(polygons))
         except ValueError as err:
@@ -154,6 +168,8 @@ class ObjectRelaxation:
         # same run as before methods existed
         self.run = core.make_run(self.method, as_input(polygons), metric=metric,
                                  max_iter=max_iterations, tol=tolerance, **options)
+        #: the engine that runs ("exact" or "tree": "auto" resolved by the curve's size)
+        self.engine = self.run.engine.name
         self.start = [p.copy() for p in polygons]
         self.x = [p.copy() for p in polygons]
         self.energy = float(np.sum(self.run.energy))
@@ -250,15 +266,16 @@ class ObjectRelaxation:
         if stats is not None:
             stats.store_run(self.obj.name, self.nit, self.energies[0], self.energies[-1],
                             time.perf_counter() - self.t0, str(result.message), len(frames),
-                            self.method)
+                            self.method, self.engine)
         return result
 
 
 def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: int = 200,
                  tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
                  method: str = DEFAULT_METHOD, penalty: float | None = None,
-                 append: bool = False, callback: Callable | None = None,
-                 scene: bpy.types.Scene | None = None, **options):
+                 append: bool = False, engine: str = DEFAULT_ENGINE, theta: float | None = None,
+                 callback: Callable | None = None, scene: bpy.types.Scene | None = None,
+                 **options):
     """Relax a converted curve by the Möbius-energy flow and keyframe its iterates (every
     ``keyframe_stride``-th and the last).
 
@@ -275,6 +292,8 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
     penalty : float, optional
         Penalty weight α of ``"ncg"``, ``"lbfgs"``, ``"nesterov"`` (None: 1e4); refused for
         the other methods.
+    engine, theta
+        See :class:`ObjectRelaxation`; ``result.stats["engine"]`` says which engine ran.
     callback : callable, optional
         ``callback(run)`` after every accepted iterate, the last one included, with the
         :class:`ObjectRelaxation` (``run.nit``, ``run.x``, ``run.energy``); returning True stops
@@ -291,8 +310,8 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
     Raises
     ------
     ValueError
-        If the curve cannot be relaxed or the method or penalty is invalid; nothing is changed
-        then.
+        If the curve cannot be relaxed (too many edges for the metric and engine among the
+        reasons) or the method, penalty, engine or θ is invalid; nothing is changed then.
     BaseException
         Whatever interrupts the run (Ctrl+C, a failing callback) passes through, after the
         iterates computed so far are keyed (or, before the first one, the earlier animation is
@@ -300,7 +319,8 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
     """
     run = ObjectRelaxation(obj, metric=metric, max_iterations=max_iterations, tolerance=tolerance,
                            frame_start=frame_start, keyframe_stride=keyframe_stride,
-                           method=method, penalty=penalty, append=append, **options)
+                           method=method, penalty=penalty, append=append, engine=engine,
+                           theta=theta, **options)
     more = True
     try:
         while more:
