@@ -5,8 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import bpy
+import numpy as np
 
-from . import keyframes
+from . import geometry, keyframes
 from .objects import select_only
 
 
@@ -26,7 +27,9 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
 
     The centre line is exported (one cyclic linear curve per spline, positions sampled on every
     frame); the bevel, which Blender 5.0's exporters would write as a second curve object, is
-    switched off for the export and restored afterwards.
+    switched off for the export and restored afterwards. The exporters read the curve's points,
+    not its shape keys: for a flow keyed as shape keys (large curves, see :mod:`.keyframes`)
+    the points follow the keys' mix while the export runs and are put back afterwards.
 
     Parameters
     ----------
@@ -60,6 +63,7 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
     frame = scene.frame_current
     scene_range = scene.frame_start, scene.frame_end
     bevel = obj.data.bevel_depth
+    follow = _points_follow_shape_keys(obj)
     obj.data.bevel_depth = 0.0
     try:
         if suffix == ".abc":
@@ -69,6 +73,7 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
             bpy.ops.wm.usd_export(filepath=str(path), export_animation=True,
                                   selected_objects_only=True)
     finally:
+        follow()
         scene.frame_start, scene.frame_end = scene_range
         obj.data.bevel_depth = bevel
         obj.select_set(False)
@@ -77,3 +82,25 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
         bpy.context.view_layer.objects.active = active
         scene.frame_set(frame)
     return path
+
+
+def _points_follow_shape_keys(obj: bpy.types.Object):
+    """For a flow keyed as shape keys, make the curve's points follow the keys on every frame
+    change (a handler run before each frame is evaluated, the exporters' included); returns
+    the function that stops it and puts the points back."""
+    if keyframes.flow_shape_at(obj, 0.0) is None:
+        return lambda: None
+    below = [p for p, _ in geometry.object_polylines(obj)]  # the points under the keys
+    cuts = np.cumsum([len(p) for p in below])[:-1]
+
+    def follow(scene, depsgraph=None):
+        X = keyframes.flow_shape_at(obj, scene.frame_current + scene.frame_subframe)
+        geometry.write_polygons(obj.data, np.split(X, cuts))
+
+    bpy.app.handlers.frame_change_pre.append(follow)
+
+    def stop():
+        bpy.app.handlers.frame_change_pre.remove(follow)
+        geometry.write_polygons(obj.data, below)
+
+    return stop

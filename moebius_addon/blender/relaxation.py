@@ -134,6 +134,7 @@ class ObjectRelaxation:
             theta)
         options.update(extra)
         polygons = geometry.curve_polygons(obj)
+        keyframes.check_flow_target(obj)
         self._shown = [p.copy() for p in polygons]  # the shape at the current frame
         self._cuts = np.cumsum([len(p) for p in polygons])[:-1]
         # the earlier flow keys, continued from their last iterate (read by show() otherwise)
@@ -193,12 +194,15 @@ class ObjectRelaxation:
             x = as_link(self.run.x)
             self.x = x
             self.energy = float(np.sum(self.run.energy))
+            # recorded as Blender keys them, in single precision (half the memory of the
+            # record of a large run)
+            keyed = [p.astype(np.float32) for p in x]
             if self.nit % self.stride == 0:
-                self.iterates.append(x)
+                self.iterates.append(keyed)
                 self.energies.append(self.energy)
                 self._pending = None
             else:
-                self._pending = (x, self.energy)
+                self._pending = (keyed, self.energy)
         return more
 
     def stop(self, message: str) -> None:

@@ -3,6 +3,7 @@
 import bpy
 import numpy as np
 import pytest
+from bpy_helpers import imported_points as _imported_points
 from bpy_helpers import points_at
 
 
@@ -17,24 +18,6 @@ def relaxed(scene, mb):
     bpy.ops.moebius.relax()
     assert mb.keyed_frames(obj) == [1, 2, 3, 4, 5, 6]
     return obj
-
-
-def _imported_points(frame):
-    """World positions of the one imported curves object at ``frame``."""
-    scene = bpy.context.scene
-    scene.frame_set(frame)
-    objs = [o for o in scene.objects if o.type == "CURVES"]
-    assert len(objs) == 1, [(o.name, o.type) for o in scene.objects]
-    (obj,) = objs
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    ev = obj.evaluated_get(depsgraph)
-    assert obj.type == "CURVES"
-    pos = ev.data.attributes["position"]
-    X = np.empty(3 * len(pos.data))
-    pos.data.foreach_get("vector", X)
-    X = X.reshape(-1, 3)
-    M = np.array(ev.matrix_world)
-    return X @ M[:3, :3].T + M[:3, 3], ev.data
 
 
 @pytest.mark.parametrize("suffix", [".abc", ".usda"])
