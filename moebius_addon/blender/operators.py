@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from . import api, keyframes, labels
 
@@ -314,6 +314,45 @@ class MOEBIUS_OT_apply_frame(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class MOEBIUS_OT_export_flow(bpy.types.Operator):
+    """Export the active curve's flow over its keyed frames as Alembic (.abc) or USD
+    (.usd/.usda/.usdc/.usdz), chosen by the file name"""
+
+    bl_idname = "moebius.export_flow"
+    bl_label = "Export Flow"
+    bl_options = {"REGISTER"}
+
+    filepath: StringProperty(name="File Path", subtype="FILE_PATH", default="",
+                             description="Where to write; .abc or .usd/.usda/.usdc/.usdz")
+    filter_glob: StringProperty(default="*.abc;*.usd;*.usda;*.usdc;*.usdz",
+                                options={"HIDDEN"})
+
+    @classmethod
+    def poll(cls, context):
+        if not _poll_active_curve(cls, context):
+            return False
+        if not keyframes.keyed_frames(_active_curve(context)):
+            cls.poll_message_set("The active curve has no flow keys; press Relax first")
+            return False
+        return True
+
+    def invoke(self, context, event):
+        if not self.filepath:
+            self.filepath = f"//{bpy.path.clean_name(_active_curve(context).name)}.abc"
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        obj = _active_curve(context)
+        try:
+            path = api.export_flow(obj, bpy.path.abspath(self.filepath), scene=context.scene)
+        except ValueError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Exported the flow of '{obj.name}' to {path}")
+        return {"FINISHED"}
+
+
 class MOEBIUS_OT_show_gradient(bpy.types.Operator):
     """Draw the energy gradients of the active curve as vector fields (one edge per vertex)"""
 
@@ -361,6 +400,7 @@ classes = (
     MOEBIUS_OT_add_knot,
     MOEBIUS_OT_clear_animation,
     MOEBIUS_OT_apply_frame,
+    MOEBIUS_OT_export_flow,
     MOEBIUS_OT_show_gradient,
 )
 

@@ -144,6 +144,7 @@ class VIEW3D_PT_moebius_keyframes(_MoebiusPanel, bpy.types.Panel):
         row = layout.row(align=True)  # no icons: half the sidebar is too narrow for them
         row.operator("moebius.apply_frame", text="Apply Frame")
         row.operator("moebius.clear_animation", text="Clear Flow")
+        layout.operator("moebius.export_flow", text="Export Flow…", icon="EXPORT")
 
 
 class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):

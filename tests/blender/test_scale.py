@@ -282,6 +282,16 @@ def test_shape_keys_survive_a_failed_or_interrupted_run(scene, mb, trefoil, shap
     assert not np.array_equal(_blocks(trefoil)[1:], keyed[1:])
 
 
+def test_export_button_needs_a_keyed_flow(scene, mb, trefoil, tmp_path):
+    with pytest.raises(RuntimeError, match="no flow keys; press Relax first"):
+        bpy.ops.moebius.export_flow(filepath=str(tmp_path / "x.abc"))
+    scene.moebius.max_iterations = 1
+    bpy.ops.moebius.relax()
+    with pytest.raises(RuntimeError, match=r"unknown export format '\.obj'"):
+        bpy.ops.moebius.export_flow(filepath=str(tmp_path / "x.obj"))
+    assert not (tmp_path / "x.obj").exists()
+
+
 def test_a_curve_with_shape_keys_of_its_own_is_refused_before_the_run(scene, mb, trefoil,
                                                                      shape_keys):
     trefoil.shape_key_add(name="Basis")
@@ -300,7 +310,11 @@ def test_shape_keys_export_round_trip(scene, mb, trefoil, shape_keys, tmp_path, 
     expected = {f: points_at(trefoil, f) for f in frames}
     assert np.abs(expected[1] - expected[5]).max() > 1e-3
     below = [P.copy() for P, _ in mb.object_polylines(trefoil)]
-    path = mb.export_flow(trefoil, tmp_path / f"flow{suffix}")
+    path = tmp_path / f"flow{suffix}"
+    if suffix == ".abc":
+        mb.export_flow(trefoil, path)
+    else:  # the panel's button (Keyframes ▸ Export Flow…)
+        assert bpy.ops.moebius.export_flow(filepath=str(path)) == {"FINISHED"}
     # the points under the keys are put back
     for (P, _), Q in zip(mb.object_polylines(trefoil), below, strict=True):
         np.testing.assert_array_equal(P, Q)
