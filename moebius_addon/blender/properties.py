@@ -27,8 +27,9 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     # Polygon
     edges: IntProperty(
         name="Edges", default=100, min=9, soft_max=1000, max=1_000_000,
-        description="Edges of each converted component (cost per iteration grows as edges²; "
-                    "at least 9, below which the start check cannot judge a knot)",
+        description="Edges of each converted component (at least 9, below which the start "
+                    "check cannot judge a knot; on the exact engine the cost per iteration "
+                    "grows as edges², see Advanced ▸ Engine)",
     )
     use_edge_length: BoolProperty(
         name="Use Edge Length", default=False,
