@@ -17,7 +17,7 @@ import time
 
 import bpy
 
-from ..core import barnes_hut
+from ..core.engine import AUTO_TREE_FROM
 from . import api, geometry
 
 
@@ -46,7 +46,7 @@ def _parser() -> argparse.ArgumentParser:
                         "lbfgs and nesterov hold the edge lengths by a penalty")
     p.add_argument("--engine", default=api.DEFAULT_ENGINE, choices=[e for e, *_ in api.ENGINES],
                    help="how the energy is evaluated (default auto: exact below "
-                        f"{barnes_hut.TREE_FROM} edges, the Barnes-Hut tree from there on)")
+                        f"{AUTO_TREE_FROM} edges, the Barnes-Hut tree from there on)")
     p.add_argument("--theta", type=float, default=None,
                    help="admissibility of the tree engine in (0, 2) (default "
                         f"{api.DEFAULT_THETA:g}; smaller is more accurate and slower)")

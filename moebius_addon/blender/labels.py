@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from .. import core
 from ..core import barnes_hut
+from ..core.engine import AUTO_TREE_FROM
 
 #: Metrics offered for the flow, as ``(core name, label, description)``.
 METRICS = (
@@ -75,7 +76,8 @@ METHODS = tuple(
 PENALTY_METHODS = core.solvers.INFEASIBLE
 
 
-#: Default engine: the tree from ``barnes_hut.TREE_FROM`` edges on, exact below (the core's).
+#: Default engine: the tree from ``core.engine.AUTO_TREE_FROM`` edges on, exact below (the
+#: core's).
 DEFAULT_ENGINE = "auto"
 #: Default admissibility θ of the tree (the core's).
 DEFAULT_THETA = barnes_hut.THETA
@@ -83,16 +85,16 @@ DEFAULT_THETA = barnes_hut.THETA
 _ENGINE_TEXT = {
     "auto": (
         "Automatic",
-        f"Exact below {barnes_hut.TREE_FROM} edges, the tree from there on (default)"),
+        f"Exact below {AUTO_TREE_FROM} edges, the tree from there on (default)"),
     "exact": (
         "Exact",
         "Every pair of edges summed exactly: time per iteration grows as N²"),
     "tree": (
         "Tree",
         "Barnes–Hut: energy and gradient in about N log N (at the default θ within 1e-5 and "
-        "7e-4 of the exact sums); large curves need a metric it holds without a dense "
-        "matrix: " + ", ".join(label for key, label, _ in METRICS
-                               if not core.ENGINES["tree"].holds_dense(key))),
+        "7e-4 of the exact sums), the metric without a dense matrix: for large curves"
+        + "".join(f" (except {label}, dense)" for key, label, _ in METRICS
+                  if core.ENGINES["tree"].holds_dense(key))),
 }
 
 #: Engines that evaluate the energy, as ``(name, label, description)``: exactly

@@ -11,6 +11,7 @@ import numpy as np
 
 from .. import core
 from ..core import barnes_hut
+from ..core.engine import engine_class
 from .labels import (
     AUTO_METHOD,
     DEFAULT_ENGINE,
@@ -96,7 +97,7 @@ def check_relax_options(max_iterations, tolerance, keyframe_stride, frame_start,
     keyframe_stride = core.check_number("keyframe_stride", keyframe_stride, 1, integer=True)
     frame_start = core.check_number("frame_start", frame_start, integer=True)
     extra = _check_method(method, penalty)
-    barnes_hut.uses_tree(engine, 0)  # ValueError naming the engines for an unknown one
+    engine_class(engine, 0)  # ValueError naming the engines for an unknown one
     extra.update(engine=engine,
                  theta=None if theta is None else barnes_hut.check_theta(theta))
     return max_iterations, tolerance, keyframe_stride, frame_start, extra
@@ -118,7 +119,8 @@ def check_edge_count(n: int, metric: str = "hs", method: str = DEFAULT_METHOD,
     # "auto" picks one of two methods by the curve's knot type; both hold the metric alike
     for m in (EXPLICIT_METHOD, KNOT_METHOD) if method == AUTO_METHOD else (method,):
         core.check_size(n, metric, m, engine)
-    if n > EDGE_LIMIT and not allow_large and barnes_hut.uses_tree(engine, n):
+    tree = issubclass(engine_class(engine, n), core.ENGINES["tree"])
+    if n > EDGE_LIMIT and not allow_large and tree:
         raise ValueError(
             f"{n} edges are more than a run in Blender takes ({EDGE_LIMIT}, on the tree "
             f"engine, where an iteration at that size takes seconds): use at most {EDGE_LIMIT} "

@@ -92,8 +92,8 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     theta: FloatProperty(
         name="Theta", default=labels.DEFAULT_THETA, min=0.0, max=2.0, soft_min=0.05,
         soft_max=1.0, precision=3,
-        description="Tree engine only: admissibility θ of its far field, in (0, 2). Smaller "
-                    "is more accurate and slower",
+        description="Tree engine only: admissibility θ of the far field of the energy and its "
+                    "gradient, in (0, 2). Smaller is more accurate and slower",
     )
     initial_step: FloatProperty(
         name="Initial Step", default=1.0, min=1e-12, precision=4,

@@ -100,7 +100,7 @@ class ObjectRelaxation:
         Weight α of the edge-stretch penalty, for the penalty methods ``"ncg"``, ``"lbfgs"``
         and ``"nesterov"`` only (None: the core's default, 1e4); positive and finite.
     engine : str
-        ``"auto"`` (default: the tree from ``barnes_hut.TREE_FROM`` edges on), ``"exact"`` or
+        ``"auto"`` (default: the tree from ``core.engine.AUTO_TREE_FROM`` edges on), ``"exact"`` or
         ``"tree"`` (``core.make_run``); the attribute ``engine`` says which one runs.
     theta : float, optional
         Admissibility θ of the tree in (0, 2) (None: the core's ``barnes_hut.THETA``).
