@@ -59,9 +59,10 @@ _CHUNKS = 8
 
 ENGINE_NAMES = ("auto", "exact", "tree")
 # From this many edges on, "auto" evaluates the energy alone (moebius_energy, moebius_gradient)
-# with the tree (runs take the tree earlier, from engine.AUTO_TREE_FROM, where its metric pays): at the default theta its energy+gradient
-# (frame included, 7_2) measured 1.1x the exact speed at 2 000 edges, 1.5x at 3 000, 2.4x at
-# 5 000, 5.3x at 10 000, 11.9x at 20 000 (docs/benchmarks.md, "Tree engine").
+# with the tree (runs take the tree earlier, from engine.AUTO_TREE_FROM, where its metric
+# pays): at the default theta its energy+gradient (frame included, 7_2) measured 1.1x the
+# exact speed at 2 000 edges, 1.5x at 3 000, 2.4x at 5 000, 5.3x at 10 000, 11.9x at 20 000
+# (docs/benchmarks.md, "Tree engine").
 TREE_FROM = 5000
 
 
