@@ -299,3 +299,10 @@ def test_flow_with_the_coarse_level(monkeypatch):
     assert r.nit == 6 and np.all(np.diff(r.history["energy"]) < 0)
     assert max(r.history["constraint_residual"]) <= 1e-10
     assert max(r.stats["krylov_iterations"]) < 40
+
+
+def test_hs_pure_flow_on_the_tree():
+    P = core.resample(trefoil(300), 300)
+    r = core.relax(P, metric="hs_pure", max_iter=4, engine="tree")
+    assert r.nit == 4 and r.fun < r.history["energy"][0] and r.metric == "hs_pure"
+    assert max(r.history["constraint_residual"]) <= 1e-10
