@@ -11,15 +11,17 @@ from ._threads import prefer_stable_layer
 
 prefer_stable_layer()  # before any parallel kernel runs: numba settles on a layer then
 
-from . import invariants, knots  # noqa: E402
+from . import invariants, knots, pd, table  # noqa: E402
 from .collision import max_collision_free_step  # noqa: E402
 from .constraints import Constraints  # noqa: E402
 from .energy import moebius_energy, moebius_gradient  # noqa: E402
 from .engine import ENGINES  # noqa: E402
 from .flow import relax, sobolev_gradient  # noqa: E402
+from .identify import Identification, Match, identify  # noqa: E402
 from .invariants import (  # noqa: E402
     alexander_polynomial,
     is_knotted,
+    jones_polynomial,
     knot_determinant,
     linking_numbers,
 )
@@ -36,7 +38,9 @@ __all__ = [
     "METHODS",
     "METRICS",
     "Constraints",
+    "Identification",
     "IterationState",
+    "Match",
     "RelaxResult",
     "Relaxation",
     "Status",
@@ -46,8 +50,10 @@ __all__ = [
     "check_size",
     "contact_ratio",
     "gram_matrix",
+    "identify",
     "invariants",
     "is_knotted",
+    "jones_polynomial",
     "knot_determinant",
     "knots",
     "linking_numbers",
@@ -55,10 +61,12 @@ __all__ = [
     "max_collision_free_step",
     "moebius_energy",
     "moebius_gradient",
+    "pd",
     "read_obj",
     "relax",
     "resample",
     "sobolev_gradient",
     "suggest_edge_count",
+    "table",
     "write_obj",
 ]

@@ -27,11 +27,15 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from . import jones
 from ._layout import as_layout
+from .pd import PlanarDiagram, from_passages, simplify
 
 # Two primes below 2^31: products of residues stay below 2^62 in int64.
 _PRIMES = (2147483647, 2147483629)
 _PROJECTIONS = 12
+# Projections (those with the fewest crossings) simplified by planar_diagram.
+_SIMPLIFIED = 4
 # Alexander polynomials of diagrams with more crossings are not attempted (O(c^4)).
 MAX_ALEXANDER_CROSSINGS = 200
 
@@ -57,9 +61,9 @@ class Diagram:
         return np.searchsorted(self.starts, position, side="right") - 1
 
 
-def diagram(P) -> Diagram:
-    """The generic projection of the knot or link ``P`` with the fewest crossings among a dozen
-    random directions (the same for every call: the directions are seeded)."""
+def _projections(P):
+    """Generic projections of ``P`` in a dozen seeded random directions: ``(layout, rows)``
+    with the rows of :func:`_sweep` of each direction where no crossing is degenerate."""
     X, layout = as_layout(P)
     if not np.isfinite(X).all():
         raise ValueError("the curve has NaN or infinite coordinates")
@@ -68,19 +72,48 @@ def diagram(P) -> Diagram:
     Q = X - X.mean(axis=0)
     Q /= max(np.abs(Q).max(), np.finfo(float).tiny)  # only the shape matters
     rng = np.random.default_rng(20261125)
-    best = None
+    found = []
     for _ in range(_PROJECTIONS):
         q, r = np.linalg.qr(rng.normal(size=(3, 3)))
-        found = _sweep(np.ascontiguousarray(Q @ (q * np.sign(np.diag(r))).T), layout.nxt)
-        if (found[:, 3] == 0).any():  # a crossing at a vertex or of touching strands
-            continue
-        if best is None or len(found) < len(best):
-            best = found
-    if best is None:
+        q = q * np.sign(np.diag(r))
+        # a rotation, not a reflection: with det -1 (half the draws) the projection showed
+        # the mirror image, which flipped linking numbers and the Jones polynomial
+        q[:, 2] *= np.sign(np.linalg.det(q))
+        rows = _sweep(np.ascontiguousarray(Q @ q.T), layout.nxt)
+        if not (rows[:, 3] == 0).any():  # no crossing at a vertex or of touching strands
+            found.append(rows)
+    if not found:
         raise ValueError("no generic projection found: the curve touches or nearly touches "
                          "itself")
-    return Diagram(best[:, 0].copy(), best[:, 1].copy(), best[:, 2].astype(np.int64),
-                   layout.starts)
+    return layout, found
+
+
+def _as_diagram(rows, starts) -> Diagram:
+    return Diagram(rows[:, 0].copy(), rows[:, 1].copy(), rows[:, 2].astype(np.int64), starts)
+
+
+def diagram(P) -> Diagram:
+    """The generic projection of the knot or link ``P`` with the fewest crossings among a dozen
+    random directions (the same for every call: the directions are seeded)."""
+    layout, found = _projections(P)
+    return _as_diagram(min(found, key=len), layout.starts)
+
+
+def planar_diagram(P) -> PlanarDiagram:
+    """A PD code of the knot or link ``P``: of the generic projections of :func:`diagram`'s
+    directions, simplified by Reidemeister I and II moves (:func:`pd.simplify`), the one with
+    the fewest crossings left. A ``PlanarDiagram`` is returned as it is."""
+    if isinstance(P, PlanarDiagram):
+        return P
+    layout, found = _projections(P)
+    found.sort(key=len)
+    best = None
+    for rows in found[:_SIMPLIFIED]:
+        d = simplify(from_passages(rows[:, 0], rows[:, 1], rows[:, 2].astype(np.int64),
+                                   layout.starts)[0])
+        if best is None or d.crossings < best.crossings:
+            best = d
+    return best
 
 
 def determinant(P) -> int:
@@ -88,7 +121,7 @@ def determinant(P) -> int:
 
     Parameters
     ----------
-    P : (n, 3) array or list of them
+    P : (n, 3) array or list of them, or a :class:`~.pd.PlanarDiagram`
         A closed polygon (the edge from the last vertex back to the first is implied) or a
         link; it must not touch itself.
 
@@ -98,7 +131,7 @@ def determinant(P) -> int:
         1 for the unknot, 3 for the trefoil, 5 for the figure-eight knot, 2 for the Hopf link,
         0 for a split link (the same for every polygon of one knot or link type).
     """
-    A0, A1 = _alexander_matrix(diagram(P))
+    A0, A1 = _alexander_matrix(planar_diagram(P))
     if A0 is None:
         return 0
     return _exact(A0 - A1, lambda A, p: _det_mod(A, p))
@@ -125,11 +158,12 @@ def alexander_polynomial(P) -> list[int]:
     """Coefficients of the Alexander polynomial ``Δ(t)`` of a knot (or the one-variable
     polynomial of a link), lowest degree first, normalized as KnotInfo writes it: the lowest
     power is ``t^0`` and its coefficient positive (3_1: ``[1, -1, 1]``, 4_1: ``[1, -3, 1]``,
-    the unknot ``[1]``, a split link ``[0]``)."""
-    d = diagram(P)
+    the unknot ``[1]``, a split link ``[0]``). ``P`` may be a :class:`~.pd.PlanarDiagram`."""
+    d = planar_diagram(P)
     if d.crossings > MAX_ALEXANDER_CROSSINGS:
         raise ValueError(f"every projection tried has more than {MAX_ALEXANDER_CROSSINGS} "
-                         f"crossings ({d.crossings} at best); relax the curve first")
+                         f"crossings after simplification ({d.crossings} at best); relax the "
+                         f"curve first")
     A0, A1 = _alexander_matrix(d)
     if A0 is None:
         return [0]
@@ -140,6 +174,28 @@ def alexander_polynomial(P) -> list[int]:
         return [0]
     c = coeffs[nz[0]: nz[-1] + 1]
     return [int(x) for x in (c if c[0] > 0 else -c)]
+
+
+def jones_polynomial(P, max_states: int = jones.MAX_STATES) -> tuple[float, list[int]]:
+    """The Jones polynomial ``V(t) = Σ_k c_k t^(low + k)`` as ``(low, [c_0, c_1, …])``, in
+    KnotInfo's and LinkInfo's convention (3_1: ``(1, [1, 0, 1, -1])``, i.e. ``t + t³ − t⁴``;
+    the unknot ``(0, [1])``; the positive Hopf link ``(0.5, [-1, 0, -1])``: links with an even
+    number of components have half-integer powers). ``P`` may be a :class:`~.pd.PlanarDiagram`.
+
+    Kauffman's bracket summed tangle by tangle (:mod:`.jones`) on the simplified diagram of
+    :func:`planar_diagram`; a diagram that needs more than ``max_states`` intermediate states
+    raises :class:`~.jones.TooComplex` (a ``ValueError``)."""
+    return laurent(jones.jones(planar_diagram(P), max_states))
+
+
+def laurent(poly: dict[int, int]) -> tuple[float, list[int]]:
+    """``{exponent of t^(1/2): coefficient}`` as ``(lowest power of t, coefficients of the
+    powers low, low + 1, …)``."""
+    lo, hi = min(poly), max(poly)
+    if any(e % 2 != lo % 2 for e in poly):
+        raise ValueError("powers of t that differ by half-integers")  # pragma: no cover
+    coeffs = [poly.get(e, 0) for e in range(lo, hi + 1, 2)]
+    return (lo // 2 if lo % 2 == 0 else lo / 2), coeffs
 
 
 def linking_numbers(P) -> np.ndarray:
@@ -155,34 +211,40 @@ def linking_numbers(P) -> np.ndarray:
     return L // 2
 
 
-def _alexander_matrix(d: Diagram):
-    """``(A0, A1)`` with ``A0 + t A1`` the Alexander matrix without its first row and column,
-    or ``(None, None)`` when a component of a link passes over everything (the link splits:
-    ``Δ = 0``)."""
-    K = len(d.starts) - 1
+def _alexander_matrix(d: PlanarDiagram):
+    """``(A0, A1)`` with ``A0 + t A1`` the Alexander matrix of the diagram ``d`` without its
+    first row and column, or ``(None, None)`` when the link splits (a component passes over
+    everything, or a loop lies apart: ``Δ = 0``)."""
     c = d.crossings
-    comp_under = d.component(d.under)
-    if len(np.unique(comp_under)) < K:
+    K = len(d.components()) + d.loops
+    if c == 0:
         if K > 1:
             return None, None
-        return np.zeros((0, 0), np.int64), np.zeros((0, 0), np.int64)  # no crossing: unknot
-    # arcs: component by component, arc k starts at the k-th undercrossing along the curve
-    order = np.argsort(d.under, kind="stable")
-    under = d.under[order]
-    comp = comp_under[order]
-    first = np.searchsorted(comp, np.arange(K))  # the first arc of each component
-    last = np.r_[first[1:], c] - 1
+        return np.zeros((0, 0), np.int64), np.zeros((0, 0), np.int64)  # the unknot
+    if d.loops:
+        return None, None
+    # arcs: the edges joined through the crossings they pass over (j and l)
+    parent: dict[int, int] = {}
 
-    def arc(position):
-        k = np.searchsorted(under, position, side="right") - 1
-        cp = d.component(position)
-        # before the first undercrossing of its component: the component's last arc
-        return np.where(k < first[cp], last[cp], k)
+    def find(a):
+        parent.setdefault(a, a)
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
 
-    over_arc = arc(d.over[order])
-    outgoing = np.arange(c)
-    incoming = np.where(outgoing == first[comp], last[comp], outgoing - 1)
-    positive = d.sign[order] > 0
+    for m in range(c):
+        ra, rb = find(int(d.X[m, 1])), find(int(d.X[m, 3]))
+        if ra != rb:
+            parent[rb] = ra
+    roots = sorted({find(int(e)) for e in np.unique(d.X)})
+    if len(roots) != c:  # a component never passes under: it lies above the rest
+        return None, None
+    arc = {r: k for k, r in enumerate(roots)}
+    over_arc = np.array([arc[find(int(e))] for e in d.X[:, 1]])
+    incoming = np.array([arc[find(int(e))] for e in d.X[:, 0]])
+    outgoing = np.array([arc[find(int(e))] for e in d.X[:, 2]])
+    positive = d.sign > 0
     A0 = np.zeros((c, c), dtype=np.int64)
     A1 = np.zeros((c, c), dtype=np.int64)
     rows = np.arange(c)

@@ -37,7 +37,6 @@ generator               default ``n``                     smallest ``n`` passing
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from functools import cache
@@ -46,6 +45,7 @@ from pathlib import Path
 import numba as nb
 import numpy as np
 
+from . import table
 from .objio import read_obj
 from .polygon import MIN_CHECKED_VERTICES, contact_ratio, resample, suggest_edge_count
 
@@ -58,6 +58,7 @@ __all__ = [
     "info",
     "named",
     "names",
+    "search",
     "random_unknot",
     "torus_knot",
 ]
@@ -220,59 +221,60 @@ def _braid_default_n(curves: list[np.ndarray]) -> int:
     return max(100, 10 * math.ceil(total / 0.3 / 10))
 
 
-@cache
-def _table() -> dict:
-    with open(_DATA / "knot_table.json", encoding="utf-8") as f:
-        return json.load(f)["knots"]
+def names(kind: str | None = None) -> list[str]:
+    """Names of the shipped table: every prime knot up to 12 crossings (``"0_1"``, ``"3_1"``,
+    …, ``"12n_888"``), then every prime link up to 11 crossings in each orientation LinkInfo
+    lists (``"L2a1{0}"``, …, ``"L11n459{1,1,1}"``); ``kind="knot"`` or ``"link"`` for one of
+    them (:mod:`.table`)."""
+    return table.names(kind)
 
 
-_ALIASES = {
-    "unknot": "0_1",
-    "trefoil": "3_1",
-    "figure_eight": "4_1",
-    "figure-eight": "4_1",
-    "figure eight": "4_1",
-    "figure8": "4_1",
-}
-
-
-def names() -> list[str]:
-    """Names of the shipped knot table, ``["0_1", "3_1", "4_1", …, "8_21"]``."""
-    return list(_table())
+def search(text: str, limit: int | None = 50) -> list[str]:
+    """Table names matching ``text``, best first (:func:`.table.search`): ``search("borromean")``
+    is ``["L6a4{0,0}", …]``, ``search("10_16")`` lists 10_16, 10_160 … 10_165."""
+    return table.search(text, limit)
 
 
 def info(name: str) -> dict:
-    """The table entry of a knot: ``braid`` (KnotInfo braid word), ``crossings``,
-    ``alternating``, ``braid_index``, ``unknotting_number``, ``genus``, ``determinant``,
-    ``symmetry`` and a one-line ``description``; ``name`` holds the table name."""
-    key = _lookup(name)
-    return {"name": key, **_table()[key]}
+    """The table entry of a knot or link by name, alias or mirror (:func:`.table.lookup`):
+    ``name``, ``kind`` ("knot"/"link"), ``braid`` and ``strands`` (the word ``named`` closes),
+    ``crossings``, ``components``, ``alternating``, ``determinant``, ``alexander`` (coefficients
+    of t⁰, t¹, …), ``jones`` (``(lowest power of t, coefficients)`` as
+    ``invariants.jones_polynomial`` returns it), ``linking`` (matrix), ``common`` names, a
+    one-line ``description``, ``mirror_of`` (the table name of a mirror image, else None) and
+    for knots ``braid_index``, ``unknotting_number``, ``genus``, ``symmetry``, ``signature``
+    (KnotInfo's)."""
+    e = table.entry(name)
+    lo, coeffs = e.jones
+    return {
+        "name": e.name, "kind": e.kind, "braid": list(e.braid), "strands": e.strands,
+        "crossings": e.crossings, "components": e.components, "alternating": e.alternating,
+        "determinant": e.determinant, "alexander": list(e.alexander),
+        "jones": (lo // 2 if lo % 2 == 0 else lo / 2, list(coeffs)),
+        "linking": e.linking_matrix(), "common": list(e.common),
+        "description": e.description, "mirror_of": e.mirror_of, **e.extra,
+    }
 
 
 def named(name: str, n: int | None = None) -> Curve:
-    """A prime knot of the table by name, ``"3_1"`` … ``"8_21"``, as the closure of KnotInfo's
-    braid word (:func:`braid_closure`). Also accepts ``"0_1"``/``"unknot"`` (a circle),
-    ``"trefoil"``, ``"figure_eight"``/``"figure-eight"``.
+    """A prime knot or link of the table by name (``"3_1"``, ``"10_161"``, ``"12n_888"``,
+    ``"L6a4{0,0}"``), alias (``"trefoil"``, ``"figure-eight"``, ``"Hopf link"``, ``"Whitehead
+    link"``, ``"Borromean rings"``, ``"Solomon's knot"``, …) or mirror image (``"m3_1"``, the
+    left-handed trefoil), as the closure of KnotInfo's or LinkInfo's braid word
+    (:func:`braid_closure`; a link as a list of polygons, one per component, oriented as the
+    name says). ``"0_1"``/``"unknot"`` is a circle.
 
     ``n=None`` is :func:`braid_closure`'s default, which grows with the braid: 3_1 gets 100,
     4_1 180, 5_2 240, 7_2 460, 8_1 660; the start passes the coarseness check down to 0.3
     times that count, and the flow from it does not jam (with 0.75 times, 5_2 did).
     """
-    key = _lookup(name)
-    if key == "0_1":
+    e = table.entry(name)
+    if e.crossings == 0:
         return circle(64 if n is None else n)
-    return braid_closure(_table()[key]["braid"], n)
-
-
-def _lookup(name: str) -> str:
-    key = str(name).strip().lower()
-    key = _ALIASES.get(key, key)
-    if key not in _table():
-        raise ValueError(
-            f"unknown knot {name!r}; valid names: {', '.join(names())}, "
-            f"or {', '.join(repr(a) for a in _ALIASES)}"
-        )
-    return key
+    curve = braid_closure(e.braid, n, strands=e.strands)
+    if e.reverse:
+        curve = [c[::-1].copy() if k in e.reverse else c for k, c in enumerate(curve)]
+    return curve
 
 
 # --------------------------------------------------------------------------------------------

@@ -2,6 +2,7 @@
 flow at its default size, and has the knot type it claims (checked independently with topoly's
 HOMFLY-PT polynomial)."""
 
+import gzip
 import importlib.util
 import json
 from pathlib import Path
@@ -15,7 +16,7 @@ from tests.conftest import random_rotation
 topoly = pytest.importorskip("topoly")
 
 ROOT = Path(__file__).resolve().parents[2]
-TABLE = ROOT / "moebius_addon" / "core" / "data" / "knot_table.json"
+TABLE = ROOT / "moebius_addon" / "core" / "data" / "knot_table.json.gz"
 ROTATION = random_rotation(np.random.default_rng(2024))  # topoly can hang on flat input
 
 
@@ -66,33 +67,136 @@ def assert_catalogue_polygon(P, n, min_ratio=2.0):
 # The table
 
 
-def test_table_lists_the_prime_knots_up_to_8_crossings():
+def test_table_lists_the_prime_knots_and_links():
     names = knots.names()
-    assert names[:3] == ["0_1", "3_1", "4_1"] and names[-1] == "8_21"
-    assert len(names) == 36
-    for name in names:
+    knot_names_, link_names = knots.names("knot"), knots.names("link")
+    # KnotInfo: 2 977 prime knots up to 12 crossings and the unknot; LinkInfo: 4 188 prime links
+    # up to 11 crossings, one entry per orientation it lists
+    assert len(knot_names_) == 2978 and len(link_names) == 4188
+    assert names == knot_names_ + link_names
+    assert knot_names_[:3] == ["0_1", "3_1", "4_1"] and knot_names_[-1] == "12n_888"
+    assert "10_161" in names and "11a_1" in names and "11n_34" in names
+    assert link_names[:2] == ["L2a1{0}", "L2a1{1}"] and link_names[-1] == "L11n459{1,1,1}"
+    assert "L6a4{0,0}" in names
+    for name in ("3_1", "8_19", "10_161", "12n_888"):
         entry = knots.info(name)
-        assert entry["crossings"] == int(name.split("_")[0])
-        assert entry["braid_index"] == max((abs(g) for g in entry["braid"]), default=0) + 1
-        assert entry["description"]
+        assert entry["crossings"] == int(name.split("_")[0].rstrip("an"))
+        assert entry["strands"] >= entry["braid_index"]
+        assert entry["description"] and entry["kind"] == "knot"
     assert knots.info("Trefoil")["name"] == "3_1"
     assert not knots.info("8_19")["alternating"]
+    hopf = knots.info("L2a1{1}")
+    assert hopf["kind"] == "link" and hopf["components"] == 2
+    assert hopf["linking"] == [[0, 1], [1, 0]] and hopf["jones"] == (0.5, [-1, 0, -1])
 
 
-def test_shipped_table_is_what_the_build_tool_makes(tmp_path):
+def test_table_agrees_with_knotinfo():
+    # every stored value against the source (the build checked the braid words against them)
+    knotinfo = pytest.importorskip("database_knotinfo")
+    rows = {r["name"]: r for r in knotinfo.link_list()}
+    for name in knots.names("knot")[1:]:
+        r, e = rows[name], knots.info(name)
+        assert e["alexander"] == json.loads(r["alexander_polynomial_vector"])[2:], name
+        v = json.loads(r["jones_polynomial_vector"])
+        assert e["jones"] == (v[0], v[2:]), name
+        assert e["determinant"] == int(r["determinant"]), name
+    links = {r["name"]: r for r in knotinfo.link_list(proper_links=True)}
+    for name in knots.names("link"):
+        r, e = links[name], knots.info(name)
+        assert e["components"] == int(r["components"]) and e["crossings"] == int(
+            r["crossing_number"]), name
+        assert e["determinant"] == int(r["determinant"]), name
+
+
+def test_shipped_table_is_what_the_build_tool_makes():
     pytest.importorskip("database_knotinfo")
     spec = importlib.util.spec_from_file_location("bkt", ROOT / "tools" / "build_knot_table.py")
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)
-    shipped = json.loads(TABLE.read_text())
-    assert tool.build()["knots"] == shipped["knots"]
+    with gzip.open(TABLE, "rt", encoding="utf-8") as f:
+        shipped = json.load(f)
+    built = tool.build()
+    assert built["knots"] == shipped["knots"] and built["links"] == shipped["links"]
+    assert built["aliases"] == shipped["aliases"]
 
 
-@pytest.mark.parametrize("name", knots.names()[1:])
-def test_named_knot_has_its_type(name):
+# A seeded sample of the table (tools/verify_knot_table.py checks every entry: run it by hand)
+_RNG = np.random.default_rng(16)
+SAMPLE = sorted(set(
+    ["3_1", "4_1", "10_161", "11n_34", "12n_888", "L2a1{0}", "L6a4{0,0}", "L10n99{0,0,0}",
+     "L11n459{1,1,1}"]
+    + [knots.names("knot")[i] for i in _RNG.choice(2978, 12, replace=False)]
+    + [knots.names("link")[i] for i in _RNG.choice(4188, 8, replace=False)]))
+
+
+def topoly_jones(P) -> dict[int, int]:
+    """topoly's Jones polynomial of a polygon or link, ``{exponent of t^(1/2): coefficient}``."""
+    spec = importlib.util.spec_from_file_location("vkt", ROOT / "tools" / "verify_knot_table.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    return tool.topoly_jones(P)
+
+
+def table_jones(name) -> dict[int, int]:
+    low, coeffs = knots.info(name)["jones"]
+    return {round(2 * (low + k)): c for k, c in enumerate(coeffs) if c}
+
+
+@pytest.mark.parametrize("name", SAMPLE)
+def test_named_entry_has_its_type(name):
     P = knots.named(name)
-    assert_catalogue_polygon(P, len(P))
-    assert name in knot_names(P)
+    n = sum(map(len, P)) if isinstance(P, list) else len(P)
+    assert_catalogue_polygon(P, n)  # start check passed at the default edge count
+    assert isinstance(P, list) == (knots.info(name)["kind"] == "link")
+    # topoly, an implementation independent of ours, against KnotInfo's/LinkInfo's value
+    assert topoly_jones(P) == table_jones(name)
+    if isinstance(P, list):
+        L = np.array([[round(linking_number(A, B)) if a != b else 0 for b, B in enumerate(P)]
+                      for a, A in enumerate(P)])
+        assert L.tolist() == knots.info(name)["linking"]
+
+
+@pytest.mark.parametrize("name", ["3_1", "5_2", "L4a1{1}", "L5a1{0}"])
+def test_mirror_images(name):
+    P, M = knots.named(name), knots.named("m" + name)
+    jones = table_jones(name)
+    assert topoly_jones(M) == {-e: c for e, c in jones.items()} != jones
+    assert knots.info("m" + name)["mirror_of"] == name
+    for alias in (name + "*", f"mirror of {name}", f"{name} mirror"):
+        assert knots.info(alias)["name"] == "m" + name
+    if isinstance(P, list):
+        assert np.array(knots.info("m" + name)["linking"]).tolist() == (
+            -np.array(knots.info(name)["linking"])).tolist()
+
+
+def test_a_link_whose_braid_closes_to_another_orientation():
+    # LinkInfo's braid of L10n99{0,0,0} closes to the orientation {1,1,1} (the same Jones
+    # polynomial); named reverses the first component to give the linking matrix LinkInfo lists
+    assert knots.info("L10n99{0,0,0}")["linking"] == [[0, -1, 1, 0], [-1, 0, 1, 0],
+                                                      [1, 1, 0, -2], [0, 0, -2, 0]]
+    P = knots.named("L10n99{0,0,0}")
+    L = [[round(linking_number(A, B)) if a != b else 0 for b, B in enumerate(P)]
+         for a, A in enumerate(P)]
+    assert L == knots.info("L10n99{0,0,0}")["linking"]
+
+
+def test_aliases_and_search():
+    for alias, name in [("trefoil", "3_1"), ("left-handed trefoil", "m3_1"),
+                        ("Figure-Eight", "4_1"), ("figure_eight", "4_1"), ("unknot", "0_1"),
+                        ("Hopf link", "L2a1{1}"), ("Whitehead link", "L5a1{0}"),
+                        ("borromean rings", "L6a4{0,0}"), ("Solomon's knot", "L4a1{1}"),
+                        ("Solomons knot", "L4a1{1}"), ("Conway knot", "11n_34"),
+                        ("Perko pair", "10_161"), ("l6a4", "L6a4{0,0}"),
+                        ("L2A1{0}", "L2a1{0}"), ("12N_888", "12n_888")]:
+        assert knots.info(alias)["name"] == name, alias
+    assert knots.search("borromean")[0] == "L6a4{0,0}"
+    assert knots.search("10_16")[:7] == ["10_16", "10_160", "10_161", "10_162", "10_163",
+                                         "10_164", "10_165"]
+    assert knots.search("trefoil")[0] == "3_1"
+    assert knots.search("m3_1") == ["m3_1"] + knots.search("m3_1")[1:]
+    assert set(knots.search("L6a4")) >= {"L6a4{0,0}", "L6a4{1,0}", "L6a4{0,1}", "L6a4{1,1}"}
+    assert len(knots.search("", limit=None)) == 7166
+    assert knots.search("no such knot") == []
 
 
 def test_default_count_is_fine_enough_for_the_flow():
@@ -112,8 +216,10 @@ def test_names_aliases_and_unknown_names():
     np.testing.assert_array_equal(knots.named(" Figure-Eight ", 150), knots.named("4_1", 150))
     np.testing.assert_array_equal(knots.named("figure_eight", 150), knots.named("4_1", 150))
     np.testing.assert_array_equal(knots.named("unknot", 32), knots.circle(32))
-    with pytest.raises(ValueError, match=r"unknown knot '9_1'; valid names: 0_1, 3_1, .*8_21"):
-        knots.named("9_1")
+    with pytest.raises(ValueError, match=r"unknown knot or link '13n_1'"):
+        knots.named("13n_1")
+    with pytest.raises(ValueError, match=r"unknown knot or link 'trefoyl'.*3_1|names look"):
+        knots.named("trefoyl")
 
 
 # --------------------------------------------------------------------------------------------
