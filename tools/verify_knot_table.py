@@ -10,6 +10,10 @@ For each name (knots and links, or a seeded sample) the default curve is built a
   Alexander and Jones polynomials) equal the table's, its linking matrix equals the table's in
   the component order of the curve, and the name is among those ``identify`` returns.
 
+With ``--pd`` each entry is drawn instead from KnotInfo's or LinkInfo's own PD code
+(``core.knots.from_pd``; needs ``database_knotinfo``) and checked the same way (start check at
+the default edge count, ``identify`` names it), into ``verify_pd_drawing.jsonl``.
+
 Results go to a JSON-lines file, one line per name; a run skips the names already there, so it
 can be stopped and started again. It prints counts as it goes and a summary at the end::
 
@@ -25,6 +29,7 @@ import json
 import re
 import sys
 import time
+from functools import cache
 from pathlib import Path
 
 import numpy as np
@@ -106,6 +111,42 @@ def verify(name: str, use_topoly: bool = True) -> dict:
     return row
 
 
+@cache
+def _pd_codes() -> dict[str, str]:
+    import database_knotinfo
+
+    codes = {r["name"]: r["pd_notation"] for r in database_knotinfo.link_list()[1:]}
+    codes.update({r["name"]: r["pd_notation_vector"]
+                  for r in database_knotinfo.link_list(proper_links=True)[1:]})
+    return codes
+
+
+def verify_pd(name: str) -> dict:
+    """Draw the entry from its source's PD code and check the curve."""
+    t0 = time.perf_counter()
+    row = {"name": name}
+    if name == "0_1":
+        return {**row, "check": True, "ours": True, "n": 0, "contact_ratio": 0.0,
+                "identified": ["0_1"], "identify_seconds": 0.0, "seconds": 0.0}
+    P = knots.from_pd(_pd_codes()[name])
+    parts = P if isinstance(P, list) else [P]
+    row["n"] = int(sum(len(c) for c in parts))
+    try:
+        check_polygon(P)
+        row["check"] = True
+    except ValueError as err:
+        row["check"] = False
+        row["check_error"] = str(err)
+    row["contact_ratio"] = round(float(contact_ratio(P)), 3)
+    t1 = time.perf_counter()
+    r = identify(P)
+    row["identify_seconds"] = round(time.perf_counter() - t1, 4)
+    row["identified"] = list(r.names)
+    row["ours"] = name in r.names
+    row["seconds"] = round(time.perf_counter() - t0, 3)
+    return row
+
+
 def summary(path: Path) -> dict:
     rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     out = {"entries": len(rows)}
@@ -130,7 +171,11 @@ def main() -> None:
     p.add_argument("--kind", choices=["knot", "link"], default=None)
     p.add_argument("--no-topoly", action="store_true")
     p.add_argument("--summary", action="store_true", help="only print the counts so far")
+    p.add_argument("--pd", action="store_true",
+                   help="draw each entry from its source's PD code instead (core.knots.from_pd)")
     args = p.parse_args()
+    if args.pd and args.out == OUT:
+        args.out = OUT.with_name("verify_pd_drawing.jsonl")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     if args.summary:
         print(json.dumps(summary(args.out), indent=1))
@@ -150,7 +195,7 @@ def main() -> None:
     bad = 0
     with args.out.open("a") as f:
         for k, name in enumerate(todo, 1):
-            row = verify(name, not args.no_topoly)
+            row = verify_pd(name) if args.pd else verify(name, not args.no_topoly)
             f.write(json.dumps(row) + "\n")
             f.flush()
             ok = row["check"] and row["ours"] and row.get("topoly", True)
