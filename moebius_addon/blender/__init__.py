@@ -11,8 +11,10 @@ from __future__ import annotations
 
 from .api import (
     EDGE_LIMIT,
+    KNOT_TYPE_PROP,
     ObjectRelaxation,
     add_knot,
+    add_notation,
     apply_conversion,
     apply_frame,
     check_edge_count,
@@ -21,6 +23,7 @@ from .api import (
     edge_limit,
     energy,
     export_flow,
+    identify_object,
     knot_polygons,
     make_curve_object,
     prepare_conversion,
@@ -38,7 +41,8 @@ from .keyframes import (
 )
 
 __all__ = [
-    "EDGE_LIMIT", "ENERGY_PROP", "ObjectRelaxation", "add_knot", "apply_conversion",
+    "EDGE_LIMIT", "ENERGY_PROP", "KNOT_TYPE_PROP", "ObjectRelaxation", "add_knot",
+    "add_notation", "apply_conversion", "identify_object",
     "apply_frame", "check_edge_count", "clear_animation", "convert_object", "curve_polygons",
     "edge_limit", "energy", "export_flow",
     "keyed_energies", "keyed_frames", "knot_polygons", "make_curve_object", "object_polylines",

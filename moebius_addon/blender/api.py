@@ -13,7 +13,8 @@ This module gathers the public names of the modules that do each job (and keeps 
 * :mod:`.conversion`: curves and meshes made into equal-edge poly curves;
 * :mod:`.relaxation`: the run on a curve object (the stepper and the blocking call);
 * :mod:`.rest`: the rest shape, *Clear Flow* and *Apply Frame*;
-* :mod:`.catalogue`: knots by name;
+* :mod:`.catalogue`: knots and links by name (searchable) or notation (braid word, PD code);
+* :mod:`.identification`: which knot or link a curve is, stored on it; whether a run kept it;
 * :mod:`.gradients`: the gradient fields drawn as vector fields;
 * :mod:`.export`: the keyed flow as Alembic or USD;
 * below them :mod:`.geometry` (curves ↔ polygons), :mod:`.keyframes` (the flow's keys),
@@ -22,10 +23,21 @@ This module gathers the public names of the modules that do each job (and keeps 
 
 from __future__ import annotations
 
-from .catalogue import add_knot, check_knot, knot_names, knot_polygons
+from .catalogue import (
+    COMPONENT_COLOURS,
+    add_knot,
+    add_notation,
+    check_knot,
+    colour_components,
+    knot_names,
+    knot_polygons,
+    notation_polygons,
+    search_knots,
+)
 from .conversion import apply_conversion, convert_object, make_curve_object, prepare_conversion
 from .export import export_flow, export_suffix
 from .gradients import refresh_gradients, show_gradients
+from .identification import KNOT_TYPE_PROP, identify_object, object_curves, type_kept
 from .keyframes import ENERGY_PROP
 from .labels import (
     AUTO_METHOD,
@@ -60,6 +72,8 @@ from .relaxation import (
 from .rest import apply_frame, clear_animation
 
 __all__ = [
+    "COMPONENT_COLOURS", "KNOT_TYPE_PROP", "add_notation", "colour_components",
+    "identify_object", "notation_polygons", "object_curves", "search_knots", "type_kept",
     "AUTO_METHOD", "DEFAULT_ENGINE", "DEFAULT_METHOD", "DEFAULT_PENALTY", "DEFAULT_THETA",
     "EDGE_LIMIT", "ENERGY_PROP", "ENGINES", "EXPLICIT_METHOD", "KNOT_METHOD", "METHODS", "METRICS",
     "PENALTY_METHODS", "SPECIAL_KNOTS", "ObjectRelaxation", "acting_settings", "add_knot",

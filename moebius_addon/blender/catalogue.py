@@ -1,4 +1,5 @@
-"""The catalogue: knots, unknots and links by name, as polygons or as curve objects."""
+"""The catalogue: knots, unknots and links by name or notation, as polygons or as curve objects
+(a link's components each in its own colour)."""
 
 from __future__ import annotations
 
@@ -9,27 +10,53 @@ import numpy as np
 
 from .. import core
 from .conversion import make_curve_object
+from .identification import KNOT_TYPE_PROP
 from .labels import DEFAULT_ENGINE, DEFAULT_METHOD, SPECIAL_KNOTS
 from .options import check_edge_count
 from .polygons import as_input, as_link
 
 
 def knot_names() -> list[str]:
-    """Every name :func:`knot_polygons` takes: the generators, then the knot table."""
+    """Every name :func:`knot_polygons` takes as it is listed: the generators, then the knot
+    table (``core.knots.names()``: 7 166 knots and links); aliases and mirror images
+    (``"trefoil"``, ``"m3_1"``) are taken too (:func:`check_knot`)."""
     from ..core import knots
 
     return [*(key for key, *_ in SPECIAL_KNOTS), *knots.names()]
 
 
+def search_knots(text: str, limit: int = 100) -> list[tuple[str, str]]:
+    """``(name, description)`` of the catalogue entries matching ``text``, best first: the
+    generators whose name or label contain it, then ``core.knots.search`` (names, aliases,
+    mirror images, descriptions). What *Add Knot*'s search field lists."""
+    from ..core import knots, table
+
+    low = text.strip().lower()
+    out = [(key, label) for key, label, _ in SPECIAL_KNOTS
+           if not low or low in key or low in label.lower()]
+    for name in knots.search(text, limit=limit):
+        out.append((name, table.entry(name).description))
+    return out[:limit]
+
+
 def check_knot(kind: str, n: int | None = None, metric: str = "hs",
                method: str = DEFAULT_METHOD, engine: str = DEFAULT_ENGINE) -> None:
-    """ValueError for a name :func:`knot_polygons` does not know (listing those it does) or
+    """ValueError for a name :func:`knot_polygons` does not know (naming close matches) or
     more edges than a run of ``method`` in ``metric`` on ``engine`` takes
     (:func:`~.options.check_edge_count`): the same refusal in every door, before any work."""
-    if kind not in knot_names():
-        raise ValueError(f"unknown knot '{kind}'; choose one of {', '.join(knot_names())}")
+    from ..core import table
+
+    if kind not in _SPECIAL and table.lookup(kind) is None:
+        near = [name for name, _ in search_knots(kind, 8)]
+        hint = (f"did you mean {', '.join(near)}?" if near else
+                "names look like 3_1, 10_161, 12n_888, L6a4{0,0}, 'trefoil', 'Borromean "
+                "rings', or fhw, helix, random, torus, circle")
+        raise ValueError(f"unknown knot '{kind}'; {hint}")
     if n:
         check_edge_count(n, metric, method, engine)
+
+
+_SPECIAL = {key for key, *_ in SPECIAL_KNOTS}
 
 
 def knot_polygons(kind: str, n: int | None = None, p: int = 2, q: int = 3,
@@ -41,7 +68,8 @@ def knot_polygons(kind: str, n: int | None = None, p: int = 2, q: int = 3,
     ----------
     kind : str
         ``"fhw"``, ``"helix"``, ``"random"``, ``"torus"``, ``"circle"``, ``"figure_eight"`` or a
-        name from ``core.knots.names()`` such as ``"7_2"``.
+        knot or link of the table by name, alias or mirror image (``"7_2"``, ``"10_161"``,
+        ``"L6a4{0,0}"``, ``"Borromean rings"``, ``"m3_1"``; ``core.knots.named``).
     n : int, optional
         Edges in total (split over the components of a link); None or 0 takes the catalogue's
         default for the entry, which is fine enough for its shape.
@@ -106,14 +134,91 @@ def add_knot(kind: str = "fhw", n: int | None = None, p: int = 2, q: int = 3, se
         The new, selected and active curve object.
     """
     polygons = knot_polygons(kind, n, p, q, seed, metric=metric, method=method, engine=engine)
+    label = {"torus": f"torus {p},{q}", "random": f"random {seed}"}.get(kind, kind)
+    obj = _place(f"Knot {label}", polygons, size, location, context)
+    if kind not in _SPECIAL:
+        from ..core import table
+
+        obj[KNOT_TYPE_PROP] = table.lookup(kind)
+    elif kind in ("fhw", "helix", "random", "circle"):
+        obj[KNOT_TYPE_PROP] = "0_1"
+    return obj
+
+
+def _place(name: str, polygons: list, size: float, location, context) -> bpy.types.Object:
+    """A curve object of the polygons scaled to ``size``, at ``location``, each component of
+    a link in its own colour."""
     X = np.concatenate(polygons)
     centre = X.mean(axis=0)
     scale = size / max(float(np.ptp(X, axis=0).max()), 1e-300)
     polygons = [(P - centre) * scale for P in polygons]
-    label = {"torus": f"torus {p},{q}", "random": f"random {seed}"}.get(kind, kind)
-    obj = make_curve_object(f"Knot {label}", polygons, context=context)
+    obj = make_curve_object(name, polygons, context=context)
     obj.location = location
     obj.data.bevel_depth = 0.01 * size
+    if len(polygons) > 1:
+        colour_components(obj)
+    return obj
+
+
+#: Viewport colours of a link's components (Blender's default palette hues, distinct in
+#: Solid mode with Material colours).
+COMPONENT_COLOURS = ((0.80, 0.16, 0.12, 1.0), (0.13, 0.45, 0.80, 1.0), (0.95, 0.65, 0.10, 1.0),
+                     (0.20, 0.65, 0.25, 1.0), (0.60, 0.25, 0.70, 1.0), (0.10, 0.70, 0.70, 1.0))
+
+
+def colour_components(obj: bpy.types.Object) -> None:
+    """Give each spline of a curve its own material (``Möbius component k``, viewport colour
+    and base colour from :data:`COMPONENT_COLOURS`), so a link's components are told apart
+    in the viewport and in renders."""
+    curve = obj.data
+    curve.materials.clear()
+    for k, spline in enumerate(curve.splines):
+        name = f"Möbius component {k + 1}"
+        mat = bpy.data.materials.get(name)
+        if mat is None:
+            mat = bpy.data.materials.new(name)
+            colour = COMPONENT_COLOURS[k % len(COMPONENT_COLOURS)]
+            mat.diffuse_color = colour
+            if hasattr(mat, "base_color"):  # pragma: no cover - newer Blender
+                mat.base_color = colour[:3]
+        curve.materials.append(mat)
+        spline.material_index = k
+
+
+def notation_polygons(text: str, n: int | None = None, *, metric: str = "hs",
+                      method: str = DEFAULT_METHOD, engine: str = DEFAULT_ENGINE) -> list:
+    """Polygons of a knot or link typed as a braid word or PD code
+    (``core.knots.from_notation``), equilateral and checked like :func:`knot_polygons`."""
+    from ..core import knots
+
+    if not str(text).strip():
+        raise ValueError("type a braid word (1 -2 1 -2) or a PD code "
+                         "([[1,5,2,4],[3,1,4,6],[5,3,6,2]]) first")
+    if n:
+        check_edge_count(n, metric, method, engine)
+    link = as_link(knots.from_notation(text, n or None))
+    try:
+        core.check_polygon(as_input(link))
+    except ValueError as err:
+        raise ValueError(f"'{text}' with {n or 'default'} edges: {err}") from None
+    return link
+
+
+def add_notation(text: str, n: int | None = None, size: float = 2.0,
+                 location: Sequence[float] = (0.0, 0.0, 0.0),
+                 context: bpy.types.Context | None = None, *, metric: str = "hs",
+                 method: str = DEFAULT_METHOD, engine: str = DEFAULT_ENGINE
+                 ) -> bpy.types.Object:
+    """Add the knot or link of a braid word (``"1 -2 1 -2"``) or PD code as a curve object
+    ready to relax (:func:`notation_polygons`); the text is kept in the object's
+    ``moebius_notation`` property, and a link's components get their own colours."""
+    from ..core import notation
+
+    polygons = notation_polygons(text, n, metric=metric, method=method, engine=engine)
+    kind, value = notation.parse_notation(text)
+    obj = _place(f"Knot {notation.describe(kind, value)}"[:60], polygons, size, location,
+                 context)
+    obj["moebius_notation"] = str(text)
     return obj
 
 

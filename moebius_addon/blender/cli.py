@@ -5,6 +5,8 @@ Examples::
     blender -c moebius --knot fhw --edges 150 --save out/fhw.blend --export out/fhw.abc
     blender -c moebius --open scene.blend --object Knot --edges 200 --save relaxed.blend
     blender -c moebius --knot 7_2 --method lbfgs --penalty 1e5 --save out/7_2.blend
+    blender -c moebius --knot "Borromean rings" --identify --save out/borromean.blend
+    blender -c moebius --braid "1 -2 1 -2" --save out/4_1.blend
 
 The same function is callable from Python as :func:`main` (it returns the exit status).
 """
@@ -24,13 +26,27 @@ from . import api, geometry
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="blender -c moebius",
-        description="Convert a curve (or add a catalogue knot), relax it by the Möbius energy "
+        description="Convert a curve (or add a catalogue knot or link, or one from a braid word "
+                    "or PD code), relax it by the Möbius energy "
                     "flow, keyframe the flow, save and export it.",
     )
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--object", help="name of the curve or edge-loop mesh object to relax")
     src.add_argument("--knot", metavar="NAME",
-                     help="add this catalogue knot instead: " + ", ".join(api.knot_names()))
+                     help="add this catalogue knot or link instead: a table name (3_1, "
+                          "10_161, 12n_888, L6a4{0,0}: every prime knot up to 12 crossings, "
+                          "every prime link up to 11), a common name ('trefoil', 'Borromean "
+                          "rings'), a mirror image (m3_1), or one of "
+                          + ", ".join(key for key, *_ in api.SPECIAL_KNOTS))
+    src.add_argument("--braid", metavar="WORD",
+                     help="add the closure of this braid word instead, e.g. '1 -2 1 -2' "
+                          "(σi as i, σi⁻¹ as -i, σi a positive crossing)")
+    src.add_argument("--pd", metavar="CODE",
+                     help="add the knot or link of this PD code instead, e.g. "
+                          "'[[1,5,2,4],[3,1,4,6],[5,3,6,2]]' (KnotInfo, LinkInfo, KnotTheory's "
+                          "PD[X[...]] or Knoodle's rows of five)")
+    p.add_argument("--identify", action="store_true",
+                   help="print which knot or link the curve is (before relaxing)")
     p.add_argument("--open", metavar="FILE.blend", help="open this file first")
     p.add_argument("--edges", type=int, default=None,
                    help="edges per component (converts the object; default: keep a converted "
@@ -86,6 +102,18 @@ def main(argv: list[str]) -> int:
         run = dict(metric=args.metric, method=args.method, engine=args.engine)
         if args.knot:
             api.check_knot(args.knot, args.edges, **run)
+        notation = args.braid or args.pd
+        if notation:
+            from ..core import notation as parse
+
+            if args.pd and not parse.is_pd(args.pd):
+                raise ValueError(f"--pd {args.pd!r} is not a PD code: write it as "
+                                 "[[1,5,2,4],[3,1,4,6],[5,3,6,2]] or PD[X[1,5,2,4], ...]")
+            if args.braid and parse.is_pd(args.braid):
+                raise ValueError(f"--braid {args.braid!r} looks like a PD code; use --pd")
+            parse.parse_notation(notation)  # refused before anything is opened
+            if args.edges:
+                api.check_edge_count(args.edges, **run)
         for path in args.export:
             api.export_suffix(path)
         if args.open:
@@ -93,6 +121,8 @@ def main(argv: list[str]) -> int:
         if args.knot:
             obj = api.add_knot(args.knot, args.edges, p=args.pq[0], q=args.pq[1],
                                seed=args.seed, **run)
+        elif notation:
+            obj = api.add_notation(notation, args.edges, **run)
         else:
             obj = bpy.data.objects.get(args.object)
             if obj is None:
@@ -103,9 +133,14 @@ def main(argv: list[str]) -> int:
                                          close_open=args.close_open, **run)
         print(f"moebius: '{obj.name}', {sum(len(s.points) for s in obj.data.splines)} edges, "
               f"energy {obj[api.ENERGY_PROP]:.6g}")
+        if args.identify:
+            found = api.identify_object(obj)
+            print(f"moebius: '{obj.name}' is {found.message}" if found.names else
+                  f"moebius: '{obj.name}': {found.message}")
         if not args.no_relax:
             t0 = time.perf_counter()
-            method, why = api.choose_method(args.method, geometry.curve_polygons(obj))
+            start = geometry.curve_polygons(obj)
+            method, why = api.choose_method(args.method, start)
             result = api.relax_object(obj, metric=args.metric, method=method,
                                       penalty=args.penalty, engine=args.engine,
                                       theta=args.theta, max_iterations=args.max_iterations,
@@ -117,6 +152,8 @@ def main(argv: list[str]) -> int:
                   f"{time.perf_counter() - t0:.2f} s, energy "
                   f"{result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, "
                   f"frames {scene.frame_start}-{scene.frame_end} ({result.message})")
+            kept, words = api.type_kept(start, api.object_curves(obj))
+            print(f"moebius: {words}", file=sys.stdout if kept is not False else sys.stderr)
         if args.save:
             bpy.ops.wm.save_as_mainfile(filepath=args.save)
             print(f"moebius: saved {args.save}")

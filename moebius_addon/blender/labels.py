@@ -125,14 +125,3 @@ SPECIAL_KNOTS = (
     ("figure_eight", "Figure-eight knot", "The 4_1 knot"),
 )
 
-
-def knot_items() -> list[tuple[str, str, str, int]]:
-    """Enum items ``(name, label, description, number)`` of the catalogue: the entries of
-    :data:`SPECIAL_KNOTS`, then the knot table of ``core.knots.names()``."""
-    from ..core import knots
-
-    items = [(k, label, desc) for k, label, desc in SPECIAL_KNOTS]
-    special = {key for key, *_ in items}
-    items += [(name, f"Knot {name}", f"Prime knot {name} of the knot table")
-              for name in knots.names() if name not in special]
-    return [(k, label, desc, i) for i, (k, label, desc) in enumerate(items)]

@@ -9,9 +9,9 @@ from __future__ import annotations
 import time
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 
-from . import api, keyframes, labels
+from . import api, keyframes
 
 _CONVERTIBLE = {"CURVE", "MESH"}
 
@@ -133,7 +133,9 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
                             f"({result.message}{api.method_hint(run.method, result, run.start)})"
-                            f"{_first_run_note(run)}")
+                            f"; {run.type_message}{_first_run_note(run)}")
+        if run.type_kept is False:  # never expected: the flow passes no strand through another
+            self.report({"WARNING"}, run.type_message)
 
     def execute(self, context):
         if not self._start(context):
@@ -229,14 +231,25 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         return self._finish(context)
 
 
+def _search_kinds(self, context, edit_text):
+    """Entries for the Knot field as the user types: ``(name, description)``, best first."""
+    return api.search_knots(edit_text, limit=100)
+
+
 class MOEBIUS_OT_add_knot(bpy.types.Operator):
-    """Add a knot from the catalogue as a closed polygon ready to relax"""
+    """Add a knot or link from the catalogue (every prime knot up to 12 crossings, every prime
+    link up to 11, unknots, torus knots) as closed polygons ready to relax"""
 
     bl_idname = "moebius.add_knot"
     bl_label = "Add Knot"
     bl_options = {"REGISTER", "UNDO"}
+    bl_property = "kind"
 
-    # kind: EnumProperty over the catalogue, added in register() (the catalogue is read then)
+    kind: StringProperty(
+        name="Knot", default="fhw", search=_search_kinds, search_options={"SUGGESTION"},
+        description="Type to search: a table name (3_1, 10_161, 12n_888, L6a4{0,0}), a common "
+                    "name (trefoil, Borromean rings, Whitehead link), a mirror image (m3_1), "
+                    "or fhw, helix, random, torus, circle")
     edges: IntProperty(name="Edges", default=0, min=0, soft_max=1000,
                        description="Edges of the polygon (0: the catalogue's default for this "
                                    "knot, fine enough for its shape)")
@@ -248,7 +261,7 @@ class MOEBIUS_OT_add_knot(bpy.types.Operator):
 
     def draw(self, context):
         col = self.layout.column()
-        col.prop(self, "kind")
+        col.prop(self, "kind", icon="VIEWZOOM")
         col.prop(self, "edges")
         if self.kind == "torus":
             row = col.row(align=True)
@@ -258,20 +271,123 @@ class MOEBIUS_OT_add_knot(bpy.types.Operator):
             col.prop(self, "seed")
         col.prop(self, "size")
 
+    def invoke(self, context, event):
+        if context.window is None or bpy.app.background:
+            return self.execute(context)
+        # a dialog whose Knot field searches the catalogue as the user types
+        return context.window_manager.invoke_props_dialog(self, width=360)
+
     def execute(self, context):
         try:
             s = context.scene.moebius  # the run the knot is added for
-            obj = api.add_knot(self.kind, self.edges, p=self.p, q=self.q, seed=self.seed,
-                               size=self.size, location=context.scene.cursor.location,
-                               context=context, metric=s.metric, method=s.method,
-                               engine=s.engine)
+            obj = api.add_knot(self.kind.strip(), self.edges, p=self.p, q=self.q,
+                               seed=self.seed, size=self.size,
+                               location=context.scene.cursor.location, context=context,
+                               metric=s.metric, method=s.method, engine=s.engine)
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
-        edges = sum(len(s.points) for s in obj.data.splines)
-        self.report({"INFO"}, f"Added '{obj.name}' with {edges}"
-                              f" edges, energy {obj[keyframes.ENERGY_PROP]:.6g}")
+        edges = sum(len(sp.points) for sp in obj.data.splines)
+        parts = len(obj.data.splines)
+        self.report({"INFO"}, f"Added '{obj.name}' with {edges} edges"
+                              + (f" in {parts} components" if parts > 1 else "")
+                              + f", energy {obj[keyframes.ENERGY_PROP]:.6g}")
         return {"FINISHED"}
+
+
+class MOEBIUS_OT_add_notation(bpy.types.Operator):
+    """Add the knot or link of a braid word (1 -2 1 -2) or PD code ([[1,5,2,4],[3,1,4,6],
+    [5,3,6,2]]) as closed polygons ready to relax"""
+
+    bl_idname = "moebius.add_notation"
+    bl_label = "Add Knot from Notation"
+    bl_options = {"REGISTER", "UNDO"}
+
+    notation: StringProperty(
+        name="Notation", default="",
+        description="Braid word (1 -2 1 -2, σi a positive crossing; [1,-2,1,-2]; "
+                    "{3, {1,-2,1,-2}}) or PD code ([[1,5,2,4],…], PD[X[…], …], Knoodle's rows "
+                    "of five); empty: the panel's Notation field")
+    edges: IntProperty(name="Edges", default=0, min=0, soft_max=1000,
+                       description="Edges in all (0: enough for the shape, about 3 edges per "
+                                   "strand spacing)")
+    size: FloatProperty(name="Size", default=2.0, min=1e-6, subtype="DISTANCE",
+                        description="Largest extent of the knot")
+
+    def invoke(self, context, event):
+        if not self.notation:
+            self.notation = context.scene.moebius.notation
+        if context.window is None or bpy.app.background:
+            return self.execute(context)
+        return context.window_manager.invoke_props_dialog(self, width=420)
+
+    def execute(self, context):
+        s = context.scene.moebius
+        text = self.notation or s.notation
+        try:
+            obj = api.add_notation(text, self.edges, size=self.size,
+                                   location=context.scene.cursor.location, context=context,
+                                   metric=s.metric, method=s.method, engine=s.engine)
+        except ValueError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        edges = sum(len(sp.points) for sp in obj.data.splines)
+        self.report({"INFO"}, f"Added '{obj.name}' with {edges} edges, energy "
+                              f"{obj[keyframes.ENERGY_PROP]:.6g}")
+        return {"FINISHED"}
+
+
+class MOEBIUS_OT_identify(bpy.types.Operator):
+    """Name the knot or link the active curve is, from invariants of a projection (Alexander
+    and Jones polynomials, linking numbers) matched against the table; stored on the object"""
+
+    bl_idname = "moebius.identify"
+    bl_label = "Identify"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.active_object
+        if obj is None or obj.type not in _CONVERTIBLE:
+            cls.poll_message_set("Select a curve object, or a mesh made of closed edge loops")
+            return False
+        return True
+
+    def execute(self, context):
+        obj = context.active_object
+        try:
+            result = api.identify_object(obj)
+        except ValueError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"'{obj.name}' is {result.message} ({result.seconds:.2f} s)"
+                    if result.names else f"'{obj.name}': {result.message}")
+        return {"FINISHED"}
+
+
+class MOEBIUS_MT_add_knot(bpy.types.Menu):
+    """Add ▸ Curve ▸ Knot: the catalogue's search, a few well-known entries, notation"""
+
+    bl_idname = "MOEBIUS_MT_add_knot"
+    bl_label = "Knot"
+
+    #: Entries listed in the menu besides the search (name, label).
+    COMMON = (("3_1", "Trefoil"), ("4_1", "Figure-Eight Knot"), ("5_1", "Cinquefoil"),
+              ("L2a1{1}", "Hopf Link"), ("L5a1{0}", "Whitehead Link"),
+              ("L6a4{0,0}", "Borromean Rings"), ("fhw", "Freedman–He–Wang Unknot"),
+              ("helix", "Helix Unknot"), ("random", "Random Unknot"),
+              ("torus", "Torus Knot (p, q)"))
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator_context = "INVOKE_DEFAULT"
+        layout.operator("moebius.add_knot", text="Search Knots and Links…", icon="VIEWZOOM")
+        layout.operator("moebius.add_notation", text="From Braid Word or PD Code…",
+                        icon="TEXT")
+        layout.separator()
+        layout.operator_context = "EXEC_DEFAULT"
+        for key, label in self.COMMON:
+            layout.operator("moebius.add_knot", text=label).kind = key
 
 
 class MOEBIUS_OT_clear_animation(bpy.types.Operator):
@@ -391,13 +507,16 @@ class MOEBIUS_OT_show_gradient(bpy.types.Operator):
 
 
 def menu_add_knot(self, context):
-    self.layout.operator_menu_enum("moebius.add_knot", "kind", text="Knot", icon="CURVE_DATA")
+    self.layout.menu(MOEBIUS_MT_add_knot.bl_idname, text="Knot", icon="CURVE_DATA")
 
 
 classes = (
     MOEBIUS_OT_convert,
     MOEBIUS_OT_relax,
     MOEBIUS_OT_add_knot,
+    MOEBIUS_OT_add_notation,
+    MOEBIUS_OT_identify,
+    MOEBIUS_MT_add_knot,
     MOEBIUS_OT_clear_animation,
     MOEBIUS_OT_apply_frame,
     MOEBIUS_OT_export_flow,
@@ -406,8 +525,6 @@ classes = (
 
 
 def register() -> None:
-    MOEBIUS_OT_add_knot.__annotations__["kind"] = EnumProperty(
-        name="Knot", items=labels.knot_items(), default="fhw", description="Catalogue entry")
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.VIEW3D_MT_curve_add.append(menu_add_knot)

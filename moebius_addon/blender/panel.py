@@ -12,6 +12,7 @@ import textwrap
 import bpy
 
 from . import labels, options
+from .identification import KNOT_TYPE_PROP
 from .keyframes import ENERGY_PROP, keyed_frames
 
 
@@ -56,6 +57,8 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
         elif obj is not None and ENERGY_PROP in obj:
             col.label(text=obj.name, icon="CURVE_DATA")
             col.label(text=f"Energy {obj[ENERGY_PROP]:.6g}")
+            if obj.get(KNOT_TYPE_PROP):
+                col.label(text=f"Type {obj[KNOT_TYPE_PROP]}")
             frames = keyed_frames(obj)
             if frames:
                 col.label(text=f"Keyed frames {frames[0]:.0f}–{frames[-1]:.0f}")
@@ -90,6 +93,8 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
                 split.label(text=name)
                 split.label(text=value)
             _wrapped_label(box.column(align=True), context, s.last_message)
+            if s.last_type:
+                _wrapped_label(box.column(align=True), context, s.last_type)
 
 
 class VIEW3D_PT_moebius_polygon(_MoebiusPanel, bpy.types.Panel):
@@ -107,7 +112,12 @@ class VIEW3D_PT_moebius_polygon(_MoebiusPanel, bpy.types.Panel):
             col.prop(s, "edges")
         layout.prop(s, "close_open")
         layout.operator("moebius.convert", icon="MOD_CURVE")
-        layout.operator_menu_enum("moebius.add_knot", "kind", text="Add Knot", icon="ADD")
+        layout.operator("moebius.add_knot", text="Add Knot…", icon="ADD")
+        col = layout.column(align=True)
+        col.prop(s, "notation", text="")
+        col.operator("moebius.add_notation", text="Add from Notation", icon="TEXT").notation = (
+            s.notation)
+        layout.operator("moebius.identify", icon="VIEWZOOM")
 
 
 class VIEW3D_PT_moebius_flow(_MoebiusPanel, bpy.types.Panel):

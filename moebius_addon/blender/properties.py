@@ -162,16 +162,25 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     last_keyframes: IntProperty(name="Keyed Frames", get=_stat("keyframes", 0))
     last_method: StringProperty(name="Method", get=_stat("method", ""))
     last_engine: StringProperty(name="Engine", get=_stat("engine", ""))
+    last_type: StringProperty(name="Knot Type", get=_stat("type", ""))
+    # Notation typed for Add from Notation (braid word or PD code)
+    notation: StringProperty(
+        name="Notation", default="1 -2 1 -2",
+        description="A braid word (1 -2 1 -2: σ1 σ2⁻¹ σ1 σ2⁻¹, σi a positive crossing; also "
+                    "[1,-2,1,-2], {3, {1,-2,1,-2}}) or a PD code ([[1,5,2,4],[3,1,4,6],"
+                    "[5,3,6,2]], PD[X[…], …], or Knoodle's rows of five)",
+    )
 
     def store_run(self, obj_name: str, iterations: int, energy_start: float, energy_end: float,
                   seconds: float, message: str, keyed: int,
-                  method: str = labels.DEFAULT_METHOD, engine: str = "") -> None:
+                  method: str = labels.DEFAULT_METHOD, engine: str = "",
+                  knot_type: str = "") -> None:
         """Record the statistics of a finished run (shown read-only in the panel)."""
         self["_stats"] = {
             "object": obj_name, "iterations": int(iterations),
             "energy_start": float(energy_start), "energy_end": float(energy_end),
             "seconds": float(seconds), "message": message, "keyframes": int(keyed),
-            "method": method, "engine": engine,
+            "method": method, "engine": engine, "type": knot_type,
         }
 
 

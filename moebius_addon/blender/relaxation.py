@@ -12,6 +12,7 @@ import numpy as np
 from .. import core
 from . import geometry, keyframes
 from .gradients import refresh_gradients
+from .identification import type_kept
 from .labels import (
     AUTO_METHOD,
     DEFAULT_ENGINE,
@@ -183,6 +184,10 @@ class ObjectRelaxation:
         # the earlier run's keys stay until this run's are written (finish), so that a run
         # that fails before its first iterate leaves them; live display removes them first
         self._live = False
+        #: set by finish(): whether the invariants are the same before and after, and a line
+        #: saying so ("knot type kept: 3_1 (trefoil) …"; None: they could not be read)
+        self.type_kept: bool | None = None
+        self.type_message = ""
 
     def step(self) -> bool:
         """Advance by one accepted iterate; False once the run has finished."""
@@ -268,11 +273,13 @@ class ObjectRelaxation:
         scene.frame_end = max(scene.frame_end, frames.stop - 1)
         scene.frame_set(frames.stop - 1)
         refresh_gradients(self.obj)  # drawn at the start, they would show a stale field
+        # the flow never passes a strand through another: the same invariants at both ends
+        self.type_kept, self.type_message = type_kept(self.start, as_link(result.x))
         stats = getattr(scene, "moebius", None)
         if stats is not None:
             stats.store_run(self.obj.name, self.nit, self.energies[0], self.energies[-1],
                             time.perf_counter() - self.t0, str(result.message), len(frames),
-                            self.method, self.engine)
+                            self.method, self.engine, self.type_message)
         return result
 
 
