@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import jones
-from .pd import PlanarDiagram, _remove, _slots, faces, simplify
+from .pd import PlanarDiagram, edge_slots, faces, remove_crossings, simplify
 
 __all__ = ["diagram_curves"]
 
@@ -51,7 +51,7 @@ def reduce(d: PlanarDiagram) -> PlanarDiagram:
         m = _nugatory(d)  # a kink's crossing is nugatory too
         if m is None:
             return d
-        d = _remove(d, [m])
+        d = remove_crossings(d, [m])
     return d
 
 
@@ -65,7 +65,7 @@ def _pieces(d: PlanarDiagram) -> list[list[int]]:
             a = parent[a]
         return a
 
-    for slots in _slots(d.X).values():
+    for slots in edge_slots(d.X).values():
         (m1, _), (m2, _) = slots
         parent[find(m1)] = find(m2)
     groups: dict[int, list[int]] = {}

@@ -22,7 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["PlanarDiagram", "from_braid", "from_rows", "parse_pd"]
+__all__ = ["PlanarDiagram", "edge_slots", "faces", "from_braid", "from_passages", "from_rows",
+           "linking_matrix", "parse_pd", "relabel", "remove_crossings", "simplify"]
 
 
 @dataclass(frozen=True)
@@ -244,7 +245,8 @@ def parse_pd(text: str) -> PlanarDiagram:
 # Orientation, faces, components
 
 
-def _slots(X: np.ndarray) -> dict[int, list[tuple[int, int]]]:
+def edge_slots(X: np.ndarray) -> dict[int, list[tuple[int, int]]]:
+    """Where each edge label sits: ``{label: [(crossing, position), (crossing, position)]}``."""
     where: dict[int, list[tuple[int, int]]] = {}
     for c in range(len(X)):
         for p in range(4):
@@ -255,7 +257,7 @@ def _slots(X: np.ndarray) -> dict[int, list[tuple[int, int]]]:
 def _orient(X: np.ndarray) -> np.ndarray:
     """``(c, 4)`` booleans: True where the edge in that slot enters the crossing."""
     c = len(X)
-    where = _slots(X)
+    where = edge_slots(X)
     head = np.zeros((c, 4), dtype=bool)
     known = np.zeros((c, 4), dtype=bool)
 
@@ -308,7 +310,7 @@ def _successor(d: PlanarDiagram) -> dict[int, int]:
 def faces(d: PlanarDiagram) -> list[list[tuple[int, int]]]:
     """Faces of the diagram as cycles of slots ``(crossing, position)``: each slot is the
     corner between the edge in that position and the next one counter-clockwise."""
-    where = _slots(d.X)
+    where = edge_slots(d.X)
     other = {}
     for slots in where.values():
         a, b = slots
@@ -333,7 +335,7 @@ def faces(d: PlanarDiagram) -> list[list[tuple[int, int]]]:
 def _check_planar(d: PlanarDiagram) -> None:
     if d.crossings == 0:
         return
-    where = _slots(d.X)
+    where = edge_slots(d.X)
     # connected pieces of the diagram (crossings joined by edges)
     parent = list(range(d.crossings))
 
@@ -391,9 +393,10 @@ def linking_matrix(d: PlanarDiagram) -> np.ndarray:
 # Simplification
 
 
-def _remove(d: PlanarDiagram, gone: list[int]) -> PlanarDiagram:
-    """Remove crossings, joining the strands straight through each (under i–k, over j–l);
-    a strand that closes up without any crossing left becomes a loop."""
+def remove_crossings(d: PlanarDiagram, gone: list[int]) -> PlanarDiagram:
+    """The diagram without the crossings ``gone``, the strands joined straight through each
+    (under i–k, over j–l); a strand that closes up without any crossing left becomes a loop.
+    The same link when the crossings form a kink, a removable bigon or a nugatory crossing."""
     parent: dict[int, int] = {}
 
     def find(a):
@@ -430,7 +433,7 @@ def _kink(d: PlanarDiagram) -> int | None:
 def _bigon(d: PlanarDiagram) -> tuple[int, int] | None:
     """Two crossings bounding a face of two edges with one strand over at both (Reidemeister
     II): removing both leaves the same link."""
-    where = _slots(d.X)
+    where = edge_slots(d.X)
     for face in faces(d):
         if len(face) != 2:
             continue
@@ -450,10 +453,10 @@ def simplify(d: PlanarDiagram) -> PlanarDiagram:
     while d.crossings:
         m = _kink(d)
         if m is not None:
-            d = _remove(d, [m])
+            d = remove_crossings(d, [m])
             continue
         pair = _bigon(d)
         if pair is None:
             break
-        d = _remove(d, list(pair))
+        d = remove_crossings(d, list(pair))
     return d
