@@ -161,12 +161,13 @@ def fingerprint(P, max_states: int = _jones.MAX_STATES) -> tuple[Fingerprint, in
     d = planar_diagram(P)
     K = len(P) if isinstance(P, list | tuple) else 1
     L = linking_numbers(P) if K > 1 else np.zeros((1, 1), np.int64)
+    alexander = tuple(alexander_polynomial(d))  # first: it refuses diagrams too large
     try:
         jp = tuple(sorted(_jones.jones(d, max_states).items()))
     except _jones.TooComplex:
         jp = None
     upper = tuple(sorted(int(L[a, b]) for a in range(K) for b in range(a + 1, K)))
-    return Fingerprint(K, tuple(alexander_polynomial(d)), jp, upper), d.crossings, L
+    return Fingerprint(K, alexander, jp, upper), d.crossings, L
 
 
 def _same_linking(e: table.Entry, L: np.ndarray) -> bool:
