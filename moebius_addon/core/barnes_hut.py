@@ -190,44 +190,104 @@ def _cluster_data(E, M, ln, cp, lo, hi, left, right):
 # the split into far and near pairs
 
 
-@nb.njit(cache=True)
-def _push_pair(buf, count, a, b):
-    if count == buf.shape[0]:
-        grown = np.empty((2 * buf.shape[0], 2), np.int64)
-        grown[:count] = buf
-        buf = grown
-    buf[count, 0] = a
-    buf[count, 1] = b
-    return buf
+# The depth-first split's stack: a step pops one pair and pushes at most three whose depths
+# (depth of a + depth of b) are larger by one or two, so the stack never holds more than
+# 2 · (2 · tree depth) + 1 pairs; a median-split tree over fewer than 2^63 edges is less than
+# 64 deep.
+_STACK = 512
 
 
 @nb.njit(cache=True)
-def _descend(a0, b0, left, right, bmin, bmax, nc, diam2, theta2, far, nfar, near, nnear, grow):
+def _node_table(bmin, bmax, nc):
+    """Per node in one row (one cache line): box min (0–2), box max (3–5), squared diagonal
+    (6) and component (7, −1 for several): what the split reads of a node."""
+    m = bmin.shape[0]
+    tab = np.empty((m, 8))
+    for i in range(m):
+        s = 0.0
+        for k in range(3):
+            tab[i, k] = bmin[i, k]
+            tab[i, 3 + k] = bmax[i, k]
+            d = bmax[i, k] - bmin[i, k]
+            s += d * d
+        tab[i, 6] = s
+        tab[i, 7] = nc[i]
+    return tab
+
+
+@nb.njit(cache=True, inline="always")
+def _admissible_row(tab, a, b, theta2):
+    """Far pair: boxes apart, one component each, ``max(diam²) ≤ θ² gap²`` (rows of
+    :func:`_node_table`)."""
+    g = 0.0
+    for k in range(3):
+        x = max(tab[a, k] - tab[b, 3 + k], tab[b, k] - tab[a, 3 + k])
+        if x > 0.0:
+            g += x * x
+    return (g > 0.0 and tab[a, 7] >= 0.0 and tab[b, 7] >= 0.0
+            and max(tab[a, 6], tab[b, 6]) <= theta2 * g)
+
+
+@nb.njit(cache=True)
+def _descend(a0, b0, left, right, tab, theta2, stack, far, nfar, near, nnear):
     """Depth-first split of the pair (a0, b0): far pairs (admissible clusters) and near pairs of
-    leaves appended to ``far``/``near`` from ``nfar``/``nnear`` on. Without ``grow`` a full
-    array ends the descent: the counts come back as -1."""
-    stack = np.empty((128, 2), np.int64)
+    leaves written to ``far``/``near`` from ``nfar``/``nnear`` on; returns the new counts, or
+    (−1, −1) when an array is full. The order of :func:`bvh.push_split`: a self pair's children
+    with themselves, then with each other; else the larger node's halves, left first."""
     stack[0, 0] = a0
     stack[0, 1] = b0
     top = 1
+    fcap = far.shape[0]
+    ncap = near.shape[0]
     while top > 0:
         top -= 1
         a = stack[top, 0]
         b = stack[top, 1]
-        is_far = a != b and _admissible(a, b, bmin, bmax, nc, diam2, theta2)
-        if not is_far and (left[a] >= 0 or left[b] >= 0):
-            stack, top = bvh.push_split(stack, top, a, b, left, right, diam2)
+        la = left[a]
+        if a == b:
+            if la < 0:
+                if nnear == ncap:
+                    return -1, -1
+                near[nnear, 0] = a
+                near[nnear, 1] = b
+                nnear += 1
+            else:
+                ra = right[a]
+                stack[top, 0] = la
+                stack[top, 1] = ra
+                stack[top + 1, 0] = ra
+                stack[top + 1, 1] = ra
+                stack[top + 2, 0] = la
+                stack[top + 2, 1] = la
+                top += 3
             continue
-        full = nfar == far.shape[0] if is_far else nnear == near.shape[0]
-        if full and not grow:
-            return far, -1, near, -1
-        if is_far:
-            far = _push_pair(far, nfar, a, b)
+        if _admissible_row(tab, a, b, theta2):
+            if nfar == fcap:
+                return -1, -1
+            far[nfar, 0] = a
+            far[nfar, 1] = b
             nfar += 1
-        else:
-            near = _push_pair(near, nnear, a, b)
+            continue
+        lb = left[b]
+        if la < 0 and lb < 0:
+            if nnear == ncap:
+                return -1, -1
+            near[nnear, 0] = a
+            near[nnear, 1] = b
             nnear += 1
-    return far, nfar, near, nnear
+        elif lb < 0 or (la >= 0 and tab[a, 6] >= tab[b, 6]):
+            stack[top, 0] = right[a]
+            stack[top, 1] = b
+            stack[top + 1, 0] = la
+            stack[top + 1, 1] = b
+            top += 2
+        else:
+            stack[top, 0] = a
+            stack[top, 1] = right[b]
+            stack[top + 1, 0] = a
+            stack[top + 1, 1] = lb
+            top += 2
+    return nfar, nnear
 
 
 @nb.njit(cache=True, inline="always")
@@ -265,52 +325,42 @@ def _split(left, right, bmin, bmax, nc, theta2, nchunks, want, cap):
     """Dual traversal from (root, root): unordered far pairs (admissible clusters) and near
     pairs of leaves (self pairs ``(A, A)`` included). The pairs of a frontier of ``want`` node
     pairs are split depth first in ``nchunks`` fixed chunks, each into a buffer of ``cap``
-    pairs, and concatenated in chunk order: the same lists for every thread count."""
+    pairs (all chunks again with twice the room while one runs out), and concatenated in
+    chunk order: the same lists for every thread count."""
     diam2 = bvh.node_diam2(bmin, bmax)
     tasks = _tasks(left, right, bmin, bmax, nc, diam2, theta2, want)
-    fbuf = np.empty((nchunks, cap, 2), np.int64)
-    nbuf = np.empty((nchunks, cap, 2), np.int64)
+    tab = _node_table(bmin, bmax, nc)
     nf = np.zeros(nchunks, np.int64)
     nn = np.zeros(nchunks, np.int64)
-    for cc in nb.prange(nchunks):
-        ch = np.int64(cc)
-        f, n = 0, 0
-        for t in range(ch, tasks.shape[0], nchunks):
-            _, f, _, n = _descend(tasks[t, 0], tasks[t, 1], left, right, bmin, bmax, nc, diam2,
-                                  theta2, fbuf[ch], f, nbuf[ch], n, False)
-            if f < 0:
-                break
-        nf[ch] = f
-        nn[ch] = n
-    # a chunk that ran out of room is split again on its own, into growing arrays
-    ok = nf >= 0
-    redo_f = [np.empty((0, 2), np.int64) for _ in range(nchunks)]
-    redo_n = [np.empty((0, 2), np.int64) for _ in range(nchunks)]
-    for ch in range(nchunks):
-        if not ok[ch]:
-            f_arr = np.empty((2 * cap, 2), np.int64)
-            n_arr = np.empty((2 * cap, 2), np.int64)
+    room = max(cap, 1)
+    while True:
+        fbuf = np.empty((nchunks, room, 2), np.int64)
+        nbuf = np.empty((nchunks, room, 2), np.int64)
+        for cc in nb.prange(nchunks):
+            ch = np.int64(cc)
+            stack = np.empty((_STACK, 2), np.int64)
             f, n = 0, 0
             for t in range(ch, tasks.shape[0], nchunks):
-                f_arr, f, n_arr, n = _descend(tasks[t, 0], tasks[t, 1], left, right, bmin, bmax,
-                                              nc, diam2, theta2, f_arr, f, n_arr, n, True)
-            redo_f[ch] = f_arr[:f].copy()
-            redo_n[ch] = n_arr[:n].copy()
+                f, n = _descend(tasks[t, 0], tasks[t, 1], left, right, tab, theta2, stack,
+                                fbuf[ch], f, nbuf[ch], n)
+                if f < 0:
+                    break
             nf[ch] = f
             nn[ch] = n
-    far = np.empty((nf.sum(), 2), np.int64)
-    near = np.empty((nn.sum(), 2), np.int64)
-    pf = 0
-    pn = 0
+        if nf.min() >= 0:
+            break
+        room *= 2
+    of = np.zeros(nchunks + 1, np.int64)
+    on = np.zeros(nchunks + 1, np.int64)
     for ch in range(nchunks):
-        if ok[ch]:
-            far[pf:pf + nf[ch]] = fbuf[ch, :nf[ch]]
-            near[pn:pn + nn[ch]] = nbuf[ch, :nn[ch]]
-        else:
-            far[pf:pf + nf[ch]] = redo_f[ch]
-            near[pn:pn + nn[ch]] = redo_n[ch]
-        pf += nf[ch]
-        pn += nn[ch]
+        of[ch + 1] = of[ch] + nf[ch]
+        on[ch + 1] = on[ch] + nn[ch]
+    far = np.empty((of[nchunks], 2), np.int64)
+    near = np.empty((on[nchunks], 2), np.int64)
+    for cc in nb.prange(nchunks):
+        ch = np.int64(cc)
+        far[of[ch]:of[ch + 1]] = fbuf[ch, :nf[ch]]
+        near[on[ch]:on[ch + 1]] = nbuf[ch, :nn[ch]]
     return far, near
 
 
