@@ -49,12 +49,15 @@ from ._layout import Layout
 # a margin, below 1e-4 (energy) and 1e-3 (gradient) on 7_2, FHW and a non-equilateral trefoil at
 # 3 000 to 20 000 edges (worst measured: 9.8e-6 and 6.3e-4, FHW's gradient; 0.2 gave 9.5e-4).
 THETA = 0.175
-_FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
+# The near field's fast-math: reassociation lets its sums vectorize; no "contract": with it (and
+# reassoc), the code compiled in a first process and the code numba's cache gave later ones
+# different last bits in the gradient (each of the two flags alone did not).
+_NEAR_FASTMATH = {"reassoc", "nsz", "arcp"}
 # Fixed split of the traversal into chunks (the same lists for every thread count).
 _SPLIT_CHUNKS = 16
-# Fixed work split of the near field (independent of the thread count: the same bits on every
-# machine); each chunk holds a buffer of 7 values per edge.
-_CHUNKS = 8
+# Pieces of the near field's parallel loop over leaves (each edge's sums are its own: any split
+# gives the same bits); a piece stages its leaves' partners in one scratch array.
+_NEAR_CHUNKS = 256
 
 
 ENGINE_NAMES = ("auto", "exact", "tree")
@@ -393,11 +396,12 @@ def _by_target(pairs, m):
 
 
 @nb.njit(cache=True, inline="always")
-def _dipole(X, s0, s1, s2, d0, d1, d2, inv, w, grad, gs, gX, gd):
+def _dipole(X, s0, s1, s2, d0, d1, d2, inv, w, grad_s, grad_x, gs, gX, gd):
     """First-order tangent term ``T(X, s) = Σ_abc ∂_c H_ab(d) X_ac s_b`` of the expansion of
     ``Σ e_Iᵀ H(m_I − m_J) e_J`` (``H = ∇² log|d|``, the tangent kernel of the energy) around
-    the clusters' centres; adds ``w`` times its derivatives in ``s``, ``X`` and ``d`` to ``gs``,
-    ``gX``, ``gd`` with ``grad``. Returns ``T``."""
+    the clusters' centres; adds ``w`` times its derivatives in ``s`` (with ``grad_s``) and in
+    ``X`` (with ``grad_x``) to ``gs``, ``gX``, and in ``d`` (with either) to ``gd``. Returns
+    ``T``."""
     w4 = inv * inv
     w6 = w4 * inv
     xd0 = X[0, 0] * d0 + X[0, 1] * d1 + X[0, 2] * d2
@@ -411,20 +415,22 @@ def _dipole(X, s0, s1, s2, d0, d1, d2, inv, w, grad, gs, gX, gd):
     dxd = d0 * xd0 + d1 * xd1 + d2 * xd2
     bb = s0 * (xd0 + xt0) + s1 * (xd1 + xt1) + s2 * (xd2 + xt2) + tr * ds
     t = -2.0 * w4 * bb + 8.0 * w6 * dxd * ds
-    if grad:
+    if grad_s or grad_x:
         a4 = -2.0 * w4 * w
         a6 = 8.0 * w6 * w
-        gs[0] += a4 * (xd0 + xt0 + tr * d0) + a6 * dxd * d0
-        gs[1] += a4 * (xd1 + xt1 + tr * d1) + a6 * dxd * d1
-        gs[2] += a4 * (xd2 + xt2 + tr * d2) + a6 * dxd * d2
-        dd = (d0, d1, d2)
-        ss = (s0, s1, s2)
-        for a in range(3):
-            for b in range(3):
-                v = a4 * (ss[a] * dd[b] + dd[a] * ss[b]) + a6 * ds * dd[a] * dd[b]
-                if a == b:
-                    v += a4 * ds
-                gX[a, b] += v
+        if grad_s:
+            gs[0] += a4 * (xd0 + xt0 + tr * d0) + a6 * dxd * d0
+            gs[1] += a4 * (xd1 + xt1 + tr * d1) + a6 * dxd * d1
+            gs[2] += a4 * (xd2 + xt2 + tr * d2) + a6 * dxd * d2
+        if grad_x:
+            dd = (d0, d1, d2)
+            ss = (s0, s1, s2)
+            for a in range(3):
+                for b in range(3):
+                    v = a4 * (ss[a] * dd[b] + dd[a] * ss[b]) + a6 * ds * dd[a] * dd[b]
+                    if a == b:
+                        v += a4 * ds
+                    gX[a, b] += v
         xs0 = X[0, 0] * s0 + X[0, 1] * s1 + X[0, 2] * s2
         xs1 = X[1, 0] * s0 + X[1, 1] * s1 + X[1, 2] * s2
         xs2 = X[2, 0] * s0 + X[2, 1] * s1 + X[2, 2] * s2
@@ -566,7 +572,7 @@ def _dipole_pair(P, R, x, w, wt, grad, gP, gx, v):
 # the code numba's cache loads in later processes fused and ordered operations differently
 # (gradients differed in the last bits between a first and a second run; measured with
 # "contract" alone too). Without it _far took 37 instead of 32 ms at 20 000 edges (7_2).
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True, parallel=True, error_model="numpy")
 def _far(L, C, S, D, Q, T, nc, foff, fpart, grad):
     """Per target node: Σ_B F(A, B) and, with ``grad``, twice Σ_B ∂F(A, B)/∂(L_A, S_A, c_A, D_A,
     Q_A, T_A) (the derivative of the ordered sum: F is symmetric). F: both parts of the kernel
@@ -642,8 +648,8 @@ def _far(L, C, S, D, Q, T, nc, foff, fpart, grad):
                 sv = (La * Lb + ab) * inv
                 q = da * db * inv * inv
                 e += sv - 2.0 * q
-                e += _dipole(Da, sbx, sby, sbz, dx, dy, dz, inv, 1.0, grad, scratch[0], gx, gc)
-                e -= _dipole(D[b], sax, say, saz, dx, dy, dz, inv, -1.0, grad, gs, scratch, gc)
+                e += _dipole(Da, sbx, sby, sbz, dx, dy, dz, inv, 1.0, False, grad, gs, gx, gc)
+                e -= _dipole(D[b], sax, say, saz, dx, dy, dz, inv, -1.0, grad, False, gs, gx, gc)
                 # tangent part, second order: ½ K4:(T_A⊗S_B) − K4:(D_A⊗D_B) + ½ K4:(S_A⊗T_B)
                 e += 0.5 * _quadrupole(T[a], S[b], x, inv, 0.5, grad, False, grad, gal, gbe,
                                        scratch[0], gc, v, scratch)
@@ -750,103 +756,138 @@ def _push_down(L, C, S, D, gL, gS, gC, gD, gQ, gT, left, right):
 # near field
 
 
-@nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
-def _near(E, M, ln, cp, pos, size, lo, hi, pairs, nchunks, grad):
-    """The near field, each unordered pair of edges once (pairs of leaves, self pairs
-    included): per edge (tree order) its share of the ordered sum (``rows``: f for each end
-    of every pair) and, with ``grad``, the partial derivatives of the ordered sum with respect
-    to its edge vector and midpoint. The leaf pairs are cut into ``nchunks`` fixed runs with a
-    buffer each, summed in order: the same bits for every thread count."""
+@nb.njit(cache=True)
+def _near_lists(pairs, perm, nxt, prv, lo, hi, left):
+    """What the near field reads besides the edges: every leaf's near partners (CSR
+    ``(offsets, partners)`` of :func:`_by_target`: both directions of each pair, a self pair
+    once), per tree position the leaf holding it, and the tree positions of the previous and
+    the next edge along the curve (always in a near partner: boxes of edges that share a
+    vertex touch)."""
+    m = lo.shape[0]
+    n = perm.shape[0]
+    noff, npart = _by_target(pairs, m)
+    leaf_of = np.empty(n, np.int64)
+    for node in range(m):
+        if left[node] < 0:
+            for q in range(lo[node], hi[node]):
+                leaf_of[q] = node
+    at = np.empty(n, np.int64)
+    for q in range(n):
+        at[perm[q]] = q
+    nbr = np.empty((n, 2), np.int64)
+    for q in range(n):
+        i = perm[q]
+        nbr[q, 0] = at[prv[i]]
+        nbr[q, 1] = at[nxt[i]]
+    return noff, npart, leaf_of, nbr
+
+
+@nb.njit(cache=True, fastmath=_NEAR_FASTMATH, error_model="numpy", inline="always")
+def _near_row(mx, my, mz, ex, ey, ez, ln, cp, count, skip, cq, px, py, pz, ax, ay, az, li, grad):
+    """One edge (midpoint ``p``, edge vector ``a``, length ``li``, component ``cq``) against
+    ``count`` staged edges: its ordered sum ``Σ_J f`` and, with ``grad``, ``Σ_J l_J/|d|²`` and
+    the partial sums of ``∂f/∂e_I`` without its length term and of ``∂f/∂m_I``. Staged edges
+    ``skip`` (the edge itself and its two neighbours) count zero, edges of another component
+    with their length part only: both by selects, so that the loop vectorizes (and so
+    ``error_model="numpy"``: no zero test on the division)."""
+    s = 0.0
+    wl = 0.0
+    gax = gay = gaz = gmx = gmy = gmz = 0.0
+    j0, j1, j2 = skip
+    for r in range(count):
+        dx = px - mx[r]
+        dy = py - my[r]
+        dz = pz - mz[r]
+        inv = 1.0 / (dx * dx + dy * dy + dz * dz)
+        inv = 0.0 if (r == j0 or r == j1 or r == j2) else inv
+        same = cp[r] == cq
+        bx = ex[r] if same else 0.0
+        by = ey[r] if same else 0.0
+        bz = ez[r] if same else 0.0
+        lj = ln[r]
+        ab = ax * bx + ay * by + az * bz
+        da = dx * ax + dy * ay + dz * az
+        db = dx * bx + dy * by + dz * bz
+        sv = (li * lj + ab) * inv
+        qq = da * db * inv * inv
+        s += sv - 2.0 * qq
+        if grad:
+            tb = 2.0 * db * inv
+            ta = 2.0 * da * inv
+            wl += lj * inv
+            gax += (bx - tb * dx) * inv
+            gay += (by - tb * dy) * inv
+            gaz += (bz - tb * dz) * inv
+            cd = 8.0 * qq - 2.0 * sv
+            gmx += (cd * dx - tb * ax - ta * bx) * inv
+            gmy += (cd * dy - tb * ay - ta * by) * inv
+            gmz += (cd * dz - tb * az - ta * bz) * inv
+    return s, wl, gax, gay, gaz, gmx, gmy, gmz
+
+
+@nb.njit(cache=True, parallel=True, fastmath=_NEAR_FASTMATH, error_model="numpy")
+def _near(E, M, ln, cp, lo, hi, leaves, noff, npart, leaf_of, nbr, grad):
+    """The near field as an ordered sum: every edge of a leaf against every edge of the leaf's
+    near partners (itself included), except itself and its neighbours along the curve, with
+    the kernel of ``energy.py``. Per edge (tree order): ``rows[0]`` its share ``Σ_J f(I, J)``
+    of the energy and, with ``grad``, rows 1–3 and 4–6 the derivatives of the ordered sum
+    (``2 Σ_J ∂f(I, J)``, ``f`` symmetric) in its edge vector and midpoint. A leaf's partners
+    are first copied to one contiguous array (coordinates in rows), so the loop over them
+    vectorizes; every pair is summed twice (once per side), and nothing is shared between
+    edges: the same bits for any thread count and any split of the leaves."""
     n = ln.shape[0]
-    npairs = pairs.shape[0]
-    width = 7 if grad else 1
-    buf = np.zeros((nchunks, width, n))
+    m = lo.shape[0]
+    nl = leaves.shape[0]
+    rows = np.empty((7 if grad else 1, n))
+    nchunks = min(nl, _NEAR_CHUNKS)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
-        b = buf[ch]
-        for p in range(ch * npairs // nchunks, (ch + 1) * npairs // nchunks):
-            la = pairs[p, 0]
-            lb = pairs[p, 1]
-            for q in range(lo[la], hi[la]):
-                ax, ay, az, li = E[q, 0], E[q, 1], E[q, 2], ln[q]
-                px, py, pz = M[q, 0], M[q, 1], M[q, 2]
-                cq, iq, sq = cp[q], pos[q], size[q]
-                s = 0.0
-                gax = gay = gaz = gmx = gmy = gmz = 0.0
-                r0 = q + 1 if la == lb else lo[lb]
-                for r in range(r0, hi[lb]):
-                    dx = px - M[r, 0]
-                    dy = py - M[r, 1]
-                    dz = pz - M[r, 2]
-                    inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-                    bx, by, bz, lj = E[r, 0], E[r, 1], E[r, 2], ln[r]
-                    if cp[r] == cq:
-                        gap = pos[r] - iq
-                        if gap < 0:
-                            gap += sq
-                        if gap <= 1 or gap == sq - 1:
-                            continue  # the edge itself or a neighbour: not disjoint
-                        ab = ax * bx + ay * by + az * bz
-                        da = dx * ax + dy * ay + dz * az
-                        db = dx * bx + dy * by + dz * bz
-                        sv = (li * lj + ab) * inv
-                        qq = da * db * inv * inv
-                        f = sv - 2.0 * qq
-                        s += f
-                        b[0, r] += f
-                        if grad:
-                            tb = 2.0 * db * inv
-                            ta = 2.0 * da * inv
-                            ci = lj / li
-                            cj = li / lj
-                            gax += (ci * ax + bx - tb * dx) * inv
-                            gay += (ci * ay + by - tb * dy) * inv
-                            gaz += (ci * az + bz - tb * dz) * inv
-                            b[1, r] += 2.0 * (cj * bx + ax - ta * dx) * inv
-                            b[2, r] += 2.0 * (cj * by + ay - ta * dy) * inv
-                            b[3, r] += 2.0 * (cj * bz + az - ta * dz) * inv
-                            cd = 8.0 * qq - 2.0 * sv
-                            fdx = (cd * dx - tb * ax - ta * bx) * inv
-                            fdy = (cd * dy - tb * ay - ta * by) * inv
-                            fdz = (cd * dz - tb * az - ta * bz) * inv
-                            gmx += fdx
-                            gmy += fdy
-                            gmz += fdz
-                            b[4, r] -= 2.0 * fdx
-                            b[5, r] -= 2.0 * fdy
-                            b[6, r] -= 2.0 * fdz
-                    else:
-                        f = li * lj * inv
-                        s += f
-                        b[0, r] += f
-                        if grad:
-                            ci = lj * inv / li
-                            cj = li * inv / lj
-                            gax += ci * ax
-                            gay += ci * ay
-                            gaz += ci * az
-                            b[1, r] += 2.0 * cj * bx
-                            b[2, r] += 2.0 * cj * by
-                            b[3, r] += 2.0 * cj * bz
-                            cd = -2.0 * f * inv
-                            gmx += cd * dx
-                            gmy += cd * dy
-                            gmz += cd * dz
-                            b[4, r] -= 2.0 * cd * dx
-                            b[5, r] -= 2.0 * cd * dy
-                            b[6, r] -= 2.0 * cd * dz
-                b[0, q] += s
+        l0 = ch * nl // nchunks
+        l1 = (ch + 1) * nl // nchunks
+        room = 1
+        for t in range(l0, l1):
+            a = leaves[t]
+            c = 0
+            for p in range(noff[a], noff[a + 1]):
+                c += hi[npart[p]] - lo[npart[p]]
+            room = max(room, c)
+        st = np.empty((7, room))
+        sc = np.empty(room, np.int64)
+        where = np.empty(m, np.int64)  # staged position of a partner's first edge
+        for t in range(l0, l1):
+            a = leaves[t]
+            c = 0
+            for p in range(noff[a], noff[a + 1]):
+                b = npart[p]
+                where[b] = c
+                for r in range(lo[b], hi[b]):
+                    st[0, c] = M[r, 0]
+                    st[1, c] = M[r, 1]
+                    st[2, c] = M[r, 2]
+                    st[3, c] = E[r, 0]
+                    st[4, c] = E[r, 1]
+                    st[5, c] = E[r, 2]
+                    st[6, c] = ln[r]
+                    sc[c] = cp[r]
+                    c += 1
+            for q in range(lo[a], hi[a]):
+                skip = (where[a] + q - lo[a],
+                        where[leaf_of[nbr[q, 0]]] + nbr[q, 0] - lo[leaf_of[nbr[q, 0]]],
+                        where[leaf_of[nbr[q, 1]]] + nbr[q, 1] - lo[leaf_of[nbr[q, 1]]])
+                li = ln[q]
+                s, wl, gax, gay, gaz, gmx, gmy, gmz = _near_row(
+                    st[0], st[1], st[2], st[3], st[4], st[5], st[6], sc, c, skip, cp[q],
+                    M[q, 0], M[q, 1], M[q, 2], E[q, 0], E[q, 1], E[q, 2], li, grad)
+                rows[0, q] = s
                 if grad:
-                    b[1, q] += 2.0 * gax
-                    b[2, q] += 2.0 * gay
-                    b[3, q] += 2.0 * gaz
-                    b[4, q] += 2.0 * gmx
-                    b[5, q] += 2.0 * gmy
-                    b[6, q] += 2.0 * gmz
-    out = buf[0].copy()
-    for ch in range(1, nchunks):
-        out += buf[ch]
-    return out
+                    w = wl / li  # the length term of ∂f/∂e_I: (l_J/l_I) e_I/|d|²
+                    rows[1, q] = 2.0 * (gax + w * E[q, 0])
+                    rows[2, q] = 2.0 * (gay + w * E[q, 1])
+                    rows[3, q] = 2.0 * (gaz + w * E[q, 2])
+                    rows[4, q] = 2.0 * gmx
+                    rows[5, q] = 2.0 * gmy
+                    rows[6, q] = 2.0 * gmz
+    return rows
 
 
 @nb.njit(cache=True, parallel=True)
@@ -926,6 +967,8 @@ class Frame:
         self.foff, self.fpart = _by_target(far, m)
         self.near = near
         self.leaves = np.flatnonzero(tree.left < 0).astype(np.int64)
+        self._near_lists = _near_lists(near, tree.perm, layout.nxt, layout.prv, tree.lo, tree.hi,
+                                       tree.left)
 
     def _evaluate(self, X: np.ndarray, grad: bool):
         lay, tree = self.layout, self.tree
@@ -933,7 +976,7 @@ class Frame:
         L, C, S, D, Q, T, nc = _cluster_data(E, M, ln, cp, tree.lo, tree.hi, tree.left,
                                              tree.right)
         eF, gL, gS, gC, gD, gQ, gT = _far(L, C, S, D, Q, T, nc, self.foff, self.fpart, grad)
-        part = _near(E, M, ln, cp, pos, size, tree.lo, tree.hi, self.near, _CHUNKS, grad)
+        part = _near(E, M, ln, cp, tree.lo, tree.hi, self.leaves, *self._near_lists, grad)
         energy = 4.0 * lay.k + float(np.sum(part[0])) + float(np.sum(eF))
         if not grad:
             return energy, None
