@@ -37,14 +37,10 @@ from ._layout import Layout
 # a margin, below 1e-4 (energy) and 1e-3 (gradient) on 7_2, FHW and a non-equilateral trefoil at
 # 3 000 to 20 000 edges (worst measured: 9.8e-6 and 6.3e-4, FHW's gradient; 0.2 gave 9.5e-4).
 THETA = 0.175
-# The near field's fast-math: reassociation lets its sums vectorize; no "contract": with it (and
-# reassoc), the code compiled in a first process and the code numba's cache gave later ones
-# different last bits in the gradient (each of the two flags alone did not).
-_NEAR_FASTMATH = {"reassoc", "nsz", "arcp"}
 # Fixed split of the traversal into chunks (the same lists for every thread count).
 _SPLIT_CHUNKS = 16
 # Pieces of the near field's parallel loop over leaves (each edge's sums are its own: any split
-# gives the same bits); a piece stages its leaves' partners in one scratch array.
+# gives the same bits); a piece reuses one work array.
 _NEAR_CHUNKS = 256
 
 
@@ -316,17 +312,10 @@ def _by_target(pairs, m):
 def _near_lists(pairs, perm, nxt, prv, lo, hi, left):
     """What the near field reads besides the edges: every leaf's near partners (CSR
     ``(offsets, partners)`` of :func:`_by_target`: both directions of each pair, a self pair
-    once), per tree position the leaf holding it, and the tree positions of the previous and
-    the next edge along the curve (always in a near partner: boxes of edges that share a
-    vertex touch)."""
-    m = lo.shape[0]
+    once) and per tree position the tree positions of the previous and the next edge along the
+    curve (always in a near partner: boxes of edges that share a vertex touch)."""
     n = perm.shape[0]
-    noff, npart = _by_target(pairs, m)
-    leaf_of = np.empty(n, np.int64)
-    for node in range(m):
-        if left[node] < 0:
-            for q in range(lo[node], hi[node]):
-                leaf_of[q] = node
+    noff, npart = _by_target(pairs, lo.shape[0])
     at = np.empty(n, np.int64)
     for q in range(n):
         at[perm[q]] = q
@@ -335,114 +324,120 @@ def _near_lists(pairs, perm, nxt, prv, lo, hi, left):
         i = perm[q]
         nbr[q, 0] = at[prv[i]]
         nbr[q, 1] = at[nxt[i]]
-    return noff, npart, leaf_of, nbr
+    return noff, npart, nbr
 
 
-@nb.njit(cache=True, fastmath=_NEAR_FASTMATH, error_model="numpy", inline="always")
-def _near_row(mx, my, mz, ex, ey, ez, ln, cp, count, skip, cq, px, py, pz, ax, ay, az, li, grad):
-    """One edge (midpoint ``p``, edge vector ``a``, length ``li``, component ``cq``) against
-    ``count`` staged edges: its ordered sum ``Σ_J f`` and, with ``grad``, ``Σ_J l_J/|d|²`` and
-    the partial sums of ``∂f/∂e_I`` without its length term and of ``∂f/∂m_I``. Staged edges
-    ``skip`` (the edge itself and its two neighbours) count zero, edges of another component
-    with their length part only: both by selects, so that the loop vectorizes (and so
-    ``error_model="numpy"``: no zero test on the division)."""
-    s = 0.0
-    wl = 0.0
-    gax = gay = gaz = gmx = gmy = gmz = 0.0
-    j0, j1, j2 = skip
-    for r in range(count):
-        dx = px - mx[r]
-        dy = py - my[r]
-        dz = pz - mz[r]
+# The near field's lanes: up to this many edges of a leaf against one partner edge at a time.
+# One work array per parallel piece: lane j's edge at W[_LANES k + j] (k: midpoint, edge
+# vector, length, then its tree position, its neighbours' and its component, as floats: exact
+# below 2^53) and its sums at W[_NW_SUMS + _LANES k + j]. One array, constant offsets plus j:
+# the loop over lanes vectorizes (an index array beside it kept it scalar). No fast-math: a
+# lane's sums are sequential, nothing to reassociate (an earlier near field with "reassoc" and
+# "contract" gave the compiling process and numba's cache different last bits).
+_LANES = 8
+_NW_ID = 7 * _LANES
+_NW_SUMS = 11 * _LANES
+_NW_SIZE = 19 * _LANES
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _near_lanes(W, rx, ry, rz, bx0, by0, bz0, lj, r, cr, grad):
+    """Partner edge ``r`` (midpoint, edge vector, length, tree position and component, the
+    last two as floats) against every lane's edge, added to the lane's sums: ``f`` and, with
+    ``grad``, ``l_J/|d|²`` and the partial ``∂f/∂e_I`` (without its length term) and
+    ``∂f/∂m_I``. The edge itself and its neighbours count zero, an edge of another component
+    its length part only: by selects, no branch."""
+    for j in range(_LANES):
+        px = W[j]
+        py = W[_LANES + j]
+        pz = W[2 * _LANES + j]
+        ax = W[3 * _LANES + j]
+        ay = W[4 * _LANES + j]
+        az = W[5 * _LANES + j]
+        li = W[6 * _LANES + j]
+        dx = px - rx
+        dy = py - ry
+        dz = pz - rz
         inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-        inv = 0.0 if (r == j0 or r == j1 or r == j2) else inv
-        same = cp[r] == cq
-        bx = ex[r] if same else 0.0
-        by = ey[r] if same else 0.0
-        bz = ez[r] if same else 0.0
-        lj = ln[r]
+        skip = r == W[_NW_ID + j] or r == W[_NW_ID + _LANES + j] or r == W[_NW_ID + 2 * _LANES + j]
+        inv = 0.0 if skip else inv
+        same = cr == W[_NW_ID + 3 * _LANES + j]
+        bx = bx0 if same else 0.0
+        by = by0 if same else 0.0
+        bz = bz0 if same else 0.0
         ab = ax * bx + ay * by + az * bz
         da = dx * ax + dy * ay + dz * az
         db = dx * bx + dy * by + dz * bz
         sv = (li * lj + ab) * inv
         qq = da * db * inv * inv
-        s += sv - 2.0 * qq
+        W[_NW_SUMS + j] += sv - 2.0 * qq
         if grad:
             tb = 2.0 * db * inv
             ta = 2.0 * da * inv
-            wl += lj * inv
-            gax += (bx - tb * dx) * inv
-            gay += (by - tb * dy) * inv
-            gaz += (bz - tb * dz) * inv
+            W[_NW_SUMS + _LANES + j] += lj * inv
+            W[_NW_SUMS + 2 * _LANES + j] += (bx - tb * dx) * inv
+            W[_NW_SUMS + 3 * _LANES + j] += (by - tb * dy) * inv
+            W[_NW_SUMS + 4 * _LANES + j] += (bz - tb * dz) * inv
             cd = 8.0 * qq - 2.0 * sv
-            gmx += (cd * dx - tb * ax - ta * bx) * inv
-            gmy += (cd * dy - tb * ay - ta * by) * inv
-            gmz += (cd * dz - tb * az - ta * bz) * inv
-    return s, wl, gax, gay, gaz, gmx, gmy, gmz
+            W[_NW_SUMS + 5 * _LANES + j] += (cd * dx - tb * ax - ta * bx) * inv
+            W[_NW_SUMS + 6 * _LANES + j] += (cd * dy - tb * ay - ta * by) * inv
+            W[_NW_SUMS + 7 * _LANES + j] += (cd * dz - tb * az - ta * bz) * inv
 
 
-@nb.njit(cache=True, parallel=True, fastmath=_NEAR_FASTMATH, error_model="numpy")
-def _near(E, M, ln, cp, lo, hi, leaves, noff, npart, leaf_of, nbr, grad):
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _near(E, M, ln, cp, lo, hi, leaves, noff, npart, nbr, grad):
     """The near field as an ordered sum: every edge of a leaf against every edge of the leaf's
     near partners (itself included), except itself and its neighbours along the curve, with
     the kernel of ``energy.py``. Per edge (tree order): ``rows[0]`` its share ``Σ_J f(I, J)``
     of the energy and, with ``grad``, rows 1–3 and 4–6 the derivatives of the ordered sum
-    (``2 Σ_J ∂f(I, J)``, ``f`` symmetric) in its edge vector and midpoint. A leaf's partners
-    are first copied to one contiguous array (coordinates in rows), so the loop over them
-    vectorizes; every pair is summed twice (once per side), and nothing is shared between
-    edges: the same bits for any thread count and any split of the leaves."""
+    (``2 Σ_J ∂f(I, J)``, ``f`` symmetric) in its edge vector and midpoint. A leaf's edges
+    are the lanes (:func:`_near_lanes`), the partners' edges go by one at a time; every pair is
+    summed twice (once per side), and nothing is shared between edges: the same bits for any
+    thread count and any split of the leaves."""
     n = ln.shape[0]
-    m = lo.shape[0]
     nl = leaves.shape[0]
     rows = np.empty((7 if grad else 1, n))
     nchunks = min(nl, _NEAR_CHUNKS)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
-        l0 = ch * nl // nchunks
-        l1 = (ch + 1) * nl // nchunks
-        room = 1
-        for t in range(l0, l1):
+        W = np.zeros(_NW_SIZE)
+        for t in range(ch * nl // nchunks, (ch + 1) * nl // nchunks):
             a = leaves[t]
-            c = 0
-            for p in range(noff[a], noff[a + 1]):
-                c += hi[npart[p]] - lo[npart[p]]
-            room = max(room, c)
-        st = np.empty((7, room))
-        sc = np.empty(room, np.int64)
-        where = np.empty(m, np.int64)  # staged position of a partner's first edge
-        for t in range(l0, l1):
-            a = leaves[t]
-            c = 0
-            for p in range(noff[a], noff[a + 1]):
-                b = npart[p]
-                where[b] = c
-                for r in range(lo[b], hi[b]):
-                    st[0, c] = M[r, 0]
-                    st[1, c] = M[r, 1]
-                    st[2, c] = M[r, 2]
-                    st[3, c] = E[r, 0]
-                    st[4, c] = E[r, 1]
-                    st[5, c] = E[r, 2]
-                    st[6, c] = ln[r]
-                    sc[c] = cp[r]
-                    c += 1
-            for q in range(lo[a], hi[a]):
-                skip = (where[a] + q - lo[a],
-                        where[leaf_of[nbr[q, 0]]] + nbr[q, 0] - lo[leaf_of[nbr[q, 0]]],
-                        where[leaf_of[nbr[q, 1]]] + nbr[q, 1] - lo[leaf_of[nbr[q, 1]]])
-                li = ln[q]
-                s, wl, gax, gay, gaz, gmx, gmy, gmz = _near_row(
-                    st[0], st[1], st[2], st[3], st[4], st[5], st[6], sc, c, skip, cp[q],
-                    M[q, 0], M[q, 1], M[q, 2], E[q, 0], E[q, 1], E[q, 2], li, grad)
-                rows[0, q] = s
-                if grad:
-                    w = wl / li  # the length term of ∂f/∂e_I: (l_J/l_I) e_I/|d|²
-                    rows[1, q] = 2.0 * (gax + w * E[q, 0])
-                    rows[2, q] = 2.0 * (gay + w * E[q, 1])
-                    rows[3, q] = 2.0 * (gaz + w * E[q, 2])
-                    rows[4, q] = 2.0 * gmx
-                    rows[5, q] = 2.0 * gmy
-                    rows[6, q] = 2.0 * gmz
+            for q0 in range(lo[a], hi[a], _LANES):
+                count = min(_LANES, hi[a] - q0)
+                for j in range(_LANES):
+                    q = q0 + min(j, count - 1)  # lanes past the leaf's end repeat its last edge
+                    W[j] = M[q, 0]
+                    W[_LANES + j] = M[q, 1]
+                    W[2 * _LANES + j] = M[q, 2]
+                    W[3 * _LANES + j] = E[q, 0]
+                    W[4 * _LANES + j] = E[q, 1]
+                    W[5 * _LANES + j] = E[q, 2]
+                    W[6 * _LANES + j] = ln[q]
+                    W[_NW_ID + j] = q
+                    W[_NW_ID + _LANES + j] = nbr[q, 0]
+                    W[_NW_ID + 2 * _LANES + j] = nbr[q, 1]
+                    W[_NW_ID + 3 * _LANES + j] = cp[q]
+                W[_NW_SUMS:] = 0.0
+                for p in range(noff[a], noff[a + 1]):
+                    b = npart[p]
+                    for r in range(lo[b], hi[b]):
+                        if grad:
+                            _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
+                                        ln[r], float(r), float(cp[r]), True)
+                        else:
+                            _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
+                                        ln[r], float(r), float(cp[r]), False)
+                for j in range(count):
+                    q = q0 + j
+                    rows[0, q] = W[_NW_SUMS + j]
+                    if grad:
+                        # the length term of ∂f/∂e_I: (l_J/l_I) e_I/|d|²
+                        w = W[_NW_SUMS + _LANES + j] / ln[q]
+                        for k in range(3):
+                            ga = W[_NW_SUMS + (2 + k) * _LANES + j]
+                            rows[1 + k, q] = 2.0 * (ga + w * E[q, k])
+                            rows[4 + k, q] = 2.0 * W[_NW_SUMS + (5 + k) * _LANES + j]
     return rows
 
 
