@@ -32,14 +32,42 @@ import numpy as np
 # Targets of the far field per parallel piece: m / _FAR_CHUNKS (each target's sums are its own,
 # so any split gives the same bits; a piece reuses one work array).
 _FAR_CHUNKS = 256
+# Levels of the hierarchy with fewer nodes than this are walked by one thread (a parallel loop
+# costs more than their work).
+_PARALLEL_LEVEL = 256
 
 @nb.njit(cache=True)
+def _levels(left, right):
+    """The nodes by depth: ``(order, offsets)``, the nodes of depth ``d`` being
+    ``order[offsets[d]:offsets[d + 1]]`` (in index order; a parent comes before its children)."""
+    m = left.shape[0]
+    depth = np.zeros(m, np.int64)
+    for node in range(m):
+        if left[node] >= 0:
+            depth[left[node]] = depth[node] + 1
+            depth[right[node]] = depth[node] + 1
+    nd = depth.max() + 1 if m > 0 else 0
+    offsets = np.zeros(nd + 1, np.int64)
+    for node in range(m):
+        offsets[depth[node] + 1] += 1
+    for d in range(nd):
+        offsets[d + 1] += offsets[d]
+    fill = offsets[:nd].copy()
+    order = np.empty(m, np.int64)
+    for node in range(m):
+        order[fill[depth[node]]] = node
+        fill[depth[node]] += 1
+    return order, offsets
+
+
+@nb.njit(cache=True, parallel=True)
 def _cluster_data(E, M, ln, cp, lo, hi, left, right):
     """Per node, bottom-up: total length ``L``, length-weighted centre ``c``, summed edge vector
     ``S``, tangent dipole ``D = Σ e_I δ_Iᵀ``, length quadrupole ``Q = Σ l_I δ_I δ_Iᵀ``, tangent
     quadrupole ``T_acd = Σ e_I,a δ_I,c δ_I,d`` (``δ_I = m_I − c``) and the node's component (−1
     for a node holding edges of several components). A parent takes its children's moments
-    moved to its centre (``δ = δ_child + h``, ``h = c_child − c``; ``Σ l δ_child = 0``)."""
+    moved to its centre (``δ = δ_child + h``, ``h = c_child − c``; ``Σ l δ_child = 0``). One
+    depth at a time from the deepest, its nodes in parallel (each writes its own row)."""
     m = lo.shape[0]
     L = np.empty(m)
     C = np.empty((m, 3))
@@ -48,60 +76,88 @@ def _cluster_data(E, M, ln, cp, lo, hi, left, right):
     Q = np.zeros((m, 3, 3))
     T = np.zeros((m, 3, 3, 3))
     nc = np.empty(m, np.int64)
-    dl = np.empty(3)
-    for node in range(m - 1, -1, -1):
-        if left[node] < 0:
-            tot = 0.0
-            cx = cy = cz = sx = sy = sz = 0.0
-            c0 = cp[lo[node]]
-            for q in range(lo[node], hi[node]):
-                w = ln[q]
-                tot += w
-                cx += w * M[q, 0]
-                cy += w * M[q, 1]
-                cz += w * M[q, 2]
-                sx += E[q, 0]
-                sy += E[q, 1]
-                sz += E[q, 2]
-                if cp[q] != c0:
-                    c0 = -1
-            L[node] = tot
-            C[node, 0] = cx / tot
-            C[node, 1] = cy / tot
-            C[node, 2] = cz / tot
-            S[node, 0] = sx
-            S[node, 1] = sy
-            S[node, 2] = sz
-            nc[node] = c0
-            for q in range(lo[node], hi[node]):
-                for k in range(3):
-                    dl[k] = M[q, k] - C[node, k]
-                for a in range(3):
-                    for b in range(3):
-                        D[node, a, b] += E[q, a] * dl[b]
-                        Q[node, a, b] += ln[q] * dl[a] * dl[b]
-                        for c in range(3):
-                            T[node, a, b, c] += E[q, a] * dl[b] * dl[c]
+    order, offsets = _levels(left, right)
+    for d in range(offsets.shape[0] - 2, -1, -1):
+        if offsets[d + 1] - offsets[d] >= _PARALLEL_LEVEL:
+            for t in nb.prange(offsets[d], offsets[d + 1]):
+                _node_moments(order[t], E, M, ln, cp, lo, hi, left, right, L, C, S, D, Q, T, nc)
         else:
-            a0, b0 = left[node], right[node]
-            tot = L[a0] + L[b0]
-            L[node] = tot
-            for k in range(3):
-                C[node, k] = (L[a0] * C[a0, k] + L[b0] * C[b0, k]) / tot
-                S[node, k] = S[a0, k] + S[b0, k]
-            for ch in (a0, b0):
-                for k in range(3):
-                    dl[k] = C[ch, k] - C[node, k]
-                for a in range(3):
-                    for b in range(3):
-                        D[node, a, b] += D[ch, a, b] + S[ch, a] * dl[b]
-                        Q[node, a, b] += Q[ch, a, b] + L[ch] * dl[a] * dl[b]
-                        for c in range(3):
-                            T[node, a, b, c] += (T[ch, a, b, c] + D[ch, a, b] * dl[c]
-                                                 + D[ch, a, c] * dl[b]
-                                                 + S[ch, a] * dl[b] * dl[c])
-            nc[node] = nc[a0] if nc[a0] == nc[b0] else -1
+            for t in range(offsets[d], offsets[d + 1]):
+                _node_moments(order[t], E, M, ln, cp, lo, hi, left, right, L, C, S, D, Q, T, nc)
     return L, C, S, D, Q, T, nc
+
+
+@nb.njit(cache=True, inline="always")
+def _node_moments(node, E, M, ln, cp, lo, hi, left, right, L, C, S, D, Q, T, nc):
+    if left[node] < 0:
+        _leaf_moments(E, M, ln, cp, lo[node], hi[node], node, L, C, S, D, Q, T, nc)
+    else:
+        _parent_moments(left[node], right[node], node, L, C, S, D, Q, T, nc)
+
+
+@nb.njit(cache=True, inline="always")
+def _leaf_moments(E, M, ln, cp, q0, q1, node, L, C, S, D, Q, T, nc):
+    """A leaf's moments from its edges ``q0 ≤ q < q1`` (see :func:`_cluster_data`)."""
+    tot = 0.0
+    cx = cy = cz = sx = sy = sz = 0.0
+    c0 = cp[q0]
+    for q in range(q0, q1):
+        w = ln[q]
+        tot += w
+        cx += w * M[q, 0]
+        cy += w * M[q, 1]
+        cz += w * M[q, 2]
+        sx += E[q, 0]
+        sy += E[q, 1]
+        sz += E[q, 2]
+        if cp[q] != c0:
+            c0 = -1
+    L[node] = tot
+    C[node, 0] = cx / tot
+    C[node, 1] = cy / tot
+    C[node, 2] = cz / tot
+    S[node, 0] = sx
+    S[node, 1] = sy
+    S[node, 2] = sz
+    nc[node] = c0
+    for q in range(q0, q1):
+        d0 = M[q, 0] - C[node, 0]
+        d1 = M[q, 1] - C[node, 1]
+        d2 = M[q, 2] - C[node, 2]
+        for a in range(3):
+            for b in range(3):
+                db = d0 if b == 0 else (d1 if b == 1 else d2)
+                da = d0 if a == 0 else (d1 if a == 1 else d2)
+                D[node, a, b] += E[q, a] * db
+                Q[node, a, b] += ln[q] * da * db
+                for c in range(3):
+                    dc = d0 if c == 0 else (d1 if c == 1 else d2)
+                    T[node, a, b, c] += E[q, a] * db * dc
+
+
+@nb.njit(cache=True, inline="always")
+def _parent_moments(a0, b0, node, L, C, S, D, Q, T, nc):
+    """A parent's moments from its children's (see :func:`_cluster_data`)."""
+    tot = L[a0] + L[b0]
+    L[node] = tot
+    for k in range(3):
+        C[node, k] = (L[a0] * C[a0, k] + L[b0] * C[b0, k]) / tot
+        S[node, k] = S[a0, k] + S[b0, k]
+    for ch in (a0, b0):
+        h0 = C[ch, 0] - C[node, 0]
+        h1 = C[ch, 1] - C[node, 1]
+        h2 = C[ch, 2] - C[node, 2]
+        for a in range(3):
+            for b in range(3):
+                hb = h0 if b == 0 else (h1 if b == 1 else h2)
+                ha = h0 if a == 0 else (h1 if a == 1 else h2)
+                D[node, a, b] += D[ch, a, b] + S[ch, a] * hb
+                Q[node, a, b] += Q[ch, a, b] + L[ch] * ha * hb
+                for c in range(3):
+                    hc = h0 if c == 0 else (h1 if c == 1 else h2)
+                    T[node, a, b, c] += (T[ch, a, b, c] + D[ch, a, b] * hc + D[ch, a, c] * hb
+                                         + S[ch, a] * hb * hc)
+    nc[node] = nc[a0] if nc[a0] == nc[b0] else -1
 
 
 # ------------------------------------------------------------------------------------------------
@@ -593,7 +649,7 @@ def _quadrupole_gradient(gal, gbe, scale, out):
                 out[a, c, d] = scale * g
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _push_down(L, C, S, D, gL, gS, gC, gD, gQ, gT, left, right):
     """What every leaf's edges receive from the far field of the leaf and its ancestors.
 
@@ -602,11 +658,13 @@ def _push_down(L, C, S, D, gL, gS, gC, gD, gQ, gT, left, right):
     centre ``c = Σ l m / L``, with ``g_c`` including the explicit dependence of ``D`` and ``T``
     on ``c``: ``−G_Dᵀ S`` and ``−2 Σ G_T,ack D_ac``; ``Q``'s vanishes, ``Σ l δ = 0``) and
     ``b_a = g_S,a + G_D,ac δ_c + G_T,acd δ_c δ_d``. The polynomials are moved to the
-    children's centres and summed down. Columns: 0 ``a0``, 1–3 ``a1``, 4–12 ``A2``, 13–15
-    ``b0``, 16–24 ``B1``, 25–51 ``B2`` (row-major, ``A2`` and ``B2`` symmetrized)."""
+    children's centres and summed down, one depth at a time, each node taking its parent's
+    (in parallel within a depth). Columns: 0 ``a0``, 1–3 ``a1``, 4–12 ``A2``, 13–15 ``b0``,
+    16–24 ``B1``, 25–51 ``B2`` (row-major, ``A2`` and ``B2`` symmetrized)."""
     m = L.shape[0]
-    acc = np.zeros((m, 52))
-    for node in range(m):
+    acc = np.empty((m, 52))
+    for nn in nb.prange(m):
+        node = np.int64(nn)
         g = gD[node]
         t = gT[node]
         r = acc[node]
@@ -625,35 +683,54 @@ def _push_down(L, C, S, D, gL, gS, gC, gD, gQ, gT, left, right):
                 for i in range(3):
                     r[25 + 9 * k + 3 * j + i] = 0.5 * (t[k, j, i] + t[k, i, j])
         r[0] = gL[node]
-    h = np.empty(3)
-    for node in range(m):  # parents come before their children
-        r = acc[node]
-        for child in (left[node], right[node]):
-            if child < 0:
-                continue
-            o = acc[child]
-            for k in range(3):
-                h[k] = C[child, k] - C[node, k]
-            # a(δ + h), b(δ + h) as polynomials in the child's δ
-            o[0] += r[0]
-            for k in range(3):
-                o[0] += r[1 + k] * h[k]
-                o[1 + k] += r[1 + k]
-                o[13 + k] += r[13 + k]
-                for j in range(3):
-                    a2 = r[4 + 3 * k + j]
-                    o[0] += a2 * h[k] * h[j]
-                    o[1 + k] += 2.0 * a2 * h[j]
-                    o[4 + 3 * k + j] += a2
-                    b1 = r[16 + 3 * k + j]
-                    o[13 + k] += b1 * h[j]
-                    o[16 + 3 * k + j] += b1
-                    for i in range(3):
-                        b2 = r[25 + 9 * k + 3 * j + i]
-                        o[13 + k] += b2 * h[j] * h[i]
-                        o[16 + 3 * k + j] += 2.0 * b2 * h[i]
-                        o[25 + 9 * k + 3 * j + i] += b2
+    order, offsets = _levels(left, right)
+    parent = np.empty(m, np.int64)
+    for node in range(m):
+        if left[node] >= 0:
+            parent[left[node]] = node
+            parent[right[node]] = node
+    for d in range(1, offsets.shape[0] - 1):
+        if offsets[d + 1] - offsets[d] >= _PARALLEL_LEVEL:
+            for t in nb.prange(offsets[d], offsets[d + 1]):
+                node = order[t]
+                _from_parent(acc, C, parent[node], node)
+        else:
+            for t in range(offsets[d], offsets[d + 1]):
+                node = order[t]
+                _from_parent(acc, C, parent[node], node)
     return acc
+
+
+@nb.njit(cache=True, inline="always")
+def _from_parent(acc, C, node, child):
+    """Add the polynomials of ``node`` moved to its child's centre to the child's."""
+    r = acc[node]
+    o = acc[child]
+    h0 = C[child, 0] - C[node, 0]
+    h1 = C[child, 1] - C[node, 1]
+    h2 = C[child, 2] - C[node, 2]
+    # a(δ + h), b(δ + h) as polynomials in the child's δ
+    o[0] += r[0]
+    for k in range(3):
+        hk = h0 if k == 0 else (h1 if k == 1 else h2)
+        o[0] += r[1 + k] * hk
+        o[1 + k] += r[1 + k]
+        o[13 + k] += r[13 + k]
+        for j in range(3):
+            hj = h0 if j == 0 else (h1 if j == 1 else h2)
+            a2 = r[4 + 3 * k + j]
+            o[0] += a2 * hk * hj
+            o[1 + k] += 2.0 * a2 * hj
+            o[4 + 3 * k + j] += a2
+            b1 = r[16 + 3 * k + j]
+            o[13 + k] += b1 * hj
+            o[16 + 3 * k + j] += b1
+            for i in range(3):
+                hi = h0 if i == 0 else (h1 if i == 1 else h2)
+                b2 = r[25 + 9 * k + 3 * j + i]
+                o[13 + k] += b2 * hj * hi
+                o[16 + 3 * k + j] += 2.0 * b2 * hi
+                o[25 + 9 * k + 3 * j + i] += b2
 
 
 @nb.njit(cache=True, parallel=True)

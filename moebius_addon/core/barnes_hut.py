@@ -312,8 +312,9 @@ def _by_target(pairs, m):
 def _near_lists(pairs, perm, nxt, prv, lo, hi, left):
     """What the near field reads besides the edges: every leaf's near partners (CSR
     ``(offsets, partners)`` of :func:`_by_target`: both directions of each pair, a self pair
-    once) and per tree position the tree positions of the previous and the next edge along the
-    curve (always in a near partner: boxes of edges that share a vertex touch)."""
+    once), per tree position the tree positions of the previous and the next edge along the
+    curve (always in a near partner: boxes of edges that share a vertex touch), and per edge
+    its tree position."""
     n = perm.shape[0]
     noff, npart = _by_target(pairs, lo.shape[0])
     at = np.empty(n, np.int64)
@@ -324,7 +325,7 @@ def _near_lists(pairs, perm, nxt, prv, lo, hi, left):
         i = perm[q]
         nbr[q, 0] = at[prv[i]]
         nbr[q, 1] = at[nxt[i]]
-    return noff, npart, nbr
+    return noff, npart, nbr, at
 
 
 # The near field's lanes: up to this many edges of a leaf against one partner edge at a time.
@@ -441,6 +442,24 @@ def _near(E, M, ln, cp, lo, hi, leaves, noff, npart, nbr, grad):
     return rows
 
 
+@nb.njit(cache=True, parallel=True)
+def _to_vertices(part, prv, at):
+    """The gradient ``(N, 3)`` from the derivatives in the edge vectors (rows 1–3 of ``part``)
+    and midpoints (rows 4–6) in tree order: ``e_I = P[nxt I] − P[I]`` and
+    ``m_I = (P[I] + P[nxt I]) / 2``, so vertex ``v`` takes ``½ ∂m − ∂e`` of the edge it starts
+    and ``∂e + ½ ∂m`` of the edge ``prv[v]`` it ends. Per vertex, in parallel."""
+    n = at.shape[0]
+    G = np.empty((n, 3))
+    for vv in nb.prange(n):
+        v = np.int64(vv)
+        q = at[v]
+        p = at[prv[v]]
+        for k in range(3):
+            G[v, k] = (0.5 * part[4 + k, q] - part[1 + k, q]) + (part[1 + k, p]
+                                                                 + 0.5 * part[4 + k, p])
+    return G
+
+
 # ------------------------------------------------------------------------------------------------
 # public: a frame (hierarchy + split) and evaluations with it
 
@@ -466,9 +485,11 @@ class Frame:
         tree = bvh.build(X, layout, leaf_size)
         self.tree = tree
         bmin, bmax = bvh.segment_boxes(tree, X, layout)
-        E, M, ln, cp, pos, size = _edge_arrays(X, layout.nxt, layout.comp, layout.starts,
-                                               tree.perm)
-        nc = _cluster_data(E, M, ln, cp, tree.lo, tree.hi, tree.left, tree.right)[-1]
+        edges = _edge_arrays(X, layout.nxt, layout.comp, layout.starts, tree.perm)
+        clusters = _cluster_data(*edges[:4], tree.lo, tree.hi, tree.left, tree.right)
+        # what an evaluation at the frame's own polygon reuses (the engine's next call)
+        self._own = (X.copy(), edges, clusters)
+        nc = clusters[-1]
         m = tree.size
         # each list holds about 2.8–3.9 m / theta pairs (measured from 5 000 to 100 000 edges)
         cap = max(256, int(8 * m / self.theta / _SPLIT_CHUNKS))
@@ -479,14 +500,17 @@ class Frame:
         self.foff, self.fpart = _by_target(far, m)
         self.near = near
         self.leaves = np.flatnonzero(tree.left < 0).astype(np.int64)
-        self._near_lists = _near_lists(near, tree.perm, layout.nxt, layout.prv, tree.lo, tree.hi,
-                                       tree.left)
+        *self._near_lists, self._at = _near_lists(near, tree.perm, layout.nxt, layout.prv,
+                                                  tree.lo, tree.hi, tree.left)
 
     def _evaluate(self, X: np.ndarray, grad: bool):
         lay, tree = self.layout, self.tree
-        E, M, ln, cp, pos, size = _edge_arrays(X, lay.nxt, lay.comp, lay.starts, tree.perm)
-        L, C, S, D, Q, T, nc = _cluster_data(E, M, ln, cp, tree.lo, tree.hi, tree.left,
-                                             tree.right)
+        X0, edges, clusters = self._own
+        if not np.array_equal(X, X0):
+            edges = _edge_arrays(X, lay.nxt, lay.comp, lay.starts, tree.perm)
+            clusters = _cluster_data(*edges[:4], tree.lo, tree.hi, tree.left, tree.right)
+        E, M, ln, cp, pos, size = edges
+        L, C, S, D, Q, T, nc = clusters
         eF, gL, gS, gC, gD, gQ, gT = _far(L, C, S, D, Q, T, nc, self.foff, self.fpart, grad)
         part = _near(E, M, ln, cp, tree.lo, tree.hi, self.leaves, *self._near_lists, grad)
         energy = 4.0 * lay.k + float(np.sum(part[0])) + float(np.sum(eF))
@@ -494,14 +518,7 @@ class Frame:
             return energy, None
         acc = _push_down(L, C, S, D, gL, gS, gC, gD, gQ, gT, tree.left, tree.right)
         _far_to_edges(E, M, ln, C, tree.lo, tree.hi, self.leaves, acc, part)
-        ga = part[1:4].T
-        gm = part[4:7].T
-        G = np.zeros_like(X)
-        # e_I = P[nxt I] − P[I], m_I = (P[I] + P[nxt I]) / 2, with I = perm[q]
-        i = tree.perm
-        G[i] += 0.5 * gm - ga
-        G[lay.nxt[i]] += ga + 0.5 * gm
-        return energy, G
+        return energy, _to_vertices(part, lay.prv, self._at)
 
     def energy(self, X: np.ndarray) -> float:
         """The approximated energy at ``X`` with this frame's split (cluster data refitted)."""
