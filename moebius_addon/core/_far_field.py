@@ -36,6 +36,11 @@ _FAR_CHUNKS = 256
 # costs more than their work).
 _PARALLEL_LEVEL = 256
 
+
+# ------------------------------------------------------------------------------------------------
+# cluster moments
+
+
 @nb.njit(cache=True)
 def _levels(left, right):
     """The nodes by depth: ``(order, offsets)``, the nodes of depth ``d`` being
