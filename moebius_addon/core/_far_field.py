@@ -574,12 +574,13 @@ def _far(L, C, S, D, Q, T, nc, foff, fpart, grad):
     m = L.shape[0]
     rows = _moment_rows(L, C, S, D, Q, T)
     eF = np.zeros(m)
-    gL = np.zeros(m)
-    gS = np.zeros((m, 3))
-    gC = np.zeros((m, 3))
-    gD = np.zeros((m, 3, 3))
-    gQ = np.zeros((m, 3, 3))
-    gT = np.zeros((m, 3, 3, 3))
+    mg = m if grad else 0  # the derivatives' arrays are empty for the energy alone
+    gL = np.zeros(mg)
+    gS = np.zeros((mg, 3))
+    gC = np.zeros((mg, 3))
+    gD = np.zeros((mg, 3, 3))
+    gQ = np.zeros((mg, 3, 3))
+    gT = np.zeros((mg, 3, 3, 3))
     nchunks = min(m, _FAR_CHUNKS)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
