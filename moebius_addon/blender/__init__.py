@@ -15,8 +15,10 @@ from .api import (
     add_knot,
     apply_conversion,
     apply_frame,
+    check_edge_count,
     clear_animation,
     convert_object,
+    edge_limit,
     energy,
     export_flow,
     knot_polygons,
@@ -37,7 +39,8 @@ from .keyframes import (
 
 __all__ = [
     "EDGE_LIMIT", "ENERGY_PROP", "ObjectRelaxation", "add_knot", "apply_conversion",
-    "apply_frame", "clear_animation", "convert_object", "curve_polygons", "energy", "export_flow",
+    "apply_frame", "check_edge_count", "clear_animation", "convert_object", "curve_polygons",
+    "edge_limit", "energy", "export_flow",
     "keyed_energies", "keyed_frames", "knot_polygons", "make_curve_object", "object_polylines",
     "prepare_conversion", "relax_object", "relax_settings", "remove_flow_keyframes",
     "show_gradients", "write_flow_keyframes", "write_polygons",

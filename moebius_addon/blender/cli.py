@@ -17,6 +17,7 @@ import time
 
 import bpy
 
+from ..core.engine import AUTO_TREE_FROM
 from . import api, geometry
 
 
@@ -43,6 +44,12 @@ def _parser() -> argparse.ArgumentParser:
                    help="optimizer (default auto: the implicit gradient for a knotted curve, "
                         "the paper's explicit projected gradient for unknots and links); ncg, "
                         "lbfgs and nesterov hold the edge lengths by a penalty")
+    p.add_argument("--engine", default=api.DEFAULT_ENGINE, choices=[e for e, *_ in api.ENGINES],
+                   help="how the energy is evaluated (default auto: exact below "
+                        f"{AUTO_TREE_FROM} edges, the Barnes-Hut tree from there on)")
+    p.add_argument("--theta", type=float, default=None,
+                   help="admissibility of the tree engine in (0, 2) (default "
+                        f"{api.DEFAULT_THETA:g}; smaller is more accurate and slower)")
     p.add_argument("--penalty", type=float, default=None, metavar="ALPHA",
                    help="penalty weight of ncg, lbfgs and nesterov (default "
                         f"{api.DEFAULT_PENALTY:g}; larger keeps edge lengths closer)")
@@ -74,16 +81,18 @@ def main(argv: list[str]) -> int:
     try:
         # every option is checked before anything is added, converted or relaxed
         api.check_relax_options(args.max_iterations, args.tolerance, args.stride,
-                                args.frame_start, args.method, args.penalty)
+                                args.frame_start, args.method, args.penalty, args.engine,
+                                args.theta)
+        run = dict(metric=args.metric, method=args.method, engine=args.engine)
         if args.knot:
-            api.check_knot(args.knot, args.edges)
+            api.check_knot(args.knot, args.edges, **run)
         for path in args.export:
             api.export_suffix(path)
         if args.open:
             bpy.ops.wm.open_mainfile(filepath=args.open)
         if args.knot:
             obj = api.add_knot(args.knot, args.edges, p=args.pq[0], q=args.pq[1],
-                               seed=args.seed)
+                               seed=args.seed, **run)
         else:
             obj = bpy.data.objects.get(args.object)
             if obj is None:
@@ -91,18 +100,20 @@ def main(argv: list[str]) -> int:
                 raise ValueError(f"no object '{args.object}' (objects: {names})")
             if args.edges is not None or not _is_converted(obj):
                 obj = api.convert_object(obj, edges=args.edges or 100,
-                                         close_open=args.close_open)
+                                         close_open=args.close_open, **run)
         print(f"moebius: '{obj.name}', {sum(len(s.points) for s in obj.data.splines)} edges, "
               f"energy {obj[api.ENERGY_PROP]:.6g}")
         if not args.no_relax:
             t0 = time.perf_counter()
             method, why = api.choose_method(args.method, geometry.curve_polygons(obj))
             result = api.relax_object(obj, metric=args.metric, method=method,
-                                      penalty=args.penalty, max_iterations=args.max_iterations,
+                                      penalty=args.penalty, engine=args.engine,
+                                      theta=args.theta, max_iterations=args.max_iterations,
                                       tolerance=args.tolerance, frame_start=args.frame_start,
                                       keyframe_stride=args.stride)
             scene = bpy.context.scene
-            print(f"moebius: {method}{f' ({why})' if why else ''}, {result.nit} iterations in "
+            print(f"moebius: {method}{f' ({why})' if why else ''}, "
+                  f"{result.stats['engine']} engine, {result.nit} iterations in "
                   f"{time.perf_counter() - t0:.2f} s, energy "
                   f"{result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, "
                   f"frames {scene.frame_start}-{scene.frame_end} ({result.message})")

@@ -12,6 +12,8 @@ from collections.abc import Sequence
 import bpy
 import numpy as np
 
+from . import keyframes
+
 #: Samples per Bezier segment (or per NURBS control point) when reading a smooth curve; the
 #: result is resampled to equal edges afterwards, so this only sets how faithfully the shape
 #: is followed.
@@ -161,7 +163,8 @@ def object_polylines(obj: bpy.types.Object) -> list[tuple[np.ndarray, bool]]:
 
 
 def curve_polygons(obj: bpy.types.Object) -> list[np.ndarray]:
-    """Polygons of a curve made of cyclic poly splines, as shown at the current frame.
+    """Polygons of a curve made of cyclic poly splines, as shown at the current frame (for a
+    flow keyed as shape keys: their mix, see :func:`.keyframes.flow_shape_at`).
 
     Parameters
     ----------
@@ -193,6 +196,10 @@ def curve_polygons(obj: bpy.types.Object) -> list[np.ndarray]:
                 f"curve '{obj.name}' has {what} spline; convert it to equal-edge closed "
                 "polygons first (Möbius ▸ Polygon ▸ Convert)"
             )
+    scene = bpy.context.scene
+    mixed = keyframes.flow_shape_at(obj, scene.frame_current + scene.frame_subframe)
+    if mixed is not None:  # a flow keyed as shape keys: what they show, not the points below
+        return np.split(mixed, np.cumsum([len(s.points) for s in splines])[:-1])
     return [p for p, _ in _curve_polylines(obj)]
 
 

@@ -1,10 +1,25 @@
-"""Keyframes of a relaxation: spline point positions on the curve data, energy on the object.
+"""Keyframes of a relaxation: the point positions of every iterate on the curve data, the energy
+on the object.
+
+The positions are stored one of two ways, by the curve's size (measured in docs/blender.md,
+"How the keys are stored"):
+
+* up to :data:`PER_POINT_MAX` points, one F-curve per coordinate of every spline point
+  (``splines[s].points[i].co``): the animated values are the curve's own points, which
+  Blender's exporters and any script read directly;
+* above it, one absolute shape key per iterate on the curve data and one F-curve for the key's
+  evaluation time (``eval_time``, keyed on each key's position): writing and playing cost about
+  N per iterate instead of one F-curve per coordinate. Blender shows the mix of the keys;
+  :func:`flow_shape_at` computes that mix (``geometry.curve_polygons`` reads it), and
+  ``export.export_flow`` writes it into the points while it exports (the exporters read the
+  points, not the keys).
 
 Blender 4.4+ stores F-curves in *channelbags* of slotted actions; 4.2-4.3 keep them on
 ``action.fcurves``. Keys are written in bulk (``keyframe_points.add`` + ``foreach_set``) with
-LINEAR interpolation: the core's step-size control keeps the straight segment between two
-successive iterates free of self-intersections, so linear in-betweens never pass the curve
-through itself (with ``keyframe_stride`` > 1 that guarantee is for the skipped iterates only).
+LINEAR interpolation, and the shape keys with KEY_LINEAR: the core's step-size control keeps
+the straight segment between two successive iterates free of self-intersections, so linear
+in-betweens never pass the curve through itself (with ``keyframe_stride`` > 1 that guarantee
+is for the skipped iterates only).
 """
 
 from __future__ import annotations
@@ -17,17 +32,26 @@ import numpy as np
 #: Custom property on the object that holds (and is keyframed with) the Möbius energy.
 ENERGY_PROP = "moebius_energy"
 ENERGY_PATH = f'["{ENERGY_PROP}"]'
+#: Curves of at most this many points are keyed per point, larger ones as shape keys (every
+#: size the add-on took before shape keys keeps its per-point keys).
+PER_POINT_MAX = 5000
 _POINT_PATH = "splines[{s}].points[{i}].co"
 _GROUP = "Möbius flow"
 _LINEAR = 1  # index of 'LINEAR' in Keyframe.interpolation (CONSTANT, LINEAR, BEZIER, ...)
+_EVAL_TIME = "eval_time"
+_FLOW_KEY = "moebius_flow"  # custom property that marks the shape keys (Key) of a flow
+_KEY_NAME = "Möbius {k}"  # shape key of iterate k
 
 
 def _action_name(idblock: bpy.types.ID) -> str:
-    """``<name>Action`` for an object, ``<name>CurveAction`` for its curve data.
+    """``<name>Action`` for an object, ``<name>CurveAction`` for its curve data,
+    ``<curve>KeyAction`` for the curve's shape keys.
 
     A converted curve and its data share one name, so one pattern for both would give
     ``<name>Action`` and ``<name>Action.001``.
     """
+    if isinstance(idblock, bpy.types.Key):  # named "Key", "Key.001", ...: by its curve
+        return f"{idblock.user.name}KeyAction"
     # the RNA class name, not ID.id_type: Blender 3.4 (the legacy install) has no id_type
     kind = "" if isinstance(idblock, bpy.types.Object) else type(idblock).bl_rna.identifier
     return f"{idblock.name}{kind}Action"
@@ -70,8 +94,40 @@ def _drop_empty_action(idblock: bpy.types.ID) -> None:
             bpy.data.actions.remove(action)
 
 
+def _flow_key(curve: bpy.types.Curve) -> bpy.types.Key | None:
+    """The shape keys of ``curve`` if :func:`write_flow_keyframes` wrote them, else None."""
+    key = curve.shape_keys
+    return key if key is not None and key.get(_FLOW_KEY) else None
+
+
+def check_flow_target(obj: bpy.types.Object) -> None:
+    """ValueError, before a run, when the flow of ``obj`` could not be keyed: a curve above
+    :data:`PER_POINT_MAX` points keys its flow as shape keys, so it must have none of its own
+    (the flow's own, from an earlier run, are replaced)."""
+    key = obj.data.shape_keys
+    n = sum(len(s.points) for s in obj.data.splines)
+    if n > PER_POINT_MAX and key is not None and not key.get(_FLOW_KEY):
+        raise ValueError(
+            f"curve '{obj.name}' has shape keys of its own ({key.key_blocks[0].name}, …); the "
+            f"flow of a curve above {PER_POINT_MAX} points is keyed as shape keys, so remove "
+            f"them first (Properties ▸ Object Data ▸ Shape Keys)")
+
+
+def _remove_flow_key(obj: bpy.types.Object) -> int:
+    key = _flow_key(obj.data)
+    if key is None:
+        return 0
+    adt = key.animation_data
+    action = adt.action if adt is not None else None
+    obj.shape_key_clear()
+    if action is not None and action.users == 0:
+        bpy.data.actions.remove(action)
+    return 1
+
+
 def remove_flow_keyframes(obj: bpy.types.Object) -> int:
-    """Delete the point and energy F-curves written by :func:`write_flow_keyframes`.
+    """Delete the keys written by :func:`write_flow_keyframes`: the point F-curves or the flow's
+    shape keys, and the energy F-curve.
 
     Other animation of the object or curve (e.g. a keyframed location) is left alone; an action
     left empty is removed.
@@ -79,9 +135,9 @@ def remove_flow_keyframes(obj: bpy.types.Object) -> int:
     Returns
     -------
     int
-        Number of F-curves removed.
+        Number of F-curves removed (the shape keys with their F-curve count as one).
     """
-    removed = 0
+    removed = _remove_flow_key(obj)
     for idblock, is_ours in (
         (obj.data, lambda p: p.startswith("splines[")),
         (obj, lambda p: p == ENERGY_PATH),
@@ -110,11 +166,14 @@ def _write_channel(fcurves, data_path: str, index: int, frames: np.ndarray,
 
 
 def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.ndarray]],
-                         energies: Sequence[float], frame_start: int = 1) -> range:
+                         energies: Sequence[float], frame_start: int = 1,
+                         shape_keys: bool | None = None) -> range:
     """Keyframe a sequence of polygons on the curve's splines and the energy on the object.
 
     Replaces keys from an earlier call (to append, pass the earlier iterates too: see
-    :func:`read_flow_keyframes`); other animation stays.
+    :func:`read_flow_keyframes`); other animation stays. The curve's own points are left as
+    they are (per-point keys overwrite them on every frame change; under shape keys they are
+    not shown).
 
     Parameters
     ----------
@@ -126,6 +185,9 @@ def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.n
         Möbius energy of each iterate (keyed as ``obj["moebius_energy"]``).
     frame_start : int
         Frame of the first iterate; iterate ``k`` lands on ``frame_start + k``.
+    shape_keys : bool, optional
+        Key the positions as shape keys (True) or per point (False); None (default) chooses
+        by the size (shape keys above :data:`PER_POINT_MAX` points).
 
     Returns
     -------
@@ -134,12 +196,31 @@ def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.n
     """
     if len(iterates) != len(energies) or len(iterates) == 0:
         raise ValueError("need one energy per iterate and at least one iterate")
-    remove_flow_keyframes(obj)
     sizes = [len(s.points) for s in obj.data.splines]
-    X = np.stack([np.concatenate([np.asarray(P, float) for P in link]) for link in iterates])
-    if X.shape[1] != sum(sizes):
-        raise ValueError(f"iterates have {X.shape[1]} points, curve '{obj.name}' has {sum(sizes)}")
+    for link in iterates:
+        if sum(len(P) for P in link) != sum(sizes):
+            raise ValueError(f"iterates have {sum(len(P) for P in link)} points, curve "
+                             f"'{obj.name}' has {sum(sizes)}")
+    if shape_keys is None:
+        shape_keys = sum(sizes) > PER_POINT_MAX
+    key = obj.data.shape_keys
+    if shape_keys and key is not None and not key.get(_FLOW_KEY):
+        raise ValueError(f"curve '{obj.name}' has shape keys of its own; remove them first")
+    remove_flow_keyframes(obj)
     frames = frame_start + np.arange(len(iterates), dtype=np.float64)
+    if shape_keys:
+        _write_shape_keys(obj, iterates, frames)
+    else:
+        _write_points(obj, sizes, iterates, frames)
+    obj[ENERGY_PROP] = float(energies[0])
+    _write_channel(_fcurves(obj, create=True), ENERGY_PATH, 0, frames,
+                   np.asarray(energies, dtype=np.float64))
+    return range(frame_start, frame_start + len(iterates))
+
+
+def _write_points(obj, sizes, iterates, frames) -> None:
+    """One F-curve per coordinate of every point."""
+    X = np.stack([np.concatenate([np.asarray(P, float) for P in link]) for link in iterates])
     fcurves = _fcurves(obj.data, create=True)
     offset = 0
     for s, n in enumerate(sizes):
@@ -148,10 +229,57 @@ def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.n
             for c in range(3):
                 _write_channel(fcurves, path, c, frames, X[:, offset + i, c])
         offset += n
-    obj[ENERGY_PROP] = float(energies[0])
-    _write_channel(_fcurves(obj, create=True), ENERGY_PATH, 0, frames,
-                   np.asarray(energies, dtype=np.float64))
-    return range(frame_start, frame_start + len(iterates))
+
+
+def _write_shape_keys(obj, iterates, frames) -> None:
+    """One absolute shape key per iterate, and the key's evaluation time keyed on the frames
+    (a run refuses a curve with shape keys of its own before it starts: ``check_flow_target``)."""
+    # every block is added while the key is relative (Blender places each 0.1 after the one
+    # before: frames 0, 10, 20, ...), then the key is made absolute
+    for k in range(len(iterates)):
+        obj.shape_key_add(name=_KEY_NAME.format(k=k), from_mix=False)
+    key = obj.data.shape_keys
+    key[_FLOW_KEY] = True
+    key.use_relative = False
+    for block, link in zip(key.key_blocks, iterates, strict=True):
+        block.data.foreach_set(
+            "co", np.concatenate([np.asarray(P, np.float32) for P in link]).ravel())
+        block.interpolation = "KEY_LINEAR"
+    # the evaluation time on each key's own position at its frame: every frame shows its
+    # iterate exactly (the positions are float32 sums of 0.1, not exact multiples of 10)
+    positions = np.array([block.frame for block in key.key_blocks])
+    _write_channel(_fcurves(key, create=True), _EVAL_TIME, 0, frames, positions)
+
+
+def flow_shape_at(obj: bpy.types.Object, frame: float) -> np.ndarray | None:
+    """All points of a flow keyed as shape keys, as Blender shows them at ``frame`` (float:
+    subframes too), one ``(N, 3)`` float64 array in spline order; None for a curve without them
+    (a per-point flow animates the points themselves).
+
+    The keys' evaluation time at ``frame`` comes from its F-curve (the property itself is
+    updated only when Blender next evaluates the animation); the keys are mixed as Blender
+    mixes absolute KEY_LINEAR keys: linearly between the two whose positions enclose the time,
+    the first or last one outside."""
+    key = _flow_key(obj.data)
+    fcurves = None if key is None else _fcurves(key, create=False)
+    fc = None if fcurves is None else fcurves.find(_EVAL_TIME)
+    if fc is None:
+        return None
+    t = fc.evaluate(frame)
+    blocks = key.key_blocks
+    positions = np.array([b.frame for b in blocks])
+    j = min(max(int(np.searchsorted(positions, t, side="right")) - 1, 0), len(blocks) - 1)
+    a = _block_points(blocks[j])
+    if j + 1 == len(blocks) or t <= positions[j]:
+        return a
+    d = (t - positions[j]) / (positions[j + 1] - positions[j])
+    return (1.0 - d) * a + d * _block_points(blocks[j + 1])
+
+
+def _block_points(block: bpy.types.ShapeKey) -> np.ndarray:
+    co = np.empty(3 * len(block.data), dtype=np.float32)
+    block.data.foreach_get("co", co)
+    return co.reshape(-1, 3).astype(np.float64)
 
 
 def keyed_energies(obj: bpy.types.Object) -> tuple[np.ndarray, np.ndarray]:
@@ -203,6 +331,8 @@ def read_flow_keyframes(obj: bpy.types.Object) -> tuple[np.ndarray, np.ndarray, 
             f"the flow keys of '{obj.name}' were edited (the energy is not keyed on every frame "
             f"from {frames[0]} to {frames[-1]}): use Apply Frame, then Relax, to start a new "
             f"flow from the current shape")
+    if _flow_key(obj.data) is not None:
+        return frames, _read_shape_keys(obj, frames), energies
     fcurves = _fcurves(obj.data, create=False)
     by_path = {} if fcurves is None else {(fc.data_path, fc.array_index): fc for fc in fcurves}
     sizes = [len(s.points) for s in obj.data.splines]
@@ -228,3 +358,27 @@ def read_flow_keyframes(obj: bpy.types.Object) -> tuple[np.ndarray, np.ndarray, 
                 points[:, offset + i, c] = co[1::2]
         offset += n
     return frames, points, energies
+
+
+def _read_shape_keys(obj: bpy.types.Object, frames: np.ndarray) -> np.ndarray:
+    """The iterates of a flow keyed as shape keys, ``(K, N, 3)``; ValueError when the keys
+    were edited (not one key per keyed frame, or the evaluation time not on their positions)."""
+    key = _flow_key(obj.data)
+    blocks = key.key_blocks
+    fcurves = _fcurves(key, create=False)
+    fc = None if fcurves is None else fcurves.find(_EVAL_TIME)
+    co = np.empty(2 * len(frames))
+    if fc is not None and len(fc.keyframe_points) == len(frames):
+        fc.keyframe_points.foreach_get("co", co)
+    positions = np.array([block.frame for block in blocks])
+    if (fc is None or len(blocks) != len(frames) or len(fc.keyframe_points) != len(frames)
+            or not np.array_equal(np.rint(co[0::2]), frames)
+            or not np.allclose(co[1::2], positions, rtol=0, atol=1e-3)):
+        raise ValueError(
+            f"the flow keys of '{obj.name}' were edited (its shape keys are not one per frame "
+            f"from {frames[0]} to {frames[-1]} of the energy): use Apply Frame, then Relax, to "
+            f"start a new flow from the current shape")
+    points = np.empty((len(blocks), len(blocks[0].data), 3))
+    for k, block in enumerate(blocks):
+        points[k] = _block_points(block)
+    return points

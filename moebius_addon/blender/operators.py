@@ -9,9 +9,9 @@ from __future__ import annotations
 import time
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
-from . import api, keyframes
+from . import api, keyframes, labels
 
 _CONVERTIBLE = {"CURVE", "MESH"}
 
@@ -55,7 +55,7 @@ class MOEBIUS_OT_convert(bpy.types.Operator):
             for obj in objs:
                 prepared.append(api.prepare_conversion(
                     obj, edges=s.edges, edge_length=s.edge_length if s.use_edge_length else None,
-                    close_open=s.close_open))
+                    close_open=s.close_open, metric=s.metric, method=s.method, engine=s.engine))
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
@@ -128,6 +128,7 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         kind = "WARNING" if not result.success else "INFO"
         how = f" ({run.method}: {run.why})" if run.why else f" ({run.method})"
         how += " continued" if run.append else ""
+        how += f", {run.engine} engine"
         self.report({kind}, f"'{run.obj.name}'{how}: {run.nit} iterations, energy "
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
@@ -228,16 +229,6 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         return self._finish(context)
 
 
-def _knot_items():
-    from ..core import knots
-
-    items = [(k, label, desc) for k, label, desc in api.SPECIAL_KNOTS]
-    special = {key for key, *_ in items}
-    items += [(name, f"Knot {name}", f"Prime knot {name} of the knot table")
-              for name in knots.names() if name not in special]
-    return [(k, label, desc, i) for i, (k, label, desc) in enumerate(items)]
-
-
 class MOEBIUS_OT_add_knot(bpy.types.Operator):
     """Add a knot from the catalogue as a closed polygon ready to relax"""
 
@@ -269,9 +260,11 @@ class MOEBIUS_OT_add_knot(bpy.types.Operator):
 
     def execute(self, context):
         try:
+            s = context.scene.moebius  # the run the knot is added for
             obj = api.add_knot(self.kind, self.edges, p=self.p, q=self.q, seed=self.seed,
                                size=self.size, location=context.scene.cursor.location,
-                               context=context)
+                               context=context, metric=s.metric, method=s.method,
+                               engine=s.engine)
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
@@ -318,6 +311,45 @@ class MOEBIUS_OT_apply_frame(bpy.types.Operator):
             return {"CANCELLED"}
         self.report({"INFO"}, f"Frame {context.scene.frame_current} is now the rest shape "
                               f"of '{obj.name}'")
+        return {"FINISHED"}
+
+
+class MOEBIUS_OT_export_flow(bpy.types.Operator):
+    """Export the active curve's flow over its keyed frames as Alembic (.abc) or USD
+    (.usd/.usda/.usdc/.usdz), chosen by the file name"""
+
+    bl_idname = "moebius.export_flow"
+    bl_label = "Export Flow"
+    bl_options = {"REGISTER"}
+
+    filepath: StringProperty(name="File Path", subtype="FILE_PATH", default="",
+                             description="Where to write; .abc or .usd/.usda/.usdc/.usdz")
+    filter_glob: StringProperty(default="*.abc;*.usd;*.usda;*.usdc;*.usdz",
+                                options={"HIDDEN"})
+
+    @classmethod
+    def poll(cls, context):
+        if not _poll_active_curve(cls, context):
+            return False
+        if not keyframes.keyed_frames(_active_curve(context)):
+            cls.poll_message_set("The active curve has no flow keys; press Relax first")
+            return False
+        return True
+
+    def invoke(self, context, event):
+        if not self.filepath:
+            self.filepath = f"//{bpy.path.clean_name(_active_curve(context).name)}.abc"
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        obj = _active_curve(context)
+        try:
+            path = api.export_flow(obj, bpy.path.abspath(self.filepath), scene=context.scene)
+        except ValueError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Exported the flow of '{obj.name}' to {path}")
         return {"FINISHED"}
 
 
@@ -368,13 +400,14 @@ classes = (
     MOEBIUS_OT_add_knot,
     MOEBIUS_OT_clear_animation,
     MOEBIUS_OT_apply_frame,
+    MOEBIUS_OT_export_flow,
     MOEBIUS_OT_show_gradient,
 )
 
 
 def register() -> None:
     MOEBIUS_OT_add_knot.__annotations__["kind"] = EnumProperty(
-        name="Knot", items=_knot_items(), default="fhw", description="Catalogue entry")
+        name="Knot", items=labels.knot_items(), default="fhw", description="Catalogue entry")
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.VIEW3D_MT_curve_add.append(menu_add_knot)

@@ -11,10 +11,8 @@ import textwrap
 
 import bpy
 
-from . import api
+from . import labels, options
 from .keyframes import ENERGY_PROP, keyed_frames
-
-_METHOD_LABELS = {key: label for key, label, _ in api.METHODS}
 
 
 def wrap_text(text: str, width_px: float, ui_scale: float = 1.0) -> list[str]:
@@ -80,12 +78,13 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
             col = box.column(align=True)
             col.label(text="Last Run", icon="TIME")
             col.label(text=s.last_object)
-            col.label(text=_METHOD_LABELS.get(s.last_method, s.last_method))
+            col.label(text=labels.method_label(s.last_method))
             for name, value in (
                 ("Iterations", str(s.last_iterations)),
                 ("Energy", f"{s.last_energy_start:.5g} → {s.last_energy_end:.5g}"),
                 ("Time", f"{s.last_seconds:.2f} s"),
                 ("Keyed", f"{s.last_keyframes} frames"),
+                ("Engine", labels.engine_label(s.last_engine)),
             ):
                 split = col.split(factor=0.38)
                 split.label(text=name)
@@ -145,6 +144,7 @@ class VIEW3D_PT_moebius_keyframes(_MoebiusPanel, bpy.types.Panel):
         row = layout.row(align=True)  # no icons: half the sidebar is too narrow for them
         row.operator("moebius.apply_frame", text="Apply Frame")
         row.operator("moebius.clear_animation", text="Clear Flow")
+        layout.operator("moebius.export_flow", text="Export Flow…", icon="EXPORT")
 
 
 class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
@@ -155,17 +155,22 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         s = context.scene.moebius
-        acting = api.acting_settings(s.method)
+        acting = options.acting_settings(s.method, s.engine)
         col = layout.column(align=True)
         col.label(text="Method")
         col.prop(s, "method", text="")
-        if s.method == api.AUTO_METHOD:  # what the automatic choice does, measured best
+        if s.method == labels.AUTO_METHOD:  # what the automatic choice does, measured best
             col.label(text="Knots: Implicit Gradient")
             col.label(text="Unknots, links: Projected")
         if "penalty" in acting:
             col.prop(s, "penalty")
+        col = layout.column(align=True)
+        col.label(text="Engine")
+        col.prop(s, "engine", text="")
+        if "theta" in acting:  # only where the tree can run
+            col.prop(s, "theta")
         # settings the method does not use stay visible, greyed out (tooltips say which use
-        # them); api.acting_settings is also what relax_settings passes on
+        # them); options.acting_settings is also what relax_settings passes on
         col = layout.column(align=True)
         col.label(text="Line Search")
         col.prop(s, "initial_step")

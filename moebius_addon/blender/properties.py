@@ -11,7 +11,7 @@ from bpy.props import (
     StringProperty,
 )
 
-from . import api
+from . import labels
 
 
 def _stat(key: str, default):
@@ -27,8 +27,9 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     # Polygon
     edges: IntProperty(
         name="Edges", default=100, min=9, soft_max=1000, max=1_000_000,
-        description="Edges of each converted component (cost per iteration grows as edges²; "
-                    "at least 9, below which the start check cannot judge a knot)",
+        description="Edges of each converted component (at least 9, below which the start "
+                    "check cannot judge a knot; on the exact engine the cost per iteration "
+                    "grows as edges², see Advanced ▸ Engine)",
     )
     use_edge_length: BoolProperty(
         name="Use Edge Length", default=False,
@@ -45,7 +46,7 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     # Flow
     metric: EnumProperty(
         name="Metric", default="hs",
-        items=[(key, label, desc) for key, label, desc in api.METRICS],
+        items=[(key, label, desc) for key, label, desc in labels.METRICS],
         description="Inner product that turns the energy's derivative into a gradient",
     )
     max_iterations: IntProperty(
@@ -69,18 +70,30 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     )
     # Advanced
     method: EnumProperty(
-        name="Method", default=api.DEFAULT_METHOD,
-        items=[(key, label, desc) for key, label, desc in api.METHODS],
+        name="Method", default=labels.DEFAULT_METHOD,
+        items=[(key, label, desc) for key, label, desc in labels.METHODS],
         description="Optimizer of the paper's comparison; Automatic picks the faster of the "
                     "two exact ones for the curve. The three penalty methods let edge "
                     "lengths stretch a little and the barycenter drift",
     )
     penalty: FloatProperty(
-        name="Penalty α", default=api.DEFAULT_PENALTY, min=0.0, soft_min=1.0, soft_max=1e7,
+        name="Penalty α", default=labels.DEFAULT_PENALTY, min=0.0, soft_min=1.0, soft_max=1e7,
         precision=1,
         description="Penalty methods only: weight α of the edge-stretch penalty "
                     "α Σ l0 log(l/l0)² (curve scaled to length 1). Larger keeps the edge "
                     "lengths closer to their start; must be positive",
+    )
+    engine: EnumProperty(
+        name="Engine", default=labels.DEFAULT_ENGINE,
+        items=[(key, label, desc) for key, label, desc in labels.ENGINES],
+        description="How the energy and its gradient are evaluated: exactly over every pair "
+                    "of edges, or by the Barnes–Hut tree (large curves)",
+    )
+    theta: FloatProperty(
+        name="Theta", default=labels.DEFAULT_THETA, min=0.0, max=2.0, soft_min=0.05,
+        soft_max=1.0, precision=3,
+        description="Tree engine only: admissibility θ of the far field of the energy and its "
+                    "gradient, in (0, 2). Smaller is more accurate and slower",
     )
     initial_step: FloatProperty(
         name="Initial Step", default=1.0, min=1e-12, precision=4,
@@ -148,16 +161,17 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     last_message: StringProperty(name="Stopped Because", get=_stat("message", ""))
     last_keyframes: IntProperty(name="Keyed Frames", get=_stat("keyframes", 0))
     last_method: StringProperty(name="Method", get=_stat("method", ""))
+    last_engine: StringProperty(name="Engine", get=_stat("engine", ""))
 
     def store_run(self, obj_name: str, iterations: int, energy_start: float, energy_end: float,
                   seconds: float, message: str, keyed: int,
-                  method: str = api.DEFAULT_METHOD) -> None:
+                  method: str = labels.DEFAULT_METHOD, engine: str = "") -> None:
         """Record the statistics of a finished run (shown read-only in the panel)."""
         self["_stats"] = {
             "object": obj_name, "iterations": int(iterations),
             "energy_start": float(energy_start), "energy_end": float(energy_end),
             "seconds": float(seconds), "message": message, "keyframes": int(keyed),
-            "method": method,
+            "method": method, "engine": engine,
         }
 
 

@@ -9,6 +9,8 @@ import numba as nb
 import numpy as np
 
 _MAX_ADVANCE = 64
+#: The advancement stops (a contact) once a pair is within this many times eps.
+SLACK = 1.001
 
 
 @nb.njit(cache=True, inline="always")
@@ -77,7 +79,7 @@ def _pair_contact(X, U, i, i1, j, j1, tau0, tau_max, eps):
             X[j1, 0] - tau * U[j1, 0], X[j1, 1] - tau * U[j1, 1], X[j1, 2] - tau * U[j1, 2],
         )
         d = np.sqrt(d2)
-        if d <= 1.001 * eps:
+        if d <= SLACK * eps:
             return tau
         tau += (d - eps) / v
         if tau >= tau_max:

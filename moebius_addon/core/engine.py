@@ -17,7 +17,7 @@ Engines by name (the ``engine=`` option of ``relax``, ``make_run`` and every run
   :mod:`.bvh` serves the contact search of every engine above its crossover); the saddle-point
   solves O(N) for the banded metrics (``l2``, ``h1``, ``h2``: :mod:`.banded`), dense as in the
   exact engine for ``hs`` and ``hs_pure`` (until a matrix-free ``hs`` lands).
-* ``"auto"``: the tree from ``barnes_hut.TREE_FROM`` edges on, else exact.
+* ``"auto"``: the tree from ``AUTO_TREE_FROM`` vertices on, else exact.
 
 :func:`make_engine` is the one place that maps names to classes.
 """
@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import barnes_hut
+from . import barnes_hut, hs_tree
 from ._layout import Layout
 from .banded import BANDED_METRICS, BandedSaddle
 from .collision import contact_time_x
@@ -90,15 +90,16 @@ class DenseEngine:
         refined by GMRES to double-precision results).
     reuse_factorization : bool
         Reuse the factorization as a GMRES preconditioner across iterates while that pays.
-    theta : float, optional
-        Opening angle of a tree approximation; the exact engine takes it and ignores it, so
-        that one option set fits every engine.
+    theta, krylov_rtol, exact_backprojection
+        The tree engine's options (:class:`TreeEngine`); the exact engine checks and ignores
+        them, so that one option set fits every engine.
     """
 
     name = "exact"
 
     def __init__(self, layout: Layout, metric: str, *, precision: str = "auto",
-                 reuse_factorization: bool = False, theta: float | None = None):
+                 reuse_factorization: bool = False, theta: float | None = None,
+                 krylov_rtol: float | None = None, exact_backprojection: bool = False):
         if precision not in ("auto", "double", "single"):
             raise ValueError("precision must be 'auto', 'double' or 'single'")
         if precision == "auto":
@@ -106,6 +107,9 @@ class DenseEngine:
         self.layout = layout
         self.metric = metric
         self.theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
+        self.krylov_rtol = hs_tree.RTOL if krylov_rtol is None else hs_tree.check_rtol(
+            krylov_rtol)
+        self.exact_backprojection = bool(exact_backprojection)
         self.solver = SaddlePointSolver(
             reuse=bool(reuse_factorization),
             factor_cost=layout.n / _FACTOR_PER_ITER,
@@ -114,7 +118,6 @@ class DenseEngine:
         self._gram = None  # the Gram matrix's memory, refilled at every update
         self._penalty_factorizations = 0
         self._banded_factorizations = 0
-        self._banded_solves = 0
 
     @classmethod
     def holds_dense(cls, metric: str) -> bool:
@@ -202,30 +205,46 @@ class TreeEngine(DenseEngine):
     polygon (the line search compares values of the same approximated sum) and the gradient
     its exact derivative. ``theta``: admissibility in (0, 2), default ``barnes_hut.THETA``.
 
-    With a banded metric (``l2``, ``h1``, ``h2``) the saddle-point solves are O(N) too
-    (:class:`banded.BandedSaddle`, factored afresh at every iterate): nothing dense, except
-    the penalty methods' metric (:meth:`penalty_solver`, dense as in the exact engine)."""
+    Nothing dense either in the metric (except the penalty methods' :meth:`penalty_solver`,
+    dense as in the exact engine): the banded metrics (``l2``, ``h1``, ``h2``) are solved
+    directly in O(N) (:class:`banded.BandedSaddle`, factored afresh at every iterate); ``hs``
+    and ``hs_pure`` are applied through a hierarchy of arcs and solved by preconditioned
+    conjugate gradients (:mod:`.hs_tree`; ``krylov_rtol`` their tolerance), the
+    back-projection's steps in the preconditioner's banded metric unless
+    ``exact_backprojection``."""
 
     name = "tree"
     _frame = None  # the last frame and the polygon it was built at
-    _saddle = None  # the banded solver of the current iterate
+    _saddle = None  # the solver of the current iterate (BandedSaddle or HsSaddle)
+
+    def __init__(self, layout: Layout, metric: str, **options):
+        super().__init__(layout, metric, **options)
+        self._tree_krylov: list[int] = []  # per solve: Krylov iterations (0: direct)
 
     @classmethod
     def holds_dense(cls, metric: str) -> bool:
-        return metric not in BANDED_METRICS
+        return metric not in BANDED_METRICS + hs_tree.METRICS
 
     def update(self, X: np.ndarray, jac: Jacobian) -> None:
         if self.dense_metric or not (jac.con.edge_lengths and jac.con.barycenter):
             super().update(X, jac)
             return
         old, self._saddle = self._saddle, None  # its memory is reused: no longer usable
-        self._saddle = BandedSaddle(banded_parts(self.metric, X, self.layout), jac, old)
+        if self.metric in BANDED_METRICS:
+            self._saddle = BandedSaddle(banded_parts(self.metric, X, self.layout), jac,
+                                        old if isinstance(old, BandedSaddle) else None)
+        else:
+            self._saddle = hs_tree.HsSaddle(
+                hs_tree.HsOperator(X, self.layout, self.metric), jac, rtol=self.krylov_rtol,
+                exact_backprojection=self.exact_backprojection, log=self._tree_krylov,
+                recycle=old if isinstance(old, hs_tree.HsSaddle) else None, X=X)
         self._banded_factorizations += 1
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self._saddle is None:
             return super().solve(g, r)
-        self._banded_solves += 1
+        if isinstance(self._saddle, BandedSaddle):
+            self._tree_krylov.append(0)
         return self._saddle.solve(g, r)
 
     def pseudo_inverse(self, phi: np.ndarray) -> np.ndarray:
@@ -240,7 +259,7 @@ class TreeEngine(DenseEngine):
 
     def refactor(self) -> None:
         if self._saddle is None:
-            super().refactor()  # the banded solver is factored afresh at every iterate
+            super().refactor()  # the tree's solvers are built afresh at every iterate
 
     @property
     def fresh(self) -> bool:
@@ -252,7 +271,7 @@ class TreeEngine(DenseEngine):
 
     @property
     def krylov_iterations(self) -> list[int]:
-        return super().krylov_iterations + [0] * self._banded_solves
+        return super().krylov_iterations + self._tree_krylov
 
     def _frame_at(self, X: np.ndarray) -> barnes_hut.Frame:
         # a trial accepted by its energy is evaluated again with the gradient: same frame
@@ -266,6 +285,13 @@ class TreeEngine(DenseEngine):
     def energy_gradient(self, X: np.ndarray) -> tuple[float, np.ndarray]:
         return self._frame_at(X).energy_gradient(X)
 
+
+#: From this many vertices on, "auto" runs on the tree engine: its whole iteration (energy,
+#: metric and solves) measured faster from about 900 edges on (FHW, median seconds per
+#: iteration exact / tree: 800: 36-40 / 41-44 ms, 1 000: 84-88 / 42-46 ms, 1 648: 248-252 /
+#: 64-76 ms; busy machine, alternated). The energy alone crosses over later
+#: (``barnes_hut.TREE_FROM``, what "auto" means for ``moebius_energy``).
+AUTO_TREE_FROM = 1000
 
 #: Engines by name; :func:`make_engine` resolves a run's ``engine=`` here ("auto" too).
 ENGINES: dict[str, type[DenseEngine]] = {"exact": DenseEngine, "tree": TreeEngine}
@@ -283,14 +309,16 @@ def make_engine(name: str, layout: Layout, metric: str, **options) -> DenseEngin
     ValueError
         For an unknown name (the message lists the valid ones).
     """
-    return engine_class(name, layout.n)(layout, metric, **options)
+    n = layout.n if name == "auto" else 0  # only "auto" looks at the size
+    return engine_class(name, n)(layout, metric, **options)
 
 
 def engine_class(name: str, n: int) -> type[DenseEngine]:
-    """The class the engine ``name`` runs for a polygon of ``n`` vertices ("auto" resolved by
-    size); ValueError naming the valid names for an unknown one."""
+    """The class the engine ``name`` runs for a polygon of ``n`` vertices ("auto": the tree
+    from ``AUTO_TREE_FROM`` vertices on); ValueError naming the valid names for an unknown
+    one."""
     if name == "auto":
-        name = "tree" if barnes_hut.uses_tree(name, n) else "exact"
+        name = "tree" if n >= AUTO_TREE_FROM else "exact"
     if name not in ENGINES:
         raise ValueError(f"unknown engine {name!r}; choose one of "
                          f"{', '.join(barnes_hut.ENGINE_NAMES)}")

@@ -48,9 +48,10 @@ def relax(
         ``projected_gradient`` (the paper's explicit method, docs/design.md) or another optimizer
         of :mod:`moebius_addon.core.solvers` (``METHODS`` lists them).
     engine : str
-        "exact", "tree" or "auto" (the tree from ``barnes_hut.TREE_FROM`` edges on;
-        ``core.engine``): the tree evaluates energy and gradient by Barnes–Hut, contacts
-        stay exact.
+        "exact", "tree" or "auto" (the tree from ``engine.AUTO_TREE_FROM`` vertices on;
+        ``core.engine``): the tree evaluates energy and gradient by Barnes–Hut and holds
+        no dense matrix (hs: Krylov solves, the banded metrics: direct O(N) solves);
+        contacts stay exact.
     theta : float, optional
         Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); checked
         for every engine.

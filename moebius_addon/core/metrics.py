@@ -341,9 +341,13 @@ def banded_parts(metric: str, X: np.ndarray, layout: Layout):
     """The banded metrics (``l2``, ``h1``, ``h2``) without a matrix: ``(rows, cols, vals,
     beta)``, the matrix of :func:`gram_x` as ``A = Σ vals at (rows, cols) + β βᵀ`` per
     component (β: the barycenter term's weights). For :mod:`.banded`'s O(N) solver."""
+    return banded_parts_of_lengths(metric, _lengths(X, layout)[1], layout)
+
+
+def banded_parts_of_lengths(metric: str, ln: np.ndarray, layout: Layout):
+    """:func:`banded_parts` from the edge lengths ``ln`` alone (all these metrics depend on)."""
     if metric not in ("l2", "h1", "h2"):
         raise ValueError(f"{metric!r} is not a banded metric (l2, h1, h2)")
-    E, ln = _lengths(X, layout)
     total = float(ln.sum())
     parts = [(_mass_triplets(ln, layout), 1.0 / total**3)]  # as _gram_l2 .. _gram_h2
     if metric != "l2":

@@ -20,7 +20,7 @@ import numpy as np
 
 from . import bvh
 from ._layout import Layout
-from ._pairs import edge_motion, pair_time, segment_distance2
+from ._pairs import SLACK, edge_motion, pair_time, segment_distance2
 
 _CHUNKS = 16
 _TASKS = 8 * _CHUNKS  # node pairs in the frontier before the parallel search
@@ -38,10 +38,11 @@ def _disjoint(i, j, starts, comp):
 
 
 @nb.njit(cache=True)
-def _frontier(left, right, bmin, bmax, diam2, overlap, want):
+def _frontier(left, right, bmin, bmax, diam2, overlap, want, umin, umax, T, eps):
     """Node pairs (self pairs included) that hold every pair of edges a search must test,
     expanded breadth first from (root, root) until there are ``want`` of them or only leaf
-    pairs are left; with ``overlap``, pairs whose boxes do not meet are dropped."""
+    pairs are left; with ``overlap``, pairs that cannot come within ``eps`` before ``T``
+    (:func:`_may_meet`) are dropped."""
     cur = np.zeros((1, 2), np.int64)
     while cur.shape[0] < want:
         nxt = np.empty((3 * cur.shape[0], 2), np.int64)
@@ -49,7 +50,7 @@ def _frontier(left, right, bmin, bmax, diam2, overlap, want):
         grew = False
         for p in range(cur.shape[0]):
             a, b = cur[p, 0], cur[p, 1]
-            if overlap and a != b and bvh.box_gap2(bmin, bmax, a, b) > 0.0:
+            if overlap and a != b and not _may_meet(bmin, bmax, umin, umax, a, b, T, eps):
                 continue
             if left[a] >= 0 or left[b] >= 0:
                 nxt, count = bvh.push_split(nxt, count, a, b, left, right, diam2)
@@ -68,33 +69,56 @@ def _frontier(left, right, bmin, bmax, diam2, overlap, want):
 
 
 @nb.njit(cache=True)
-def _swept_boxes(perm, lo, hi, left, right, mid, vel, spread, half, eps, T, pad):
-    """Per node the box of its edges' grown midpoint spheres over ``τ ∈ [0, T]``: centre
-    ``m − τ ū``, radius ``l/2 + eps/2 + τ·spread`` (the spheres of the pair test; a sphere
-    moving and growing linearly stays in the hull of its end spheres), padded by ``pad``."""
+def _motion_boxes(X, U, nxt, perm, lo, hi, left, right, pad):
+    """Per node the box of its edges' endpoints (padded by ``pad``) and the box of their
+    velocities, bottom-up: at ``τ`` every point of the node's edges lies in the box swept
+    back by ``τ`` times a velocity of the velocity box."""
     m = lo.shape[0]
     bmin = np.empty((m, 3))
     bmax = np.empty((m, 3))
+    umin = np.empty((m, 3))
+    umax = np.empty((m, 3))
     for node in range(m - 1, -1, -1):
         if left[node] < 0:
             for k in range(3):
                 bmin[node, k] = np.inf
                 bmax[node, k] = -np.inf
+                umin[node, k] = np.inf
+                umax[node, k] = -np.inf
             for q in range(lo[node], hi[node]):
                 i = perm[q]
-                r0 = half[i] + 0.5 * eps
-                r1 = r0 + T * spread[i]
-                for k in range(3):
-                    c0 = mid[i, k]
-                    c1 = mid[i, k] - T * vel[i, k]
-                    bmin[node, k] = min(bmin[node, k], min(c0 - r0, c1 - r1) - pad)
-                    bmax[node, k] = max(bmax[node, k], max(c0 + r0, c1 + r1) + pad)
+                for v in (i, nxt[i]):
+                    for k in range(3):
+                        bmin[node, k] = min(bmin[node, k], X[v, k] - pad)
+                        bmax[node, k] = max(bmax[node, k], X[v, k] + pad)
+                        umin[node, k] = min(umin[node, k], U[v, k])
+                        umax[node, k] = max(umax[node, k], U[v, k])
         else:
             a, b = left[node], right[node]
             for k in range(3):
                 bmin[node, k] = min(bmin[a, k], bmin[b, k])
                 bmax[node, k] = max(bmax[a, k], bmax[b, k])
-    return bmin, bmax
+                umin[node, k] = min(umin[a, k], umin[b, k])
+                umax[node, k] = max(umax[a, k], umax[b, k])
+    return bmin, bmax, umin, umax
+
+
+@nb.njit(cache=True, inline="always")
+def _may_meet(bmin, bmax, umin, umax, a, b, T, eps):
+    """Whether a point of node ``a``'s edges and one of node ``b``'s can come within ``eps``
+    of each other at one time ``τ ∈ [0, T]`` (points ``x − τu``). False only where, on some
+    axis, one node stays more than ``eps`` below the other at every such τ: the gap on an axis
+    is bounded below by a linear function of τ, so checking both ends suffices. Two nodes
+    moving alike keep their gap, however far they move (boxes swept over the whole motion
+    would meet)."""
+    for k in range(3):
+        g = bmin[b, k] - bmax[a, k]  # a below b
+        if g > eps and g - T * (umax[b, k] - umin[a, k]) > eps:
+            return False
+        g = bmin[a, k] - bmax[b, k]  # b below a
+        if g > eps and g - T * (umax[a, k] - umin[b, k]) > eps:
+            return False
+    return True
 
 
 @nb.njit(cache=True, parallel=True)
@@ -106,11 +130,11 @@ def _contact_search(X, U, nxt, starts, comp, perm, lo, hi, left, right, tau_max,
         for k in range(3):
             scale = max(scale, abs(mid[i, k]) + tau_max * abs(vel[i, k]))
         scale = max(scale, half[i] + tau_max * spread[i])
-    pad = 1e-12 * scale  # rounding of the pair test's sphere arithmetic
-    bmin, bmax = _swept_boxes(perm, lo, hi, left, right, mid, vel, spread, half, eps,
-                              tau_max, pad)
+    pad = 1e-12 * scale  # rounding of the pair test's arithmetic
+    bmin, bmax, umin, umax = _motion_boxes(X, U, nxt, perm, lo, hi, left, right, pad)
     diam2 = bvh.node_diam2(bmin, bmax)
-    tasks = _frontier(left, right, bmin, bmax, diam2, True, want)
+    reach = SLACK * eps  # what the pair test calls a contact
+    tasks = _frontier(left, right, bmin, bmax, diam2, True, want, umin, umax, tau_max, reach)
     best = np.full(nchunks, tau_max)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
@@ -123,7 +147,8 @@ def _contact_search(X, U, nxt, starts, comp, perm, lo, hi, left, right, tau_max,
             while top > 0:
                 top -= 1
                 a, b = stack[top, 0], stack[top, 1]
-                if a != b and bvh.box_gap2(bmin, bmax, a, b) > 0.0:
+                # only contacts before this chunk's best so far can change its answer
+                if a != b and not _may_meet(bmin, bmax, umin, umax, a, b, tb, reach):
                     continue
                 if left[a] < 0 and left[b] < 0:
                     for q in range(lo[a], hi[a]):
@@ -172,7 +197,7 @@ def _better(d2, i, j, best, bi, bj):
 def _closest_search(X, nxt, starts, comp, perm, lo, hi, left, right, bmin, bmax, min_gap,
                     nchunks, want):
     diam2 = bvh.node_diam2(bmin, bmax)
-    tasks = _frontier(left, right, bmin, bmax, diam2, False, want)
+    tasks = _frontier(left, right, bmin, bmax, diam2, False, want, bmin, bmax, 0.0, 0.0)
     big = np.iinfo(np.int64).max
     vbest = np.full(nchunks, np.inf)
     vidx = np.full((nchunks, 2), big, np.int64)

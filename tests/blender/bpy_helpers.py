@@ -60,10 +60,43 @@ def points_at(obj, frame: int):
 
 
 def spline_points(obj):
-    """Local-space points of all poly splines of ``obj``, one ``(N, 3)`` array."""
+    """Local-space points of all poly splines of ``obj`` as Blender shows them, one ``(N, 3)``
+    array: the spline points, or under shape keys (a large flow) the vertices of the curve
+    Blender evaluates (its centre line, the bevel switched off while it is read)."""
+    if obj.data.shape_keys is not None:
+        bevel = obj.data.bevel_depth
+        obj.data.bevel_depth = 0.0
+        try:
+            evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+            mesh = evaluated.to_mesh()
+            co = np.empty(3 * len(mesh.vertices))
+            mesh.vertices.foreach_get("co", co)
+            evaluated.to_mesh_clear()
+        finally:
+            obj.data.bevel_depth = bevel
+        assert len(co) == 3 * sum(len(s.points) for s in obj.data.splines)
+        return co.reshape(-1, 3)
     X = []
     for s in obj.data.splines:
         co = np.empty(4 * len(s.points))
         s.points.foreach_get("co", co)
         X.append(co.reshape(-1, 4)[:, :3])
     return np.concatenate(X)
+
+
+def imported_points(frame):
+    """World positions of the one imported curves object at ``frame``."""
+    scene = bpy.context.scene
+    scene.frame_set(frame)
+    objs = [o for o in scene.objects if o.type == "CURVES"]
+    assert len(objs) == 1, [(o.name, o.type) for o in scene.objects]
+    (obj,) = objs
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    ev = obj.evaluated_get(depsgraph)
+    assert obj.type == "CURVES"
+    pos = ev.data.attributes["position"]
+    X = np.empty(3 * len(pos.data))
+    pos.data.foreach_get("vector", X)
+    X = X.reshape(-1, 3)
+    M = np.array(ev.matrix_world)
+    return X @ M[:3, :3].T + M[:3, 3], ev.data

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from bpy_helpers import scene_state, spline_points
 
+from moebius_addon.core import barnes_hut
 from moebius_addon.core.solvers import FEASIBLE, INFEASIBLE, METHODS
 
 
@@ -39,7 +40,10 @@ def test_settings_pass_each_method_only_its_options(scene, mb):
     legacy = {"metric", "max_iterations", "tolerance", "frame_start", "keyframe_stride",
               "initial_step", "armijo", "growth", "backproject_iter", "backproject_tol",
               "edge_lengths", "barycenter"}
-    assert set(mb.relax_settings(s)) == legacy | {"method"}  # the default: as before
+    assert set(mb.relax_settings(s)) == legacy | {"method", "engine", "theta"}
+    # the default run is the core's: θ is a float32 property, passed on as typed
+    assert mb.relax_settings(s)["engine"] == "auto"
+    assert mb.relax_settings(s)["theta"] == barnes_hut.THETA
     # the tolerance is set as digits (a number field shows only six decimals)
     assert mb.relax_settings(s)["backproject_tol"] == pytest.approx(1e-10, rel=1e-12)
     s.backproject_digits = 8

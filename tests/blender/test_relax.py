@@ -329,7 +329,7 @@ def test_first_run_of_a_session_says_it_prepares_the_solver(scene, mb, trefoil, 
     # the first use compiled for seconds with no word of why nothing moved
     import sys
 
-    monkeypatch.setitem(mb.api._SESSION, "warm", False)
+    monkeypatch.setitem(sys.modules[mb.__name__ + ".relaxation"]._SESSION, "warm", False)
     # the kernels are compiled by now: a note however short the preparation
     monkeypatch.setattr(sys.modules[mb.__name__ + ".operators"], "PREPARE_NOTE_FROM", 0.0)
     scene.moebius.max_iterations = 2

@@ -98,11 +98,9 @@ def test_not_a_banded_metric_refused():
 def test_tree_engine_with_a_banded_metric_runs_past_the_dense_limit():
     n = DENSE_MAX_VERTICES + 1000
     P = core.knots.freedman_unknot(n)
-    with pytest.raises(ValueError, match="dense"):
-        core.relax(P, metric="hs", max_iter=1, engine="tree")
-    with pytest.raises(ValueError, match="dense"):
+    with pytest.raises(ValueError, match="engine='tree'"):
         core.relax(P, metric="h2", max_iter=1, engine="exact")
-    with pytest.raises(ValueError, match="dense"):
+    with pytest.raises(ValueError, match="penalty methods"):
         core.relax(P, metric="h2", max_iter=1, engine="tree", method="lbfgs")
     r = core.relax(P, metric="h2", max_iter=2, engine="tree")
     assert r.nit == 2

@@ -294,10 +294,12 @@ def test_sizes_whose_dense_factorization_crashes_are_refused():
     from moebius_addon.core import sobolev_gradient
 
     P = ngon(base.DENSE_MAX_VERTICES + 1)
-    for call in (lambda: relax(P, max_iter=1), lambda: relax(P, engine="tree", max_iter=1),
-                 lambda: sobolev_gradient(P)):
+    for call in (lambda: relax(P, engine="exact", max_iter=1), lambda: sobolev_gradient(P),
+                 lambda: relax(P, engine="tree", max_iter=1, edge_lengths=False)):
         with pytest.raises(ValueError, match=f"at most {base.DENSE_MAX_VERTICES} vertices"):
             call()
+    with pytest.raises(ValueError, match="keep both constraints"):
+        relax(P, engine="tree", max_iter=1, barycenter=False)
 
 
 def test_check_size_says_before_any_work_what_a_run_would_refuse():
@@ -312,8 +314,9 @@ def test_check_size_says_before_any_work_what_a_run_would_refuse():
             check_size(n, metric, method, engine)
         with pytest.raises(ValueError, match=f"at most {base.DENSE_MAX_VERTICES} vertices"):
             relax(ngon(n), metric=metric, method=method, engine=engine, max_iter=1)
-    check_size(n, "h2", "projected_gradient", "tree")  # the banded metric holds nothing dense
-    check_size(n, "h1", "projected_gradient", "auto")
+    for metric in ("h2", "h1", "hs", "hs_pure"):  # the tree engine holds nothing dense
+        check_size(n, metric, "projected_gradient", "tree")
+        check_size(n, metric, "projected_gradient_implicit", "auto")
     for bad, word in ((("hs", "projected_gradient", "nope"), "engine"),
                       (("nope", "projected_gradient", "auto"), "metric"),
                       (("hs", "nope", "auto"), "method")):

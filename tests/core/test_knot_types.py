@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from moebius_addon.core import knots, relax
+from moebius_addon.core import knots, relax, resample
 from tests.conftest import random_rotation
 
 topoly = pytest.importorskip("topoly")
@@ -63,3 +63,12 @@ def test_freedman_unknot_becomes_a_round_circle():
     r = relax_watching_type(knots.freedman_unknot(600), "0_1", 400, every=20,
                             energy_target=4.01)
     assert r.success and r.nit <= 300
+
+
+@pytest.mark.parametrize(("name", "n", "iters"), [("5_2", 1200, 15), ("7_2", 1500, 10)])
+def test_knots_stay_themselves_on_the_tree(name, n, iters):
+    # the tree engine's metric and inexact Krylov solves move the curve differently; the
+    # collision-free step bound is the exact one whatever the engine
+    P = resample(knots.named(name), n)
+    r = relax_watching_type(P, name, iters, every=5, engine="tree")
+    assert r.stats["engine"] == "tree" and r.fun < r.history["energy"][0]

@@ -51,9 +51,10 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
     P, metric, max_iter, tol, **options
         As in :class:`Relaxation` and the method's own class.
     engine : str
-        "exact", "tree" or "auto" (the tree from ``barnes_hut.TREE_FROM`` edges on;
-        ``core.engine``): the tree evaluates energy and gradient by Barnes–Hut, contacts
-        stay exact.
+        "exact", "tree" or "auto" (the tree from ``engine.AUTO_TREE_FROM`` vertices on;
+        ``core.engine``): the tree evaluates energy and gradient by Barnes–Hut and holds
+        no dense matrix (hs: Krylov solves, the banded metrics: direct O(N) solves);
+        contacts stay exact.
     theta : float, optional
         Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); checked
         for every engine.
@@ -74,8 +75,7 @@ def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
     """Refuse, before any work, a polygon of ``n`` vertices (in all) that a run of ``method``
     in ``metric`` on ``engine`` would refuse for its size: the same ``ValueError`` (naming the
     way out) the run's constructor raises. Sizes are bounded where the metric is held as a
-    dense matrix (the exact engine; the penalty methods on every engine; ``hs`` and
-    ``hs_pure`` until the tree engine serves them without one).
+    dense matrix: the exact engine, and the penalty methods on every engine.
 
     Raises
     ------
@@ -86,5 +86,7 @@ def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     if metric not in METRICS:
         raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
-    if engine_class(engine, n).holds_dense(metric) or METHOD_CLASSES[method]._DENSE_METRIC:
+    if METHOD_CLASSES[method]._DENSE_METRIC:
+        check_dense_size(n, "method")
+    elif engine_class(engine, n).holds_dense(metric):
         check_dense_size(n)

@@ -147,18 +147,29 @@ def _physical_memory() -> float | None:
         return None
 
 
-def check_dense_size(n: int) -> None:
+#: Why a run holds its metric as a dense matrix, and the way out the refusal names.
+_DENSE_WHY = {
+    "engine": "or run on the tree engine (engine='tree' or 'auto'), which stores nothing dense",
+    "method": "or use a feasible method (projected_gradient, projected_gradient_implicit, "
+              "trust_region) on the tree engine: the penalty methods (ncg, lbfgs, nesterov) "
+              "hold the metric as a dense matrix on every engine",
+    "constraints": "or keep both constraints (edge_lengths and barycenter): without them the "
+                   "tree engine solves with a dense matrix",
+}
+
+
+def check_dense_size(n: int, why: str = "engine") -> None:
     """Refuse a polygon whose dense N × N matrices would not fit in memory (an absurd size:
     a machine swapping or killed by the out-of-memory handler says nothing useful), or whose
-    dense factorization would crash the process (``DENSE_MAX_VERTICES``)."""
+    dense factorization would crash the process (``DENSE_MAX_VERTICES``). ``why`` the run is
+    dense (a key of ``_DENSE_WHY``) chooses the way out the message names."""
     if n > DENSE_MAX_VERTICES:
         raise ValueError(
             f"{n} vertices are more than the dense metric's factorization handles "
             f"({DENSE_MAX_VERTICES}: numpy's multithreaded OpenBLAS Cholesky crashes the process "
             f"from about 16 000 on): resample to at most {DENSE_MAX_VERTICES} vertices "
-            f"(core.resample(P, n); a few hundred are plenty to untangle a knot), or use a "
-            f"banded metric on the tree engine (metric='h2' or 'h1', engine='tree'), which "
-            f"stores nothing dense"
+            f"(core.resample(P, n); a few hundred are plenty to untangle a knot), "
+            f"{_DENSE_WHY[why]}"
         )
     total = _physical_memory()
     need = _BYTES_PER_PAIR * float(n) ** 2
@@ -169,7 +180,8 @@ def check_dense_size(n: int) -> None:
         f"{n} vertices need about {need / 1e9:.1f} GB for the dense metric and its "
         f"factorization (memory grows as N²), more than this machine's "
         f"{total / 1e9:.1f} GB allow: resample to at most {most} vertices "
-        f"(core.resample(P, n)); a few hundred are plenty to untangle a knot"
+        f"(core.resample(P, n)); a few hundred are plenty to untangle a knot), "
+        f"{_DENSE_WHY[why]}"
     )
 
 
@@ -211,7 +223,9 @@ class Run:
         X, layout, e2 = as_unit_layout(P)  # exact scaling of curves far from size 1
         # the engine is built first (cheap): it says whether its metric is a dense matrix
         self.engine = make_engine(engine, layout, metric, theta=theta, **engine_options)
-        if self.engine.dense_metric or self._DENSE_METRIC:
+        if self._DENSE_METRIC:
+            check_dense_size(layout.n, "method")
+        elif self.engine.dense_metric:
             check_dense_size(layout.n)
         if check:
             check_polygon(P)

@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 from ..constraints import Constraints, jacobian, make_constraints, residual
-from .base import HISTORY_KEYS, Run, _check_names, check_number
+from .base import HISTORY_KEYS, Run, _check_names, check_dense_size, check_number
 
 # The modified Newton back-projection gives up on a trial step once |Φ| shrinks by less than
 # this factor per iteration (it converges linearly; slower means the step left its basin).
@@ -91,10 +91,16 @@ class Relaxation(Run):
         slope −<g,u> and E(Q), kept in [0.1, 0.5] τ, instead of halving it (fewer rejected
         trials, but smaller accepted steps: measured more iterations on the FHW unknot).
     engine : str
-        Name of the numerical engine (``core.engine.ENGINES``; only "exact" so far).
+        Name of the numerical engine (``core.engine.ENGINES``): "exact", "tree" or "auto".
     theta : float, optional
         Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); checked
         for every engine.
+    krylov_rtol : float, optional
+        Relative tolerance of the tree engine's Krylov solves with ``hs`` and ``hs_pure``
+        (default ``hs_tree.RTOL``); checked for every engine.
+    exact_backprojection : bool
+        The tree engine's back-projection steps in the metric itself (Krylov solves) instead
+        of its banded preconditioner's metric.
     """
 
     def __init__(
@@ -121,6 +127,8 @@ class Relaxation(Run):
         interpolate: bool = False,
         engine: str = "auto",
         theta: float | None = None,
+        krylov_rtol: float | None = None,
+        exact_backprojection: bool = False,
     ):
         _check_names(metric, target_lengths)
         armijo, growth = check_line_search(armijo, growth)
@@ -130,12 +138,15 @@ class Relaxation(Run):
         super().__init__(P, metric, max_iter, tol, energy_target=energy_target, ftol=ftol,
                          max_seconds=max_seconds, target_lengths=target_lengths, check=check,
                          equilateral=True, engine=engine, theta=theta, precision=precision,
-                         reuse_factorization=reuse_factorization)
+                         reuse_factorization=reuse_factorization, krylov_rtol=krylov_rtol,
+                         exact_backprojection=exact_backprojection)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter
         self.backproject_tol = backproject_tol
         self.interpolate = bool(interpolate)
+        if not (edge_lengths and barycenter) and not self.engine.dense_metric:
+            check_dense_size(self.layout.n, "constraints")  # the tree's solvers need both
         self.con: Constraints = make_constraints(self.X, self.layout, self.lengths0,
                                                  edge_lengths, barycenter)
         self.tau = initial_step / self.growth

@@ -1,0 +1,248 @@
+"""Conversion: a drawn, imported or catalogue curve made into equal-edge cyclic poly splines,
+checked before anything in the scene changes."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import bpy
+import numpy as np
+
+from .. import core
+from . import geometry
+from .keyframes import ENERGY_PROP
+from .labels import DEFAULT_ENGINE, DEFAULT_METHOD
+from .objects import copy_transform, deselect_all, link_like
+from .options import EDGE_LIMIT, check_edge_count, edge_limit
+from .polygons import as_input, energy
+from .rest import set_rest_shape
+
+# Coordinates at or beyond this are Blender's clamped infinities (single precision: ±3.4e38).
+_FLOAT_LIMIT = 1e38
+_SOURCE = "moebius_source"
+
+
+def _dedupe(points: np.ndarray, closed: bool) -> np.ndarray:
+    """Drop repeated consecutive points (OBJ files and evaluated curves often repeat them)."""
+    scale = max(float(np.ptp(points, axis=0).max()), 1e-300) if len(points) else 1.0
+    keep = np.ones(len(points), bool)
+    keep[1:] = np.linalg.norm(np.diff(points, axis=0), axis=1) > 1e-12 * scale
+    points = points[keep]
+    if closed and len(points) > 1 and np.linalg.norm(points[-1] - points[0]) <= 1e-12 * scale:
+        points = points[:-1]
+    return points
+
+
+def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: float | None = None,
+                       close_open: bool = False, allow_large: bool = False, *,
+                       metric: str = "hs", method: str = DEFAULT_METHOD,
+                       engine: str = DEFAULT_ENGINE) -> list[np.ndarray]:
+    """Check ``obj`` and compute its equal-edge polygons without touching the scene.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        Curve (poly, Bezier, NURBS) or mesh made of closed edge loops.
+    edges : int
+        Edges per component (at least 4); ignored when ``edge_length`` is given.
+    edge_length : float, optional
+        Target edge length in object units; each component gets ``round(length / edge_length)``
+        edges (at least 4).
+    close_open : bool
+        Join the ends of open splines/chains instead of refusing them.
+    allow_large : bool
+        Accept more than :data:`~.options.EDGE_LIMIT` edges in total on the tree engine (the
+        core's own size refusals stand).
+    metric, method, engine : str
+        The run the curve is converted for: its edge count is refused where that run would
+        refuse it (:func:`~.options.check_edge_count`).
+
+    Returns
+    -------
+    list of (n_i, 3) float64 arrays
+        Equilateral polygons, one per component, in object coordinates.
+
+    Raises
+    ------
+    ValueError
+        With the reason and the fix: unsupported object, open spline, fewer than 4 points,
+        too many edges, a polygon that touches itself.
+    """
+    polylines = geometry.object_polylines(obj)
+    many = len(polylines) > 1
+    cleaned = []
+    for k, (points, closed) in enumerate(polylines):
+        where = f"'{obj.name}'" + (f" (component {k + 1} of {len(polylines)})" if many else "")
+        if not closed and not close_open:
+            raise ValueError(
+                f"{where} is an open curve; close it (Edit Mode: Alt+C, or F on the end "
+                "vertices of a mesh) or enable 'Close open splines'"
+            )
+        points = np.asarray(points, np.float64)
+        # Blender keeps points in single precision and stores an infinity typed in the UI as
+        # ±3.4e38 (its float limit): coordinates that large are infinite ones
+        bad = ~(np.abs(points) < _FLOAT_LIMIT).all(axis=1)
+        if bad.any():
+            raise ValueError(
+                f"{where} has NaN or infinite coordinates ({int(bad.sum())} of its "
+                f"{len(points)} points, the first at index {int(np.flatnonzero(bad)[0])}; "
+                "Blender shows an infinite one as ±3.4e38); fix or delete those points"
+            )
+        points = _dedupe(points, closed=True)
+        if len(points) < 4:
+            raise ValueError(
+                f"{where} has only {len(points)} distinct points; a closed curve to relax needs "
+                "at least 4 (subdivide it or draw more points)"
+            )
+        try:  # the drawn curve itself must not touch itself (resampling could hide it)
+            core.check_polygon(points, coarseness=False)
+        except ValueError as err:
+            raise ValueError(f"{where}: {err}") from None
+        cleaned.append(points)
+    lengths = [float(np.linalg.norm(np.diff(np.vstack([p, p[:1]]), axis=0), axis=1).sum())
+               for p in cleaned]
+    if edge_length is not None:
+        if not edge_length > 0:
+            raise ValueError(f"edge length must be positive, got {edge_length}")
+        counts = [max(4, round(L / edge_length)) for L in lengths]
+    else:
+        if int(edges) < 4:
+            raise ValueError(f"{edges} edges is too few; a closed polygon needs at least 4")
+        counts = [int(edges)] * len(cleaned)
+    few = core.polygon.MIN_CHECKED_VERTICES
+    if min(counts) < few:
+        raise ValueError(
+            f"'{obj.name}': {min(counts)} edges per component is too few: below {few} the "
+            "start check cannot see strands that come too close, and a knot can come out "
+            f"unknotted (the trefoil at 5 to 7 edges did); use at least {few}"
+            + (" or a shorter edge length" if edge_length is not None else "")
+        )
+    try:  # before resampling: no size may crash the process
+        check_edge_count(sum(counts), metric, method, engine, allow_large)
+    except ValueError as err:
+        raise ValueError(f"'{obj.name}': {err}"
+                         + (" (or set a longer edge length)" if edge_length is not None else "")
+                         ) from None
+    polygons = [core.resample(p, n, closed=True) for p, n in zip(cleaned, counts, strict=True)]
+    try:
+        core.check_polygon(as_input(polygons), coarseness=False)
+    except ValueError as err:
+        raise ValueError(f"'{obj.name}' after resampling to {counts} edges: {err}") from None
+    if core.contact_ratio(as_input(polygons)) < core.polygon.CONTACT_RATIO:
+        limit = EDGE_LIMIT if allow_large else edge_limit(metric, method, engine)
+        raise ValueError(f"'{obj.name}' is too coarse at {counts} edges for its shape: strands "
+                         f"far apart along the curve come closer than one edge length, and the "
+                         f"energy cannot keep them apart — "
+                         f"{_finer_conversion(cleaned, counts, edge_length, limit)}")
+    return polygons
+
+
+def _finer_conversion(cleaned, counts, edge_length, limit: int) -> str:
+    """The fix for a too coarse conversion, in the unit of the field the user set: the
+    smallest count per component (or the largest edge length) in 10% steps that passes the
+    contact check, or a plain advice when none does up to ``limit`` edges (what the run
+    takes)."""
+    def finer(factor):
+        return [max(4, int(np.ceil(n * factor))) for n in counts]
+
+    def passes(trial):
+        polygons = [core.resample(p, n, closed=True) for p, n in zip(cleaned, trial, strict=True)]
+        return core.contact_ratio(as_input(polygons)) >= core.polygon.CONTACT_RATIO
+
+    # the largest count first: a search in 10% steps up to the limit would take long for
+    # nothing when even that fails
+    top = limit / sum(counts)
+    if top < 1.1 or not passes(finer(top)):
+        return f"move the strands apart; no conversion up to {limit} edges resolves them"
+    factor = 1.1
+    while factor < top and not passes(finer(factor)):
+        factor *= 1.1
+    factor = min(factor, top)
+    if edge_length is not None:
+        return f"use an edge length of at most {edge_length / factor:.4g}"
+    return f"use at least {finer(factor)[0]} edges per component (the Edges field)"
+
+
+def make_curve_object(name: str, polygons: Sequence[np.ndarray],
+                      like: bpy.types.Object | None = None,
+                      context: bpy.types.Context | None = None) -> bpy.types.Object:
+    """Create and select a curve object with one cyclic poly spline per polygon.
+
+    Parameters
+    ----------
+    name : str
+    polygons : sequence of (n_i, 3) arrays
+        Vertices in object coordinates.
+    like : bpy.types.Object, optional
+        Object whose transform, collections and (for curves) bevel and materials are copied.
+    context : bpy.types.Context, optional
+        Defaults to ``bpy.context``.
+
+    Returns
+    -------
+    bpy.types.Object
+    """
+    context = context or bpy.context
+    curve = geometry.new_curve(name, polygons)
+    if like is not None and like.type == "CURVE":
+        src = like.data
+        curve.bevel_depth = src.bevel_depth
+        curve.bevel_resolution = src.bevel_resolution
+        curve.use_fill_caps = src.use_fill_caps
+        for mat in src.materials:
+            curve.materials.append(mat)
+    obj = bpy.data.objects.new(name, curve)
+    if like is not None:
+        copy_transform(like, obj)
+    deselect_all(context)
+    link_like(obj, like, context)
+    set_rest_shape(obj, polygons)
+    obj[ENERGY_PROP] = energy(polygons)
+    obj.select_set(True)
+    context.view_layer.objects.active = obj
+    return obj
+
+
+def convert_object(obj: bpy.types.Object, edges: int = 100, edge_length: float | None = None,
+                   close_open: bool = False, allow_large: bool = False,
+                   context: bpy.types.Context | None = None, *, metric: str = "hs",
+                   method: str = DEFAULT_METHOD,
+                   engine: str = DEFAULT_ENGINE) -> bpy.types.Object:
+    """Make an equal-edge poly curve from ``obj``; the original is kept, hidden.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        Curve (poly, Bezier, NURBS) or mesh made of closed edge loops.
+    edges, edge_length, close_open, allow_large, metric, method, engine
+        See :func:`prepare_conversion`.
+    context : bpy.types.Context, optional
+        Defaults to ``bpy.context``.
+
+    Returns
+    -------
+    bpy.types.Object
+        The new curve object ``"<name>.moebius"`` (same transform and collections), selected
+        and active; ``obj["moebius_source"]`` names the hidden original.
+
+    Raises
+    ------
+    ValueError
+        See :func:`prepare_conversion`; the scene is unchanged then.
+    """
+    polygons = prepare_conversion(obj, edges, edge_length, close_open, allow_large,
+                                  metric=metric, method=method, engine=engine)
+    return apply_conversion(obj, polygons, context)
+
+
+def apply_conversion(obj: bpy.types.Object, polygons: Sequence[np.ndarray],
+                     context: bpy.types.Context | None = None) -> bpy.types.Object:
+    """Create the converted curve from :func:`prepare_conversion`'s polygons; hide ``obj``."""
+    context = context or bpy.context
+    new = make_curve_object(f"{obj.name}.moebius", polygons, like=obj, context=context)
+    new[_SOURCE] = obj.name
+    obj.hide_set(True)
+    obj.hide_render = True
+    return new
+
+

@@ -1,0 +1,138 @@
+"""Names, labels and defaults of the Blender layer: what the panel's menus and the command line's
+choices list, each derived from the core's own list where there is one.
+
+No bpy: the properties, the panel, the operators and the command line all read these.
+"""
+
+from __future__ import annotations
+
+from .. import core
+from ..core import barnes_hut
+from ..core.engine import AUTO_TREE_FROM
+
+#: Metrics offered for the flow, as ``(core name, label, description)``.
+METRICS = (
+    ("hs", "W^{3/2,2} (geometric)", "Geometric Sobolev metric of the paper: fastest, scale-aware"),
+    ("hs_pure", "W^{3/2,2} (pure)", "Fractional Sobolev metric without the lower-order terms"),
+    ("h2", "H²", "Second-order Sobolev metric (too strong: slow for fine polygons)"),
+    ("h1", "H¹", "First-order Sobolev metric (too weak: step sizes shrink with N)"),
+    ("l2", "L²", "Plain L² gradient descent (needs tiny steps; for comparison only)"),
+)
+
+#: The paper's explicit projected gradient (``core.Relaxation``): best on unknots.
+EXPLICIT_METHOD = "projected_gradient"
+#: The implicit projected gradient: best on knots.
+KNOT_METHOD = "projected_gradient_implicit"
+#: Default: :data:`KNOT_METHOD` for a curve its knot determinant proves knotted, else
+#: :data:`EXPLICIT_METHOD` (``choose_method``; measured in docs/benchmarks.md, "The
+#: automatic method": the implicit one ended lower on 32 of the 36 table knots in the same
+#: seconds, the explicit one is faster on the FHW unknot).
+AUTO_METHOD = "auto"
+DEFAULT_METHOD = AUTO_METHOD
+
+#: Default weight α of the edge-stretch penalty of the penalty methods (the core's default).
+DEFAULT_PENALTY = core.DEFAULT_PENALTY_WEIGHT
+
+_METHOD_TEXT = {
+    AUTO_METHOD: (
+        "Automatic",
+        "Implicit Gradient for a knotted curve (knot determinant above 1), Projected Gradient "
+        "for unknots and links: the faster of the two on each, as measured (default)"),
+    "projected_gradient": (
+        "Projected Gradient",
+        "The paper's explicit projected Sobolev gradient with Armijo steps: keeps edge lengths "
+        "and barycenter exactly; the fastest on unknots"),
+    "projected_gradient_implicit": (
+        "Implicit Gradient",
+        "Backward Euler on the projected flow, solved by Newton–Krylov: keeps edge lengths and "
+        "barycenter exactly; fewer but costlier iterations"),
+    "trust_region": (
+        "Trust Region",
+        "Subspace trust-region method with Hessian products: keeps edge lengths and barycenter "
+        "exactly"),
+    "ncg": (
+        "Nonlinear CG (penalty)",
+        "Polak–Ribière conjugate gradients; edge lengths held only by a penalty (they may "
+        "stretch), barycenter free"),
+    "lbfgs": (
+        "L-BFGS (penalty)",
+        "Limited-memory BFGS; edge lengths held only by a penalty (they may stretch), "
+        "barycenter free"),
+    "nesterov": (
+        "Nesterov (penalty)",
+        "Nesterov's accelerated gradient; edge lengths held only by a penalty (they may "
+        "stretch), barycenter free"),
+}
+
+#: Optimizers offered for the flow, as ``(name, label, description)``: :data:`AUTO_METHOD`,
+#: then exactly ``core.METHODS`` in its order (a method without a text here gets its name as
+#: label).
+METHODS = tuple(
+    (m, *_METHOD_TEXT.get(m, (m.replace("_", " ").title(), f"core.solvers '{m}'")))
+    for m in (AUTO_METHOD, *core.METHODS)
+)
+
+#: Methods that replace the edge-length constraints by a penalty of weight α.
+PENALTY_METHODS = core.solvers.INFEASIBLE
+
+
+#: Default engine: the tree from ``core.engine.AUTO_TREE_FROM`` edges on, exact below (the
+#: core's).
+DEFAULT_ENGINE = "auto"
+#: Default admissibility θ of the tree (the core's).
+DEFAULT_THETA = barnes_hut.THETA
+
+_ENGINE_TEXT = {
+    "auto": (
+        "Automatic",
+        f"Exact below {AUTO_TREE_FROM} edges, the tree from there on (default)"),
+    "exact": (
+        "Exact",
+        "Every pair of edges summed exactly: time per iteration grows as N²"),
+    "tree": (
+        "Tree",
+        "Barnes–Hut: energy and gradient in about N log N (at the default θ within 1e-5 and "
+        "7e-4 of the exact sums), the metric without a dense matrix: for large curves"
+        + "".join(f" (except {label}, dense)" for key, label, _ in METRICS
+                  if core.ENGINES["tree"].holds_dense(key))),
+}
+
+#: Engines that evaluate the energy, as ``(name, label, description)``: exactly
+#: ``core.barnes_hut.ENGINE_NAMES`` in its order.
+ENGINES = tuple(
+    (e, *_ENGINE_TEXT.get(e, (e.title(), f"core.engine '{e}'")))
+    for e in barnes_hut.ENGINE_NAMES
+)
+
+
+def method_label(method: str) -> str:
+    """The label the panel shows for ``method`` (its name when it has none)."""
+    return next((label for key, label, _ in METHODS if key == method), method)
+
+
+def engine_label(engine: str) -> str:
+    """The label the panel shows for ``engine`` (its name when it has none)."""
+    return next((label for key, label, _ in ENGINES if key == engine), engine)
+
+
+#: Catalogue entries besides the named knots of ``core.knots.names()``.
+SPECIAL_KNOTS = (
+    ("fhw", "Freedman–He–Wang unknot", "The tangled unknot of Freedman, He and Wang"),
+    ("helix", "Helix unknot", "A coiled unknot"),
+    ("random", "Random unknot", "A seeded random unknot"),
+    ("torus", "Torus knot (p, q)", "The (p, q) torus knot"),
+    ("circle", "Circle", "A regular polygon (the energy minimiser)"),
+    ("figure_eight", "Figure-eight knot", "The 4_1 knot"),
+)
+
+
+def knot_items() -> list[tuple[str, str, str, int]]:
+    """Enum items ``(name, label, description, number)`` of the catalogue: the entries of
+    :data:`SPECIAL_KNOTS`, then the knot table of ``core.knots.names()``."""
+    from ..core import knots
+
+    items = [(k, label, desc) for k, label, desc in SPECIAL_KNOTS]
+    special = {key for key, *_ in items}
+    items += [(name, f"Knot {name}", f"Prime knot {name} of the knot table")
+              for name in knots.names() if name not in special]
+    return [(k, label, desc, i) for i, (k, label, desc) in enumerate(items)]

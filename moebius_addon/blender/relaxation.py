@@ -1,0 +1,350 @@
+"""The relaxation of a curve object: the method chosen for it, the stepper the modal operator
+drives (:class:`ObjectRelaxation`) and the blocking call scripts use (:func:`relax_object`)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+
+import bpy
+import numpy as np
+
+from .. import core
+from . import geometry, keyframes
+from .gradients import refresh_gradients
+from .labels import (
+    AUTO_METHOD,
+    DEFAULT_ENGINE,
+    DEFAULT_METHOD,
+    EXPLICIT_METHOD,
+    KNOT_METHOD,
+    method_label,
+)
+from .options import check_edge_count, check_relax_options
+from .polygons import as_input, as_link
+from .rest import rest_shape, set_rest_shape
+
+# Whether a run reached its first iterate in this Blender session: the first one pays for the
+# numerical kernels (numba compiles them once per installation, later sessions load them from
+# its cache) before its first iterate; see docs/blender.md, Install, for the times measured.
+_SESSION = {"warm": False}
+
+
+def choose_method(method: str, polygons: Sequence[np.ndarray]) -> tuple[str, str]:
+    """The core method a run of ``method`` uses on ``polygons``, and why (empty unless
+    ``method`` is :data:`AUTO_METHOD`): :data:`KNOT_METHOD` for one component whose knot
+    determinant is above 1 (``core.knot_determinant``: certainly knotted), else
+    :data:`EXPLICIT_METHOD` (unknots, links, and the rare knots of determinant 1)."""
+    if method != AUTO_METHOD:
+        return method, ""
+    if len(polygons) != 1:
+        return EXPLICIT_METHOD, f"a link of {len(polygons)} components"
+    det = core.knot_determinant(polygons[0])
+    if det > 1:
+        return KNOT_METHOD, f"knotted, determinant {det}"
+    return EXPLICIT_METHOD, "no knot detected"
+
+
+def method_hint(method: str, result, polygons: Sequence[np.ndarray]) -> str:
+    """Advice appended to the report of an explicit run that hit its iteration limit on a
+    knotted curve (``polygons``: its start): the explicit flow's last stretch on a knot is
+    slow (docs/benchmarks.md, "Knots of the table"). Decided by ``result.status``, never by
+    the words of the message; unknots and links get none (the explicit method is the faster
+    one on unknots)."""
+    if method != EXPLICIT_METHOD or result.status != core.Status.MAX_ITER:
+        return ""
+    if len(polygons) != 1 or not core.is_knotted(polygons[0]):
+        return ""
+    label = method_label(KNOT_METHOD)
+    return f"; knots settle in fewer iterations with Advanced ▸ Method: {label}"
+
+
+def solver_warm() -> bool:
+    """Whether a relaxation has reached its first iterate in this session, so that the
+    numerical kernels are ready (False: the next run prepares them first, see
+    :attr:`ObjectRelaxation.first_run`)."""
+    return _SESSION["warm"]
+
+
+class ObjectRelaxation:
+    """A relaxation of one curve object, stepped by a caller that may stop it at any time.
+
+    The modal operator steps it on a timer; :func:`relax_object` steps it in a loop. The start
+    and every ``keyframe_stride``-th accepted iterate (and always the last) are recorded and
+    keyframed by :meth:`finish`.
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        Curve of cyclic poly splines (see :func:`convert_object`); its shape at the current frame
+        is the start. Earlier flow keyframes on it are replaced by this run's when it finishes.
+    metric : str
+        ``"hs"``, ``"hs_pure"``, ``"h2"``, ``"h1"`` or ``"l2"``.
+    max_iterations : int
+    tolerance : float
+        Stop once the gradient norm in the metric is this small (``tol`` of ``core.relax``;
+        projected onto the constraints for the feasible methods).
+    frame_start : int
+        Frame of the start shape.
+    keyframe_stride : int
+        Keyframe every this many iterates (1 = all).
+    append : bool
+        Continue the flow keyed on ``obj``: start from its last keyed iterate and key the new
+        iterates on the frames after it, keeping the earlier keys (``frame_start`` is not
+        used then). Without flow keys on ``obj`` this is a new run from the current shape.
+    method : str
+        ``"auto"`` (default; :func:`choose_method` decides from the start, the attributes
+        ``method`` and ``why`` say what ran) or one of ``core.METHODS`` (run by
+        ``core.make_run``); ``requested`` keeps what was asked.
+    penalty : float, optional
+        Weight α of the edge-stretch penalty, for the penalty methods ``"ncg"``, ``"lbfgs"``
+        and ``"nesterov"`` only (None: the core's default, 1e4); positive and finite.
+    engine : str
+        ``"auto"`` (default: the tree from ``core.engine.AUTO_TREE_FROM`` edges on), ``"exact"`` or
+        ``"tree"`` (``core.make_run``); the attribute ``engine`` says which one runs.
+    theta : float, optional
+        Admissibility θ of the tree in (0, 2) (None: the core's ``barnes_hut.THETA``).
+    **options
+        Passed on to the core's run (``initial_step``, ``armijo``, ``growth``,
+        ``backproject_iter``, ``backproject_tol``, ``edge_lengths``, ``barycenter``,
+        ``energy_target``, ``ftol``, ``max_seconds``, and the method's own options); the
+        penalty methods ignore the options that need hard constraints. ``allow_large=True``
+        lifts :data:`~.options.EDGE_LIMIT` (never the core's own size refusals).
+
+    Raises
+    ------
+    ValueError
+        If the curve is not a closed poly curve, the core refuses it (touching itself, too many
+        edges for the metric and engine, ...), or the method, penalty, engine or θ is invalid;
+        nothing is changed then.
+    """
+
+    def __init__(self, obj: bpy.types.Object, metric: str = "hs", max_iterations: int = 200,
+                 tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
+                 method: str = DEFAULT_METHOD, penalty: float | None = None,
+                 append: bool = False, engine: str = DEFAULT_ENGINE,
+                 theta: float | None = None, **options) -> None:
+        self.t0 = time.perf_counter()
+        #: the first run of the session: it prepares the solver before its first iterate
+        self.first_run = not _SESSION["warm"]
+        #: seconds from the set-up to the first iterate (None before it)
+        self.seconds_to_first: float | None = None
+        max_iterations, tolerance, keyframe_stride, frame_start, extra = check_relax_options(
+            max_iterations, tolerance, keyframe_stride, frame_start, method, penalty, engine,
+            theta)
+        options.update(extra)
+        polygons = geometry.curve_polygons(obj)
+        keyframes.check_flow_target(obj)
+        self._shown = [p.copy() for p in polygons]  # the shape at the current frame
+        self._cuts = np.cumsum([len(p) for p in polygons])[:-1]
+        # the earlier flow keys, continued from their last iterate (read by show() otherwise)
+        self._prior = keyframes.read_flow_keyframes(obj) if append else None
+        if self._prior is not None:
+            frames, points, _ = self._prior
+            polygons = np.split(points[-1], self._cuts)
+            frame_start = int(frames[-1])
+        try:  # before any work: no size may crash the process
+            check_edge_count(sum(len(p) for p in polygons), metric, method, engine,
+                             options.pop("allow_large", False))
+        except ValueError as err:
+            raise ValueError(f"'{obj.name}': {err}") from None
+        try:
+            core.check_polygon(as_input(polygons))
+        except ValueError as err:
+            raise ValueError(f"'{obj.name}': {err}") from None
+        options.setdefault("target_lengths", "keep")
+        self.obj = obj
+        #: the method asked for (may be ``"auto"``), the core method run, and why
+        self.requested = method
+        self.method, self.why = choose_method(method, polygons)
+        if method == AUTO_METHOD and self.method != EXPLICIT_METHOD:
+            # the panel's Armijo constant and step growth are the explicit method's; the
+            # implicit one keeps its own (core.solvers), but bad values are refused all the same
+            core.solvers.projected.check_line_search(options.pop("armijo", 0.5),
+                                                     options.pop("growth", 8.0))
+        self.append = self._prior is not None
+        self.frame_start = int(frame_start)
+        self.stride = int(keyframe_stride)
+        # make_run("projected_gradient", ...) is core.Relaxation itself: the default is the
+        # same run as before methods existed
+        self.run = core.make_run(self.method, as_input(polygons), metric=metric,
+                                 max_iter=max_iterations, tol=tolerance, **options)
+        #: the engine that runs ("exact" or "tree": "auto" resolved by the curve's size)
+        self.engine = self.run.engine.name
+        self.start = [p.copy() for p in polygons]
+        self.x = [p.copy() for p in polygons]
+        self.energy = float(np.sum(self.run.energy))
+        self.nit = 0
+        self.iterates = [self.start]
+        self.energies = [self.energy]
+        self._pending = None
+        # the earlier run's keys stay until this run's are written (finish), so that a run
+        # that fails before its first iterate leaves them; live display removes them first
+        self._live = False
+
+    def step(self) -> bool:
+        """Advance by one accepted iterate; False once the run has finished."""
+        before = self.run.nit
+        more = self.run.step()
+        if self.run.nit > before:  # an accepted iterate (the last one may come with False)
+            if self.seconds_to_first is None:
+                self.seconds_to_first = time.perf_counter() - self.t0
+                _SESSION["warm"] = True
+            self.nit += 1
+            x = as_link(self.run.x)
+            self.x = x
+            self.energy = float(np.sum(self.run.energy))
+            # recorded as Blender keys them, in single precision (half the memory of the
+            # record of a large run)
+            keyed = [p.astype(np.float32) for p in x]
+            if self.nit % self.stride == 0:
+                self.iterates.append(keyed)
+                self.energies.append(self.energy)
+                self._pending = None
+            else:
+                self._pending = (keyed, self.energy)
+        return more
+
+    def stop(self, message: str) -> None:
+        """Stop the run (e.g. the user pressed Esc); :meth:`finish` still keyframes it."""
+        self.run.stop(message)
+
+    def show(self) -> None:
+        """Put the current iterate on the curve (for live display while running; the earlier
+        run's keys are removed at the first call, or they would pull the curve back)."""
+        if not self._live:
+            if self._prior is None:  # kept to be put back by restore() after a failure
+                try:
+                    self._prior = keyframes.read_flow_keyframes(self.obj)
+                except ValueError:  # keys edited by hand: a new run replaces them anyway
+                    pass
+            keyframes.remove_flow_keyframes(self.obj)
+            self._live = True
+        geometry.write_polygons(self.obj.data, self.x)
+
+    def restore(self) -> None:
+        """Undo :meth:`show` after a failure: the earlier flow keys (removed for the live
+        display) written back and the curve as it was shown before the run."""
+        if self._live and self._prior is not None:
+            frames, points, energies = self._prior
+            keyframes.write_flow_keyframes(self.obj, [np.split(X, self._cuts) for X in points],
+                                           list(energies), int(frames[0]))
+        geometry.write_polygons(self.obj.data, self._shown)
+
+    def finish(self, scene: bpy.types.Scene | None = None):
+        """Keyframe the recorded iterates and return the core's result.
+
+        Grows the scene frame range to include the keyed frames (it never shrinks it: other
+        animation may need the rest), jumps to the last one and stores the statistics in
+        ``scene.moebius`` (when the add-on is registered).
+
+        Returns
+        -------
+        result
+            The core run's ``result()`` (``x``, ``fun``, ``nit``, ``success``, ``message``,
+            ``history``; the penalty methods' history also has ``penalized_energy``).
+        """
+        scene = scene or bpy.context.scene
+        result = self.run.result()
+        if self._pending is not None:
+            self.iterates.append(self._pending[0])
+            self.energies.append(self._pending[1])
+            self._pending = None
+        iterates, energies, first = self.iterates, self.energies, self.frame_start
+        if self.append:  # the earlier keys, then this run's from the last of them on
+            frames0, points, energies0 = self._prior
+            iterates = [np.split(X, self._cuts) for X in points[:-1]] + iterates
+            energies = list(energies0[:-1]) + energies
+            first = int(frames0[0])
+        else:
+            set_rest_shape(self.obj, self.start)
+        # the curve's own (unanimated) shape: the rest shape Clear Flow goes back to
+        rest = rest_shape(self.obj)
+        geometry.write_polygons(self.obj.data, iterates[0] if rest is None else rest)
+        frames = keyframes.write_flow_keyframes(self.obj, iterates, energies, first)
+        scene.frame_start = min(scene.frame_start, frames.start)
+        scene.frame_end = max(scene.frame_end, frames.stop - 1)
+        scene.frame_set(frames.stop - 1)
+        refresh_gradients(self.obj)  # drawn at the start, they would show a stale field
+        stats = getattr(scene, "moebius", None)
+        if stats is not None:
+            stats.store_run(self.obj.name, self.nit, self.energies[0], self.energies[-1],
+                            time.perf_counter() - self.t0, str(result.message), len(frames),
+                            self.method, self.engine)
+        return result
+
+
+def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: int = 200,
+                 tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
+                 method: str = DEFAULT_METHOD, penalty: float | None = None,
+                 append: bool = False, engine: str = DEFAULT_ENGINE, theta: float | None = None,
+                 callback: Callable | None = None, scene: bpy.types.Scene | None = None,
+                 **options):
+    """Relax a converted curve by the Möbius-energy flow and keyframe its iterates (every
+    ``keyframe_stride``-th and the last).
+
+    Parameters
+    ----------
+    obj : bpy.types.Object
+        Curve of cyclic poly splines (see :func:`convert_object`).
+    metric, max_iterations, tolerance, frame_start, keyframe_stride, append, **options
+        See :class:`ObjectRelaxation`; ``append=True`` continues the flow keyed on ``obj``.
+    method : str
+        ``"auto"`` (default: :func:`choose_method` picks the implicit gradient for a knotted
+        curve, the paper's explicit projected gradient for unknots and links) or one of
+        ``core.METHODS``.
+    penalty : float, optional
+        Penalty weight α of ``"ncg"``, ``"lbfgs"``, ``"nesterov"`` (None: 1e4); refused for
+        the other methods.
+    engine, theta
+        See :class:`ObjectRelaxation`; ``result.stats["engine"]`` says which engine ran.
+    callback : callable, optional
+        ``callback(run)`` after every accepted iterate, the last one included, with the
+        :class:`ObjectRelaxation` (``run.nit``, ``run.x``, ``run.energy``); returning True stops
+        the run cleanly.
+    scene : bpy.types.Scene, optional
+        Scene whose frame range grows to include the flow; defaults to ``bpy.context.scene``.
+
+    Returns
+    -------
+    result
+        The core's result object (``x``, ``fun``, ``nit``, ``success``, ``message``,
+        ``history``).
+
+    Raises
+    ------
+    ValueError
+        If the curve cannot be relaxed (too many edges for the metric and engine among the
+        reasons) or the method, penalty, engine or θ is invalid; nothing is changed then.
+    BaseException
+        Whatever interrupts the run (Ctrl+C, a failing callback) passes through, after the
+        iterates computed so far are keyed (or, before the first one, the earlier animation is
+        left as it was); a note on the exception says which.
+    """
+    run = ObjectRelaxation(obj, metric=metric, max_iterations=max_iterations, tolerance=tolerance,
+                           frame_start=frame_start, keyframe_stride=keyframe_stride,
+                           method=method, penalty=penalty, append=append, engine=engine,
+                           theta=theta, **options)
+    more = True
+    try:
+        while more:
+            before = run.nit
+            more = run.step()
+            # every accepted iterate reaches the callback, the last one of the run included (as
+            # in core.relax); a True returned for the last one changes nothing
+            if run.nit > before and callback is not None and callback(run):
+                run.stop("stopped by callback")
+                break
+    except BaseException as err:  # Ctrl+C in a script, a failing callback: keep the work
+        if run.nit == 0:
+            err.add_note(f"moebius: no iterate was computed; the earlier animation of "
+                         f"'{obj.name}' is kept")
+        else:
+            run.stop(f"interrupted by {type(err).__name__}")
+            run.finish(scene)
+            err.add_note(f"moebius: the {run.nit} iterates computed before the interruption "
+                         f"are keyed on '{obj.name}' from frame {run.frame_start}")
+        raise
+    return run.finish(scene)
+
+

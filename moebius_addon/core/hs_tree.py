@@ -1,0 +1,782 @@
+"""The hs metric without a matrix: its product through a hierarchy of arcs, and the saddle-point
+solves by a preconditioned Krylov method (the tree engine's metric for ``hs`` and ``hs_pure``).
+
+The metric of docs/design.md ("Metrics"; the paper's "Discrete inner product") is
+
+    A = 2 Dᵀ(diag(W1) − W)D + 2 Mᵀ(diag(V1) − V)M + N b bᵀ / L⁴
+
+with ``w_IJ = l_I l_J / |d|²`` and ``v_IJ = l_I l_J (1/|d|² − 1/ρ²) / |d|²`` over disjoint edge
+pairs (``d = m_I − m_J``, ρ the arc length between the midpoints, 1/ρ² = 0 between
+components). Here ``W`` and ``V`` are replaced by ``W̃``, ``Ṽ``:
+
+* **near** pairs of edges (pairs of leaves of the hierarchy that are not admissible, which
+  always includes pairs close in space and pairs close along the curve) keep their exact
+  weights, computed once per iterate and stored;
+* **far** pairs of clusters ``(A, B)`` take one weight per cluster pair from the clusters'
+  length-weighted centres ``c`` and arc-length centres ``s``: ``w = l_I l_J / |c_A − c_B|²``
+  and ``v = w (1/|c_A − c_B|² − 1/ρ(s_A, s_B)²) / |c_A − c_B|²`` (kept ≥ 0).
+
+The clusters are arcs (contiguous edges of one component, :func:`arc_tree`), so that ρ is
+smooth over a cluster pair; a pair is admissible when both boxes are small against their gap,
+``max(diam A, diam B) ≤ θ gap(A, B)``, and, on one component, both arcs are short against the
+arc length between them, ``max(len A, len B) ≤ θ ρ(A, B)``. The weights stay symmetric and
+non-negative, so ``Ã`` keeps the structure that makes ``A`` positive definite (graph Laplacians
+of non-negative weights plus the barycenter term): the metric of the tree path is ``Ã`` itself,
+a function of the polygon, the same in every product (docs/benchmarks.md: its products against
+the dense ``A``).
+
+Products cost O(near pairs + far pairs + N): the near field as stored rows, the far field by an
+upward pass (cluster sums of ``l f``), one weight per cluster pair, and a downward pass.
+
+The saddle-point systems ``[[Ã ⊗ I₃, Cᵀ], [C, 0]] [u; λ] = [g; r]`` are solved by projected
+conjugate gradients (Gould, Hribar & Nocedal 2001) with the constraint preconditioner
+``[[H ⊗ I₃, Cᵀ], [C, 0]]``, which core/banded.py solves exactly in O(N): ``H = s·h1 +
+2 Mᵀ diag(Ṽ1) M``, the h1 metric scaled to ``Ã``'s trace plus the diagonal of ``Ã``'s lower-order
+part (which carries the strong coupling of strands that come close; without it the iterates'
+errors move such strands against each other and the collision bound stalls the flow). Measured
+on the FHW unknot, 7_2 and random right-hand sides: the iteration counts do not grow with N
+(docs/benchmarks.md, "hs on the tree").
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from . import bvh
+from ._layout import Layout
+from .banded import BandedSaddle
+from .barnes_hut import _by_target
+from ._layout import layout_from_sizes
+from .constraints import Jacobian, jacobian, make_constraints
+from .linalg import Factorization
+from .metrics import _PURE_L2, _barycenter_weights, banded_parts_of_lengths, gram_x
+
+#: Admissibility of the metric's far field (its own, coarser than the energy's: the metric
+#: is any positive definite matrix close to hs, while the energy must be accurate).
+THETA = 0.5
+#: Edges per leaf at most.
+LEAF_SIZE = 8
+#: Pairs whose arc length exceeds this many times their distance are "folded" (strands that
+#: come close again along the curve, or other components): the lower-order weights of those
+#: pairs alone enter the preconditioner's diagonal (see :meth:`HsOperator.preconditioner_parts`).
+FOLDED = 2.0
+#: The metrics this module computes.
+METRICS = ("hs_pure", "hs")
+#: Relative tolerance of the gradient's Krylov solve (preconditioned residual norm).
+RTOL = 1e-2
+#: The coarse level of the preconditioner: about ``COARSE_PER_ROOT · √N`` vertices, at most
+#: ``COARSE_MAX`` (solved densely), none below ``COARSE_FROM`` vertices.
+COARSE_PER_ROOT = 8.0
+COARSE_MAX = 2500
+COARSE_FROM = 10000
+
+
+
+
+def check_rtol(rtol) -> float:
+    """``rtol`` as a float in [1e-10, 1), else ValueError naming ``krylov_rtol``."""
+    try:
+        t = float(rtol)
+    except (TypeError, ValueError):
+        raise ValueError(f"krylov_rtol must be a number in [1e-10, 1), got {rtol!r}") from None
+    if not 1e-10 <= t < 1.0:
+        raise ValueError(f"krylov_rtol must be a number in [1e-10, 1), got {rtol!r}")
+    return t
+
+
+# ------------------------------------------------------------------------------------------------
+# the hierarchy of arcs
+
+
+@nb.njit(cache=True)
+def _arc_tree(starts, leaf_size):
+    """Binary tree over the edges in index order: a range spanning several components is split
+    at the component boundary nearest its middle, a range of one component in halves, down to
+    ``leaf_size`` edges. Parents come before their children."""
+    n = starts[-1]
+    k = starts.shape[0] - 1
+    cap = 2 * (n // max(leaf_size // 2, 1) + k) + 2
+    lo = np.empty(cap, np.int64)
+    hi = np.empty(cap, np.int64)
+    left = np.full(cap, -1, np.int64)
+    right = np.full(cap, -1, np.int64)
+    comp_of = np.empty(n, np.int64)
+    for c in range(k):
+        for i in range(starts[c], starts[c + 1]):
+            comp_of[i] = c
+    lo[0] = 0
+    hi[0] = n
+    count = 1
+    stack = np.empty(128, np.int64)
+    stack[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        node = stack[top]
+        a, b = lo[node], hi[node]
+        ca, cb = comp_of[a], comp_of[b - 1]
+        if ca != cb:
+            mid2 = a + b  # twice the middle
+            m = starts[ca + 1]
+            for c in range(ca + 2, cb + 1):
+                if abs(2 * starts[c] - mid2) < abs(2 * m - mid2):
+                    m = starts[c]
+        elif b - a > leaf_size:
+            m = (a + b) // 2
+        else:
+            continue
+        for child in range(2):
+            lo[count] = a if child == 0 else m
+            hi[count] = m if child == 0 else b
+            if child == 0:
+                left[node] = count
+            else:
+                right[node] = count
+            if top == stack.shape[0]:
+                grown = np.empty(2 * top, np.int64)
+                grown[:top] = stack
+                stack = grown
+            stack[top] = count
+            top += 1
+            count += 1
+    perm = np.arange(n)
+    return perm, lo[:count].copy(), hi[:count].copy(), left[:count].copy(), right[:count].copy()
+
+
+def arc_tree(layout: Layout, leaf_size: int = LEAF_SIZE) -> bvh.Tree:
+    """The hierarchy of arcs over the edges of ``layout`` (``perm`` is the identity)."""
+    return bvh.Tree(*_arc_tree(layout.starts, int(leaf_size)))
+
+
+@nb.njit(cache=True)
+def _edge_data(X, nxt, starts):
+    """Edge lengths, midpoints, the arc position of every midpoint along its component and
+    the components' lengths."""
+    n = X.shape[0]
+    k = starts.shape[0] - 1
+    ln = np.empty(n)
+    mid = np.empty((n, 3))
+    arc = np.empty(n)
+    clen = np.empty(k)
+    for c in range(k):
+        s = 0.0
+        for i in range(starts[c], starts[c + 1]):
+            j = nxt[i]
+            e2 = 0.0
+            for d in range(3):
+                e = X[j, d] - X[i, d]
+                e2 += e * e
+                mid[i, d] = 0.5 * (X[i, d] + X[j, d])
+            ln[i] = np.sqrt(e2)
+            arc[i] = s + 0.5 * ln[i]
+            s += ln[i]
+        clen[c] = s
+    return ln, mid, arc, clen
+
+
+@nb.njit(cache=True)
+def _node_data(ln, mid, arc, starts, lo, hi, left, right):
+    """Per node: component (−1 when it spans several), total length, length-weighted centre,
+    arc-length start and end along its component."""
+    m = lo.shape[0]
+    nc = np.empty(m, np.int64)
+    L = np.zeros(m)
+    C = np.zeros((m, 3))
+    s0 = np.empty(m)
+    s1 = np.empty(m)
+    for node in range(m - 1, -1, -1):
+        a, b = lo[node], hi[node]
+        c = 0
+        while starts[c + 1] <= a:
+            c += 1
+        nc[node] = c if b <= starts[c + 1] else -1
+        if left[node] < 0:
+            for q in range(a, b):
+                L[node] += ln[q]
+                for d in range(3):
+                    C[node, d] += ln[q] * mid[q, d]
+            for d in range(3):
+                C[node, d] /= L[node]
+        else:
+            c1, c2 = left[node], right[node]
+            L[node] = L[c1] + L[c2]
+            for d in range(3):
+                C[node, d] = (L[c1] * C[c1, d] + L[c2] * C[c2, d]) / L[node]
+        s0[node] = arc[a] - 0.5 * ln[a]
+        s1[node] = arc[b - 1] + 0.5 * ln[b - 1]
+    return nc, L, C, s0, s1
+
+
+@nb.njit(cache=True, inline="always")
+def _arc_gap(s0a, s1a, s0b, s1b, length):
+    """Arc length between two disjoint arcs of a closed curve of ``length``."""
+    f1 = (s0b - s1a) % length
+    f2 = (s0a - s1b) % length
+    return min(f1, f2)
+
+
+@nb.njit(cache=True, inline="always")
+def _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, theta2):
+    if nc[a] < 0 or nc[b] < 0:
+        return False
+    gap2 = bvh.box_gap2(bmin, bmax, a, b)
+    if gap2 <= 0.0 or max(diam2[a], diam2[b]) > theta2 * gap2:
+        return False
+    if nc[a] != nc[b]:
+        return True
+    span = max(s1[a] - s0[a], s1[b] - s0[b])
+    rho = _arc_gap(s0[a], s1[a], s0[b], s1[b], clen[nc[a]])
+    return span * span <= theta2 * rho * rho
+
+
+@nb.njit(cache=True)
+def _split(left, right, bmin, bmax, nc, s0, s1, clen, theta2):
+    """Dual traversal from (root, root): unordered far pairs of admissible clusters and near
+    pairs of leaves (self pairs included)."""
+    diam2 = bvh.node_diam2(bmin, bmax)
+    m = left.shape[0]
+    far = np.empty((max(64, 8 * m), 2), np.int64)
+    near = np.empty((max(64, 8 * m), 2), np.int64)
+    nf = 0
+    nn = 0
+    stack = np.empty((256, 2), np.int64)
+    stack[0, 0] = 0
+    stack[0, 1] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        a = stack[top, 0]
+        b = stack[top, 1]
+        if a != b and _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, theta2):
+            if nf == far.shape[0]:
+                grown = np.empty((2 * nf, 2), np.int64)
+                grown[:nf] = far
+                far = grown
+            far[nf, 0], far[nf, 1] = a, b
+            nf += 1
+        elif left[a] >= 0 or left[b] >= 0:
+            stack, top = bvh.push_split(stack, top, a, b, left, right, diam2)
+        else:
+            if nn == near.shape[0]:
+                grown = np.empty((2 * nn, 2), np.int64)
+                grown[:nn] = near
+                near = grown
+            near[nn, 0], near[nn, 1] = a, b
+            nn += 1
+    return far[:nf].copy(), near[:nn].copy()
+
+
+# ------------------------------------------------------------------------------------------------
+# weights
+
+
+@nb.njit(cache=True, parallel=True)
+def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart, rowoff,
+                  low, cross2, w, v, w1, v1, x1):
+    """Exact weights of every near pair, stored per target edge as one row over the edges of
+    its leaf's partner leaves (in partner order), their row sums, and the row sums of ``v``
+    over the folded pairs (other components, or ``ρ² ≥ cross2 · |d|²``)."""
+    for kk in nb.prange(leaves.shape[0]):
+        a = leaves[np.int64(kk)]
+        width = 0
+        for p in range(noff[a], noff[a + 1]):
+            b = npart[p]
+            width += hi[b] - lo[b]
+        for q in range(lo[a], hi[a]):
+            pos = rowoff[a] + (q - lo[a]) * width
+            cq = comp[q]
+            sq = starts[cq + 1] - starts[cq]
+            sw = 0.0
+            sv = 0.0
+            sx = 0.0
+            for p in range(noff[a], noff[a + 1]):
+                b = npart[p]
+                for r in range(lo[b], hi[b]):
+                    wq = 0.0
+                    vq = 0.0
+                    same = comp[r] == cq
+                    gap = (r - q) % sq if same else 2
+                    if gap >= 2 and gap != sq - 1:
+                        dx = mid[q, 0] - mid[r, 0]
+                        dy = mid[q, 1] - mid[r, 1]
+                        dz = mid[q, 2] - mid[r, 2]
+                        inv = 1.0 / (dx * dx + dy * dy + dz * dz)
+                        wq = ln[q] * ln[r] * inv
+                        if same:
+                            fwd = abs(arc[r] - arc[q])
+                            rho = min(fwd, clen[cq] - fwd)
+                            vq = low * wq * (inv - 1.0 / (rho * rho))
+                            if rho * rho * inv >= cross2:
+                                sx += vq
+                        else:
+                            vq = low * wq * inv
+                            sx += vq
+                    w[pos] = wq
+                    v[pos] = vq
+                    sw += wq
+                    sv += vq
+                    pos += 1
+            w1[q] = sw
+            v1[q] = sv
+            x1[q] = sx
+
+
+@nb.njit(cache=True, parallel=True)
+def _far_weights(L, C, nc, s0, s1, clen, foff, fpart, low, cross2, fw, fv, rw, rv, rx):
+    """One weight pair per ordered far pair of clusters, and per target cluster the sums
+    ``Σ_B ω L_B`` (what its edges' row sums receive, times their own length), those of ``v``
+    over folded pairs (see :func:`_near_weights`) apart."""
+    m = L.shape[0]
+    for aa in nb.prange(m):
+        a = np.int64(aa)
+        sw = 0.0
+        sv = 0.0
+        sx = 0.0
+        for p in range(foff[a], foff[a + 1]):
+            b = fpart[p]
+            dx = C[a, 0] - C[b, 0]
+            dy = C[a, 1] - C[b, 1]
+            dz = C[a, 2] - C[b, 2]
+            inv = 1.0 / (dx * dx + dy * dy + dz * dz)
+            if nc[a] == nc[b]:
+                ca = 0.5 * (s0[a] + s1[a])
+                cb = 0.5 * (s0[b] + s1[b])
+                fwd = abs(ca - cb)
+                rho = min(fwd, clen[nc[a]] - fwd)
+                vv = low * inv * max(0.0, inv - 1.0 / (rho * rho))
+                if rho * rho * inv >= cross2:
+                    sx += vv * L[b]
+            else:
+                vv = low * inv * inv
+                sx += vv * L[b]
+            fw[p] = inv
+            fv[p] = vv
+            sw += inv * L[b]
+            sv += vv * L[b]
+        rw[a] = sw
+        rv[a] = sv
+        rx[a] = sx
+
+
+@nb.njit(cache=True)
+def _push_to_edges(acc, ln, lo, hi, left, right, out):
+    """``out[q] += l_q Σ_{A ∋ q} acc[A]`` (acc per node, any number of columns)."""
+    m = acc.shape[0]
+    tot = acc.copy()
+    for node in range(m):  # parents come first
+        if left[node] >= 0:
+            for c in (left[node], right[node]):
+                for d in range(acc.shape[1]):
+                    tot[c, d] += tot[node, d]
+        else:
+            for q in range(lo[node], hi[node]):
+                for d in range(acc.shape[1]):
+                    out[q, d] += ln[q] * tot[node, d]
+
+
+# ------------------------------------------------------------------------------------------------
+# the product
+
+
+@nb.njit(cache=True, parallel=True)
+def _edge_fields(U, nxt, ln):
+    """``(D U, M U)`` per edge: ``(U[nxt] − U) / l`` and ``(U + U[nxt]) / 2``, as (N, 3) each."""
+    n = U.shape[0]
+    F = np.empty((n, 3))
+    G = np.empty((n, 3))
+    for ii in nb.prange(n):
+        i = np.int64(ii)
+        j = nxt[i]
+        for d in range(3):
+            F[i, d] = (U[j, d] - U[i, d]) / ln[i]
+            G[i, d] = 0.5 * (U[i, d] + U[j, d])
+    return F, G
+
+
+@nb.njit(cache=True, parallel=True, fastmath={"reassoc", "contract", "nsz", "arcp"})
+def _near_product(F, G, w, v, lo, hi, leaves, noff, npart, rowoff, Y):
+    """``Y[q, :3] = Σ w_qr F[r]``, ``Y[q, 3:] = Σ v_qr G[r]`` over the stored near rows."""
+    for kk in nb.prange(leaves.shape[0]):
+        a = leaves[np.int64(kk)]
+        width = 0
+        for p in range(noff[a], noff[a + 1]):
+            b = npart[p]
+            width += hi[b] - lo[b]
+        for q in range(lo[a], hi[a]):
+            pos = rowoff[a] + (q - lo[a]) * width
+            f0 = f1 = f2 = g0 = g1 = g2 = 0.0
+            for p in range(noff[a], noff[a + 1]):
+                b = npart[p]
+                for r in range(lo[b], hi[b]):
+                    wq = w[pos]
+                    vq = v[pos]
+                    f0 += wq * F[r, 0]
+                    f1 += wq * F[r, 1]
+                    f2 += wq * F[r, 2]
+                    g0 += vq * G[r, 0]
+                    g1 += vq * G[r, 1]
+                    g2 += vq * G[r, 2]
+                    pos += 1
+            Y[q, 0], Y[q, 1], Y[q, 2] = f0, f1, f2
+            Y[q, 3], Y[q, 4], Y[q, 5] = g0, g1, g2
+
+
+@nb.njit(cache=True, parallel=True)
+def _assemble(U, F, G, Y, w1, v1, ln, prv, comp, starts, beta, mass):
+    """``2 Dᵀ(W̃1 ∘ F − Y_F) + 2 Mᵀ(Ṽ1 ∘ G − Y_G)`` per vertex, the barycenter term
+    ``β (βᵀU)`` per component and ``mass`` times the P1 mass matrix applied to ``U``."""
+    n = U.shape[0]
+    k = starts.shape[0] - 1
+    bu = np.zeros((k, 3))
+    for c in range(k):
+        for i in range(starts[c], starts[c + 1]):
+            for d in range(3):
+                bu[c, d] += beta[i] * U[i, d]
+    out = np.empty((n, 3))
+    for pp in nb.prange(n):
+        p = np.int64(pp)
+        q = prv[p]
+        c = comp[p]
+        for d in range(3):
+            hp = 2.0 * (w1[p] * F[p, d] - Y[p, d]) / ln[p]
+            hq = 2.0 * (w1[q] * F[q, d] - Y[q, d]) / ln[q]
+            gp = 2.0 * (v1[p] * G[p, d] - Y[p, 3 + d])
+            gq = 2.0 * (v1[q] * G[q, d] - Y[q, 3 + d])
+            o = hq - hp + 0.5 * (gp + gq) + beta[p] * bu[c, d]
+            if mass != 0.0:  # edges p and q: l/3 at this vertex, l/6 at the other end
+                o += mass * (ln[p] * (U[p, d] / 3 + F[p, d] * ln[p] / 6 + U[p, d] / 6)
+                             + ln[q] * (U[p, d] / 3 + (U[p, d] - F[q, d] * ln[q]) / 6))
+            out[p, d] = o
+    return out
+
+
+@nb.njit(cache=True)
+def _cluster_sums(F, G, ln, lo, hi, left, right):
+    """Per node ``(Σ l F, Σ l G)`` over its edges (6 columns), bottom-up."""
+    m = lo.shape[0]
+    S = np.zeros((m, 6))
+    for node in range(m - 1, -1, -1):
+        if left[node] < 0:
+            for q in range(lo[node], hi[node]):
+                for d in range(3):
+                    S[node, d] += ln[q] * F[q, d]
+                    S[node, 3 + d] += ln[q] * G[q, d]
+        else:
+            for d in range(6):
+                S[node, d] = S[left[node], d] + S[right[node], d]
+    return S
+
+
+@nb.njit(cache=True, parallel=True)
+def _far_product(S, foff, fpart, fw, fv):
+    """Per target node ``Σ_B (ω_W S_F[B], ω_V S_G[B])``."""
+    m = S.shape[0]
+    acc = np.zeros((m, 6))
+    for aa in nb.prange(m):
+        a = np.int64(aa)
+        for p in range(foff[a], foff[a + 1]):
+            b = fpart[p]
+            for d in range(3):
+                acc[a, d] += fw[p] * S[b, d]
+                acc[a, 3 + d] += fv[p] * S[b, 3 + d]
+    return acc
+
+
+class HsOperator:
+    """``Ã`` of the polygon ``X`` (stacked, see ``_layout``) for ``metric`` "hs" or "hs_pure":
+    the hierarchy, the split and the weights, built once; :meth:`product` applies it.
+
+    Parameters
+    ----------
+    X : (N, 3) array
+    layout : Layout
+    metric : {"hs", "hs_pure"}
+    theta : float
+        Admissibility of the far field (see the module's text).
+    leaf_size : int
+    """
+
+    def __init__(self, X: np.ndarray, layout: Layout, metric: str = "hs",
+                 theta: float = THETA, leaf_size: int = LEAF_SIZE):
+        if metric not in ("hs", "hs_pure"):
+            raise ValueError(f"{metric!r} is not computed by the tree's metric (hs, hs_pure)")
+        self.layout = layout
+        self.metric = metric
+        self.low = 1.0 if metric == "hs" else 0.0
+        lay = layout
+        tree = arc_tree(lay, leaf_size)
+        self.tree = tree
+        ln, mid, arc, clen = _edge_data(X, lay.nxt, lay.starts)
+        self.ln = ln
+        self.total = float(ln.sum())
+        nc, L, C, s0, s1 = _node_data(ln, mid, arc, lay.starts, tree.lo, tree.hi, tree.left,
+                                      tree.right)
+        bmin, bmax = bvh.segment_boxes(tree, X, lay)
+        far, near = _split(tree.left, tree.right, bmin, bmax, nc, s0, s1, clen,
+                           float(theta) ** 2)
+        m = tree.size
+        self.far_pairs, self.near_pairs = far.shape[0], near.shape[0]
+        self.foff, self.fpart = _by_target(far, m)
+        self.noff, self.npart = _by_target(near, m)
+        self.leaves = np.flatnonzero(tree.left < 0).astype(np.int64)
+        size = tree.hi - tree.lo
+        # near row width of every leaf: the edges of its partner leaves
+        owner = np.repeat(np.arange(m), np.diff(self.noff))
+        width = np.bincount(owner, weights=size[self.npart], minlength=m).astype(np.int64)
+        cells = np.where(tree.left < 0, size * width, 0)
+        self.rowoff = np.concatenate(([0], np.cumsum(cells)[:-1])).astype(np.int64)
+        total = int(cells.sum())
+        self.w = np.empty(total)
+        self.v = np.empty(total)
+        rows = np.empty((3, lay.n))
+        cross2 = FOLDED**2
+        _near_weights(ln, mid, arc, clen, lay.starts, lay.comp, tree.lo, tree.hi, self.leaves,
+                      self.noff, self.npart, self.rowoff, self.low, cross2, self.w, self.v,
+                      rows[0], rows[1], rows[2])
+        self.fw = np.empty(self.fpart.shape[0])
+        self.fv = np.empty(self.fpart.shape[0])
+        rfar = np.empty((3, m))
+        _far_weights(L, C, nc, s0, s1, clen, self.foff, self.fpart, self.low, cross2, self.fw,
+                     self.fv, rfar[0], rfar[1], rfar[2])
+        rows = np.ascontiguousarray(rows.T)
+        _push_to_edges(np.ascontiguousarray(rfar.T), ln, tree.lo, tree.hi, tree.left,
+                       tree.right, rows)
+        self.w1 = np.ascontiguousarray(rows[:, 0])
+        self.v1 = np.ascontiguousarray(rows[:, 1])
+        self.x1 = np.ascontiguousarray(rows[:, 2])  # v's row sums over folded pairs
+        # the barycenter term N b bᵀ / L⁴ as β βᵀ per component (metrics._add_barycenter_term)
+        self.beta = _barycenter_weights(ln, lay) * np.sqrt(lay.n) / self.total**2
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the stored weights."""
+        return int(self.w.nbytes + self.v.nbytes + self.fw.nbytes + self.fv.nbytes)
+
+    def product(self, U: np.ndarray) -> np.ndarray:
+        """``Ã U`` for a field ``U`` (N, 3)."""
+        lay, ln, tree = self.layout, self.ln, self.tree
+        U = np.ascontiguousarray(U, dtype=np.float64)
+        F, G = _edge_fields(U, lay.nxt, ln)
+        Y = np.empty((lay.n, 6))
+        _near_product(F, G, self.w, self.v, tree.lo, tree.hi, self.leaves, self.noff,
+                      self.npart, self.rowoff, Y)
+        S = _cluster_sums(F, G, ln, tree.lo, tree.hi, tree.left, tree.right)
+        acc = _far_product(S, self.foff, self.fpart, self.fw, self.fv)
+        _push_to_edges(acc, ln, tree.lo, tree.hi, tree.left, tree.right, Y)
+        mass = _PURE_L2 / self.total**3 if self.metric == "hs_pure" else 0.0
+        return _assemble(U, F, G, Y, self.w1, self.v1, ln, lay.prv, lay.comp, lay.starts,
+                         self.beta, mass)
+
+    def diagonal(self) -> np.ndarray:
+        """The diagonal of ``Ã`` (N,): ``2 Σ_{I ∋ p} W̃1_I / l_I² + ½ Σ_{I ∋ p} Ṽ1_I + β_p²``
+        (the off-diagonal parts vanish there: edges through one vertex are not disjoint)."""
+        lay, ln = self.layout, self.ln
+        e = 2.0 * self.w1 / ln**2 + 0.5 * self.v1
+        d = e + e[lay.prv] + self.beta**2
+        if self.metric == "hs_pure":
+            d += _PURE_L2 / self.total**3 * (ln + ln[lay.prv]) / 3
+        return d
+
+    def preconditioner_parts(self):
+        """``H = s·h1 + 2 Mᵀ diag(Ṽ1) M`` as :func:`metrics.banded_parts` gives a banded
+        metric: ``(rows, cols, vals, beta)`` (β: this metric's barycenter term), with ``s``
+        the ratio of the traces of ``Ã``'s and h1's banded parts."""
+        lay = self.layout
+        rows, cols, vals, _ = banded_parts_of_lengths("h1", self.ln, lay)
+        diag = rows == cols
+        s = float((self.diagonal() - self.beta**2).sum() / vals[diag].sum())
+        i = np.arange(lay.n)
+        j = lay.nxt
+        h = 0.5 * self.x1
+        return (np.concatenate([rows, i, i, j, j]), np.concatenate([cols, i, j, i, j]),
+                np.concatenate([s * vals, h, h, h, h]), self.beta)
+
+
+# ------------------------------------------------------------------------------------------------
+# saddle-point solves
+
+
+def coarse_size(n: int) -> int:
+    """Vertices of the preconditioner's coarse level for ``n`` fine ones (0: none)."""
+    if n < COARSE_FROM:
+        return 0
+    return int(min(COARSE_MAX, COARSE_PER_ROOT * np.sqrt(n)))
+
+
+class CoarseLevel:
+    """The coarse level of the preconditioner: the polygon of every ``m``-th vertex of each
+    component, its own metric (dense) and constraints, and linear interpolation along the
+    curve between the two (``P``). Applied to a residual ``r`` (one the constraint
+    preconditioner has already projected, ``C H⁻¹ r = 0``) it returns ``Π_H P S_c Pᵀ r``:
+    the coarse constrained solve ``S_c`` of the restricted residual, interpolated and moved
+    onto ``ker C`` by the fine constraint preconditioner (``Π_H``: its ``H``-orthogonal
+    projection). Added to the constraint preconditioner (a two-level additive Schwarz
+    preconditioner) it carries what the banded ``H`` misses most on smooth curves, the
+    lowest modes, whose hs energy grows one power of the frequency faster than h1's.
+
+    Parameters
+    ----------
+    X : (N, 3) array
+    layout : Layout
+    metric : {"hs", "hs_pure"}
+    K : BandedSaddle
+        The fine constraint preconditioner (its ``_solve`` projects onto ``ker C``).
+    jac : Jacobian
+        The fine constraint Jacobian.
+    size : int
+        Coarse vertices wanted in all; components keep at least 8 (or all they have).
+    """
+
+    def __init__(self, X: np.ndarray, layout: Layout, metric: str, K: BandedSaddle,
+                 jac: Jacobian, size: int):
+        self.K, self.jac = K, jac
+        m = max(1, int(round(layout.n / max(size, 1))))
+        idx, sizes, a, b, f = [], [], [], [], []
+        offset = 0
+        for c in range(layout.k):
+            s0, s1 = int(layout.starts[c]), int(layout.starts[c + 1])
+            step = m if (s1 - s0) // m >= 8 else 1
+            local = np.arange(s1 - s0)
+            ci = s0 + local[::step]
+            k = len(ci)
+            j = local // step  # the coarse vertex before each fine one, and the next
+            a.append(offset + j)
+            b.append(offset + (j + 1) % k)
+            f.append((local - j * step) / step)
+            idx.append(ci)
+            sizes.append(k)
+            offset += k
+        self.a, self.b = np.concatenate(a), np.concatenate(b)
+        self.f = np.concatenate(f)[:, None]
+        self.n = offset
+        idx = np.concatenate(idx)
+        clay = layout_from_sizes(sizes, layout.is_link)
+        Xc = X[idx]
+        lc = np.linalg.norm(Xc[clay.nxt] - Xc, axis=1)
+        self.jc = jacobian(Xc, make_constraints(Xc, clay, lc))
+        Ac = gram_x(metric, Xc, clay)
+        try:  # a preconditioner: single precision is plenty
+            self.fac = Factorization(Ac, self.jc, np.float32)
+        except np.linalg.LinAlgError:
+            self.fac = Factorization(Ac, self.jc, np.float64)
+
+    def prolong(self, Uc: np.ndarray) -> np.ndarray:
+        """``P Uc``: (coarse vertices, 3) to (N, 3), linear along the curve."""
+        return (1.0 - self.f) * Uc[self.a] + self.f * Uc[self.b]
+
+    def restrict(self, R: np.ndarray) -> np.ndarray:
+        """``Pᵀ R``: (N, 3) to (coarse vertices, 3)."""
+        out = np.empty((self.n, 3))
+        for d in range(3):
+            out[:, d] = (np.bincount(self.a, (1.0 - self.f[:, 0]) * R[:, d], self.n)
+                         + np.bincount(self.b, self.f[:, 0] * R[:, d], self.n))
+        return out
+
+    def __call__(self, R: np.ndarray) -> np.ndarray:
+        uc, _ = self.fac.solve(self.restrict(R), np.zeros(self.jc.con.size))
+        w = self.prolong(uc)
+        return w - self.K._solve(np.zeros_like(w), self.jac.matvec(w))[0]
+
+
+class HsSaddle:
+    """Saddle-point solves with ``Ã`` (:class:`HsOperator`) at one iterate, by projected
+    preconditioned conjugate gradients (see the module's text).
+
+    Parameters
+    ----------
+    op : HsOperator
+    jac : Jacobian
+        Constraint Jacobian at the same polygon (edge-length and barycenter rows).
+    rtol : float
+        Relative tolerance of :meth:`solve`: the preconditioned residual norm
+        ``sqrt(rᵀ K r)`` against that of the start.
+    max_iter : int
+        Iterations at most per solve.
+    exact_backprojection : bool
+        :meth:`pseudo_inverse` in ``Ã`` by the same Krylov method (tolerance ``rtol``)
+        instead of in the preconditioner's metric ``H``.
+    log : list, optional
+        Where every solve appends its iteration count.
+    recycle : HsSaddle, optional
+        The previous iterate's solver, whose band memory this one takes over.
+    X : (N, 3) array, optional
+        The polygon (needed for the coarse level).
+    coarse : int, optional
+        Vertices of the coarse level (default :func:`coarse_size`; 0: none).
+    """
+
+    def __init__(self, op: HsOperator, jac: Jacobian, rtol: float = RTOL, max_iter: int = 200,
+                 exact_backprojection: bool = False, log: list | None = None,
+                 recycle: HsSaddle | None = None, X: np.ndarray | None = None,
+                 coarse: int | None = None):
+        self.op = op
+        self.jac = jac
+        self.rtol = rtol
+        self.max_iter = max_iter
+        self.exact_backprojection = exact_backprojection
+        self.K = BandedSaddle(op.preconditioner_parts(), jac,
+                              None if recycle is None else recycle.K)
+        self.iterations: list[int] = [] if log is None else log
+        size = coarse_size(op.layout.n) if coarse is None else int(coarse)
+        self.coarse = None
+        if size and X is not None and size < op.layout.n:
+            self.coarse = CoarseLevel(X, op.layout, op.metric, self.K, jac, size)
+
+    def _precondition(self, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(z, μ)``: the constraint preconditioner's ``H z + Cᵀμ = R``, ``C z = 0``, plus the
+        coarse level's correction of the projected residual ``R − Cᵀμ``."""
+        z, mu = self.K._solve(R, np.zeros(self.jac.con.size))
+        if self.coarse is not None:
+            z += self.coarse(R - self.jac.rmatvec(mu))
+        return z, mu
+
+    def solve(self, g: np.ndarray, r: np.ndarray, rtol: float | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """``(u, λ)`` of ``[[Ã ⊗ I₃, Cᵀ], [C, 0]] [u; λ] = [g; r]``: ``C u = r`` to rounding,
+        the first rows to the relative tolerance (λ from the last preconditioner solve)."""
+        rtol = self.rtol if rtol is None else rtol
+        n = g.shape[0]
+        x = self.K._solve(np.zeros((n, 3)), r)[0] if np.any(r) else np.zeros((n, 3))
+        res = self.op.product(x) - g
+        z, mu = self._precondition(res)
+        # the residual keeps only what the constraints cannot absorb, its Cᵀμ part moved into
+        # the multipliers λ (Gould, Hribar & Nocedal's residual update; the same iterates in
+        # exact arithmetic, res = Ã x − g + Cᵀλ throughout): without it, a residual dominated
+        # by Cᵀλ swamped the projected part's rounding and the iterates left C u = r (2% of |u|
+        # after 125 iterations at rtol 1e-10 on a trefoil)
+        lam = -mu
+        res -= self.jac.rmatvec(mu)
+        rz = float(np.einsum("ij,ij->", res, z))
+        stop = rtol * rtol * rz
+        p = -z
+        its = 0
+        while rz > stop and its < self.max_iter:
+            Ap = self.op.product(p)
+            pAp = float(np.einsum("ij,ij->", p, Ap))
+            if not pAp > 0.0:
+                break
+            a = rz / pAp
+            x += a * p
+            res += a * Ap
+            z, mu = self._precondition(res)
+            lam -= mu
+            res -= self.jac.rmatvec(mu)
+            rz_new = float(np.einsum("ij,ij->", res, z))
+            p *= rz_new / rz
+            p -= z
+            rz = rz_new
+            its += 1
+        self.iterations.append(its)
+        return x, lam
+
+    def metric_product(self, V: np.ndarray) -> np.ndarray:
+        """``Ã V`` for a field (N, 3)."""
+        return self.op.product(V)
+
+    def pseudo_inverse(self, phi: np.ndarray) -> np.ndarray:
+        """``Ã⁻¹Cᵀ(CÃ⁻¹Cᵀ)⁻¹ φ`` (with ``exact_backprojection``), else the same in ``H``: a
+        step of the back-projection onto ``C d = φ`` either way."""
+        if self.exact_backprojection:
+            return self.solve(np.zeros((self.op.layout.n, 3)), phi)[0]
+        return self.K._solve(np.zeros((self.op.layout.n, 3)), phi)[0]

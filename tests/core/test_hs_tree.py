@@ -1,0 +1,266 @@
+"""The hs metric on the tree (core/hs_tree.py): the hierarchy of arcs, the operator against a
+slow numpy version of the same approximated matrix and against the dense Gram matrix, the
+preconditioned Krylov solves against dense solves, and the flow on the tree path."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from moebius_addon import core
+from moebius_addon.core import hs_tree
+from moebius_addon.core._layout import as_layout
+from moebius_addon.core.constraints import jacobian, make_constraints, residual
+from moebius_addon.core.metrics import gram_x
+from tests.conftest import ngon, trefoil
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _unit(P):
+    """Stacked vertices scaled to total length 1 (the runs' scale) and the layout."""
+    X, lay = as_layout(P)
+    return X / np.linalg.norm(X[lay.nxt] - X, axis=1).sum(), lay
+
+
+def _link(n):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    ring = np.c_[np.cos(t), np.sin(t), 0 * t]
+    return [ring, ring[:, [0, 2, 1]] + [1.2, 0, 0], ring + [2.4, 0, 0]]
+
+
+CURVES = {
+    "trefoil": lambda: core.resample(trefoil(300), 240),
+    "fhw": lambda: core.knots.freedman_unknot(600),
+    "link": lambda: core.resample(_link(200), [90, 80, 70]),
+    "noneq": lambda: trefoil(200),  # equal parameter steps: edges of different lengths
+}
+
+
+def slow_matrix(X, lay, op):
+    """``Ã`` literally, from the operator's lists of near and far pairs: exact weights for every
+    pair of edges of a near pair of leaves, one weight from the clusters' centres for every pair
+    of edges of a far pair of clusters; then docs/design.md's formula."""
+    n = lay.n
+    tree = op.tree
+    nxt = lay.nxt
+    ln = np.linalg.norm(X[nxt] - X, axis=1)
+    mid = 0.5 * (X + X[nxt])
+    arc = np.empty(n)
+    clen = np.empty(lay.k)
+    for c in range(lay.k):
+        s = slice(lay.starts[c], lay.starts[c + 1])
+        arc[s] = np.cumsum(ln[s]) - 0.5 * ln[s]
+        clen[c] = ln[s].sum()
+    comp = lay.comp
+    pos = np.arange(n) - lay.starts[comp]
+    size = lay.starts[comp + 1] - lay.starts[comp]
+
+    def exact(q, r):
+        if comp[q] == comp[r]:
+            gap = (pos[r] - pos[q]) % size[q]
+            if gap in (0, 1, size[q] - 1):
+                return 0.0, 0.0
+            d2 = np.sum((mid[q] - mid[r]) ** 2)
+            fwd = abs(arc[r] - arc[q])
+            rho = min(fwd, clen[comp[q]] - fwd)
+            w = ln[q] * ln[r] / d2
+            return w, op.low * w * (1 / d2 - 1 / rho**2)
+        d2 = np.sum((mid[q] - mid[r]) ** 2)
+        w = ln[q] * ln[r] / d2
+        return w, op.low * w / d2
+
+    def node(a):
+        idx = np.arange(tree.lo[a], tree.hi[a])
+        L = ln[idx].sum()
+        c = (ln[idx, None] * mid[idx]).sum(0) / L
+        s = 0.5 * ((arc[idx[0]] - 0.5 * ln[idx[0]]) + (arc[idx[-1]] + 0.5 * ln[idx[-1]]))
+        return idx, c, s
+
+    W = np.zeros((n, n))
+    V = np.zeros((n, n))
+    seen = np.zeros((n, n), int)
+    for a in range(tree.size):
+        for p in range(op.noff[a], op.noff[a + 1]):
+            b = op.npart[p]
+            for q in range(tree.lo[a], tree.hi[a]):
+                for r in range(tree.lo[b], tree.hi[b]):
+                    W[q, r], V[q, r] = exact(q, r)
+                    seen[q, r] += 1
+        for p in range(op.foff[a], op.foff[a + 1]):
+            b = op.fpart[p]
+            ia, ca, sa = node(a)
+            ib, cb, sb = node(b)
+            inv = 1.0 / np.sum((ca - cb) ** 2)
+            if comp[ia[0]] == comp[ib[0]]:
+                fwd = abs(sa - sb)
+                rho = min(fwd, clen[comp[ia[0]]] - fwd)
+                v = op.low * inv * max(0.0, inv - 1 / rho**2)
+            else:
+                v = op.low * inv * inv
+            W[np.ix_(ia, ib)] = np.outer(ln[ia], ln[ib]) * inv
+            V[np.ix_(ia, ib)] = np.outer(ln[ia], ln[ib]) * v
+            seen[np.ix_(ia, ib)] += 1
+    assert (seen == 1).all()  # the split covers every ordered pair of edges exactly once
+    i = np.arange(n)
+    D = np.zeros((n, n))
+    M = np.zeros((n, n))
+    D[i, i], D[i, nxt] = -1 / ln, 1 / ln
+    M[i, i], M[i, nxt] = 0.5, 0.5
+    A = 2 * D.T @ (np.diag(W.sum(1)) - W) @ D + 2 * M.T @ (np.diag(V.sum(1)) - V) @ M
+    total = ln.sum()
+    b = 0.5 * (ln[lay.prv] + ln) * np.sqrt(n) / total**2
+    for c in range(lay.k):
+        s = slice(lay.starts[c], lay.starts[c + 1])
+        A[s, s] += np.outer(b[s], b[s])
+    if op.metric == "hs_pure":
+        mass = np.zeros((n, n))
+        np.add.at(mass, (i, i), ln / 3)
+        np.add.at(mass, (nxt, nxt), ln / 3)
+        np.add.at(mass, (i, nxt), ln / 6)
+        np.add.at(mass, (nxt, i), ln / 6)
+        A += hs_tree._PURE_L2 * mass / total**3
+    return A
+
+
+def test_arcs_of_the_hierarchy():
+    P = [ngon(37), ngon(5), ngon(120)]
+    X, lay = as_layout(P)
+    tree = hs_tree.arc_tree(lay, 8)
+    assert np.array_equal(tree.perm, np.arange(lay.n))
+    for a in range(tree.size):
+        lo, hi = tree.lo[a], tree.hi[a]
+        comps = set(lay.comp[lo:hi])
+        if tree.left[a] < 0:
+            assert hi - lo <= 8 and len(comps) == 1  # a leaf: a short arc of one component
+        else:
+            left, right = tree.left[a], tree.right[a]
+            assert left > a and right > a  # parents first
+            assert (tree.lo[left], tree.hi[left], tree.hi[right]) == (lo, tree.lo[right], hi)
+            if len(comps) > 1:  # several components are split at one of their boundaries
+                assert tree.hi[left] in lay.starts
+
+
+@pytest.mark.parametrize("name", list(CURVES))
+@pytest.mark.parametrize("metric", ["hs", "hs_pure"])
+def test_operator_is_the_approximated_matrix(name, metric, rng):
+    X, lay = _unit(CURVES[name]())
+    op = hs_tree.HsOperator(X, lay, metric, theta=0.5)
+    A = slow_matrix(X, lay, op)
+    U = rng.standard_normal((lay.n, 3))
+    assert np.allclose(op.product(U), A @ U, rtol=0, atol=1e-11 * np.abs(A @ U).max())
+    assert np.allclose(op.diagonal(), np.diag(A), rtol=1e-12)
+    # symmetric, positive definite: the structure of the exact matrix is kept
+    assert np.allclose(A, A.T, rtol=0, atol=1e-12 * np.abs(A).max())
+    assert np.linalg.eigvalsh(A)[0] > 0
+
+
+@pytest.mark.parametrize("name", list(CURVES))
+def test_operator_against_the_dense_gram_matrix(name, rng):
+    X, lay = _unit(CURVES[name]())
+    A = gram_x("hs", X, lay)
+    U = rng.standard_normal((lay.n, 3))
+    exact = A @ U
+    # every pair near: the exact matrix to rounding
+    op = hs_tree.HsOperator(X, lay, "hs", theta=1e-9)
+    assert op.far_pairs == 0
+    assert np.allclose(op.product(U), exact, rtol=0, atol=1e-11 * np.abs(exact).max())
+    # the default far field: relative errors of products below 2e-2 (measured at most 1.0e-2
+    # on random fields, docs/benchmarks.md), falling with theta
+    errors = []
+    for theta in (hs_tree.THETA, 0.25):
+        op = hs_tree.HsOperator(X, lay, "hs", theta=theta)
+        errors.append(np.linalg.norm(op.product(U) - exact) / np.linalg.norm(exact))
+    assert errors[0] < 2e-2 and errors[1] < errors[0]
+
+
+def _dense_saddle(A, jac, g, r):
+    n = A.shape[0]
+    m = jac.con.size
+    C = np.column_stack([jac.matvec(e.reshape(n, 3)) for e in np.eye(3 * n)])
+    K = np.zeros((3 * n + m, 3 * n + m))
+    K[:3 * n, :3 * n] = np.kron(A, np.eye(3))
+    K[3 * n:, :3 * n] = C
+    K[:3 * n, 3 * n:] = C.T
+    x = np.linalg.solve(K, np.concatenate([g.ravel(), r]))
+    return x[:3 * n].reshape(n, 3), x[3 * n:]
+
+
+@pytest.mark.parametrize("name", ["trefoil", "link"])
+def test_krylov_solves_against_a_dense_solve(name, rng):
+    X, lay = _unit(CURVES[name]())
+    ln = np.linalg.norm(X[lay.nxt] - X, axis=1)
+    con = make_constraints(X, lay, ln)
+    jac = jacobian(X, con)
+    op = hs_tree.HsOperator(X, lay, "hs")
+    A = slow_matrix(X, lay, op)
+    g = rng.standard_normal((lay.n, 3))
+    r = 1e-3 * rng.standard_normal(con.size)
+    solver = hs_tree.HsSaddle(op, jac)
+    for rtol, tol in ((1e-8, 1e-6), (1e-2, 3e-2)):
+        for rhs in ((g, np.zeros(con.size)), (g, r), (0 * g, r)):
+            u0, lam0 = _dense_saddle(A, jac, *rhs)
+            u, lam = solver.solve(*rhs, rtol=rtol)
+            assert np.abs(jac.matvec(u) - rhs[1]).max() < 1e-9 * max(1.0, np.abs(r).max())
+            assert np.linalg.norm(u - u0) <= tol * np.linalg.norm(u0)
+            if rtol == 1e-8:
+                assert np.allclose(lam, lam0, rtol=0, atol=1e-6 * np.abs(lam0).max())
+    # back-projection steps: onto C d = φ, in the preconditioner's metric or in Ã's
+    phi = residual(X + 1e-3 * rng.standard_normal(X.shape) * ln.mean(), con)
+    for exact in (False, True):
+        solver.exact_backprojection = exact
+        d = solver.pseudo_inverse(phi)
+        assert np.abs(jac.matvec(d) - phi).max() < 1e-10 * np.abs(phi).max()
+    assert solver.iterations and max(solver.iterations) < 100
+
+
+def test_tree_flow_ends_at_the_circle_like_the_exact_flow():
+    P = core.knots.freedman_unknot(600)
+    exact = core.relax(P, max_iter=400, energy_target=4.01, engine="exact")
+    tree = core.relax(P, max_iter=400, energy_target=4.01, engine="tree")
+    assert tree.success and tree.fun <= 4.01 and tree.stats["engine"] == "tree"
+    assert abs(tree.nit - exact.nit) <= 0.2 * exact.nit  # measured 194 against 177
+    assert np.all(np.diff(tree.history["energy"]) <= 0)  # the tree's own energy never rises
+    assert max(tree.history["constraint_residual"]) <= 1e-10
+    its = tree.stats["krylov_iterations"]
+    assert len(its) == tree.nit + 1 and 0 < np.mean(its) < 30  # measured 9.5 per solve
+
+
+@pytest.mark.parametrize("method", core.METHODS)
+def test_every_method_runs_on_the_tree_or_says_what_does(method):
+    P = core.resample(trefoil(300), 200)
+    if method in ("ncg", "lbfgs", "nesterov"):  # a dense metric: refused past the dense size
+        with pytest.raises(ValueError, match="feasible method"):
+            core.check_size(20000, "hs", method, "tree")
+    r = core.relax(P, method=method, max_iter=3, engine="tree")
+    assert r.nit == 3 and r.fun < r.history["energy"][0]
+
+
+CODE = """
+import json, numpy as np
+from moebius_addon import core
+P = core.resample(core.knots.named("5_2"), 1500)
+r = core.relax(P, max_iter=3, engine="tree")
+print(json.dumps([r.x.tobytes().hex(), r.stats["krylov_iterations"]]))
+"""
+
+
+def test_tree_flow_bitwise_identical_across_thread_counts(tmp_path):
+    outs = []
+    for threads in ("1", "2"):
+        env = {**os.environ, "NUMBA_NUM_THREADS": threads}
+        out = subprocess.run([sys.executable, "-c", CODE], env=env, cwd=ROOT,
+                             capture_output=True, text=True, check=True, timeout=600)
+        outs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert outs[0] == outs[1]
+
+
+def test_bad_krylov_tolerance_refused_by_name():
+    P = core.resample(trefoil(300), 100)
+    for bad in (0.0, 1.0, -1e-3, float("nan"), "x"):
+        with pytest.raises(ValueError, match="krylov_rtol"):
+            core.relax(P, max_iter=1, krylov_rtol=bad)
