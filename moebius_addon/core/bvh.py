@@ -54,17 +54,24 @@ def _swap(key, perm, p, q):
 @nb.njit(cache=True)
 def _select(key, perm, a, b, k):
     """Reorder ``key[a:b]``, ``perm[a:b]`` so that the ``k − a`` smallest (key, edge index)
-    come first (quickselect, median-of-three pivots; expected linear time)."""
+    come first: quickselect with pivots at pseudo-random positions (a hash of the range, so
+    the same every time; median-of-three pivots went quadratic on a circle, whose coordinates
+    along an axis rise and fall), and after 64 rounds a sort of what is left (O(n log n) at
+    worst)."""
     lo, hi = a, b - 1
+    state = np.uint64(0x9E3779B97F4A7C15) ^ np.uint64(a) ^ (np.uint64(b) << np.uint64(32))
+    rounds = 0
     while hi > lo:
-        mid = (lo + hi) // 2
-        # median of three at hi
-        if _before(key, perm, mid, lo):
-            _swap(key, perm, mid, lo)
-        if _before(key, perm, hi, lo):
-            _swap(key, perm, hi, lo)
-        if _before(key, perm, mid, hi):
-            _swap(key, perm, mid, hi)
+        rounds += 1
+        if rounds > 64:
+            _sort_range(key, perm, lo, hi + 1)
+            return
+        # xorshift64*
+        state ^= state >> np.uint64(12)
+        state ^= state << np.uint64(25)
+        state ^= state >> np.uint64(27)
+        r = state * np.uint64(0x2545F4914F6CDD1D)
+        _swap(key, perm, lo + np.int64(r % np.uint64(hi - lo + 1)), hi)
         store = lo
         for q in range(lo, hi):
             if _before(key, perm, q, hi):
@@ -77,6 +84,17 @@ def _select(key, perm, a, b, k):
             lo = store + 1
         else:
             hi = store - 1
+
+
+@nb.njit(cache=True)
+def _sort_range(key, perm, a, b):
+    """Sort ``key[a:b]``, ``perm[a:b]`` by (key, edge index): by index, then stably by key."""
+    order = np.argsort(perm[a:b], kind="mergesort")
+    k1 = key[a:b][order]
+    p1 = perm[a:b][order]
+    order = np.argsort(k1, kind="mergesort")
+    key[a:b] = k1[order]
+    perm[a:b] = p1[order]
 
 
 @nb.njit(cache=True, inline="always")
