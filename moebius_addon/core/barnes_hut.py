@@ -43,10 +43,12 @@ _SPLIT_CHUNKS = 16
 
 
 ENGINE_NAMES = ("auto", "exact", "tree")
-# From this many edges on, "auto" takes the tree: at the default theta its energy+gradient
-# (frame included, 7_2) measured 1.1x the exact speed at 2 000 edges, 1.5x at 3 000, 2.4x at
-# 5 000, 5.3x at 10 000, 11.9x at 20 000 (docs/benchmarks.md, "Tree engine").
-TREE_FROM = 5000
+# From this many edges on, "auto" takes the tree for moebius_energy / moebius_gradient: at the
+# default theta (frame included, 7_2, alternated on a shared machine) the energy alone measured
+# 0.5x the exact speed at 1 000 edges, 0.7-1.0x at 2 000, 0.7-1.2x at 2 500, 1.6-2.2x at 3 000,
+# energy+gradient 1.4x at 1 000, 2.9-3.9x at 2 000, 4.5-6.0x at 3 000 (docs/benchmarks.md,
+# "Tree engine").
+TREE_FROM = 3000
 
 
 def uses_tree(engine: str, n: int) -> bool:
