@@ -6,8 +6,8 @@ all of them). Here the pairs are split by a dual traversal of the hierarchy (:mo
 * the **far field**: pairs of clusters ``(A, B)`` of one component each whose boxes are apart,
   ``max(diam A, diam B) ≤ θ · gap(A, B)``, summed by the expansion of the kernel to second
   order in the clusters' moments (:mod:`._far_field`). At the default θ the relative errors
-  measured at most 1e-5 (energy) and 6.3e-4 (gradient) on 7_2, FHW and a non-equilateral
-  trefoil of 5 000 and 20 000 edges, the first order's 1.7e-3 and 6.7e-3; the gradient's
+  measured at most 8.2e-6 (energy) and 5.0e-4 (gradient) on 7_2, FHW, a link of three rings
+  and a non-equilateral 7_2 of 5 000 and 20 000 edges (docs/benchmarks.md); the gradient's
   falls about like θ³.
 * the **near field**: every other pair (always the pairs close in space, and so those close
   along the curve: boxes of edges sharing a vertex touch), summed exactly with the kernel of
@@ -35,8 +35,9 @@ from ._layout import Layout
 from ._near_field import _near, _to_vertices
 
 # Default admissibility: the largest of 0.15, 0.175, 0.2, 0.25 whose relative errors stay, with
-# a margin, below 1e-4 (energy) and 1e-3 (gradient) on 7_2, FHW and a non-equilateral trefoil at
-# 3 000 to 20 000 edges (worst measured: 9.8e-6 and 6.3e-4, FHW's gradient; 0.2 gave 9.5e-4).
+# a margin, below 1e-4 (energy) and 1e-3 (gradient) on 7_2, FHW, a link and a non-equilateral
+# polygon at 3 000 to 20 000 edges (worst measured with full leaves of 8: 8.2e-6 and 5.0e-4,
+# FHW's gradient at 5 000 edges; 0.2 gave 8.8e-4 there, 0.25 1.5e-3).
 THETA = 0.175
 # Fixed split of the traversal into chunks (the same lists for every thread count).
 _SPLIT_CHUNKS = 16
@@ -45,9 +46,8 @@ _SPLIT_CHUNKS = 16
 ENGINE_NAMES = ("auto", "exact", "tree")
 # From this many edges on, "auto" takes the tree for moebius_energy / moebius_gradient: at the
 # default theta (frame included, 7_2, alternated on a shared machine) the energy alone measured
-# 0.5x the exact speed at 1 000 edges, 0.7-1.0x at 2 000, 0.7-1.2x at 2 500, 1.6-2.2x at 3 000,
-# energy+gradient 1.4x at 1 000, 2.9-3.9x at 2 000, 4.5-6.0x at 3 000 (docs/benchmarks.md,
-# "Tree engine").
+# 0.5-0.8x the exact speed at 1 000 edges, 0.7-1.2x at 2 000, 1.6-2.2x at 3 000, energy+gradient
+# 1.4-2.3x at 1 000, 2.9-3.9x at 2 000, 4.5-6.0x at 3 000 (docs/benchmarks.md, "Tree engine").
 TREE_FROM = 3000
 
 
@@ -108,8 +108,8 @@ def _edge_arrays(X, nxt, comp, starts, perm):
 
 # The depth-first split's stack: a step pops one pair and pushes at most three whose depths
 # (depth of a + depth of b) are larger by one or two, so the stack never holds more than
-# 2 · (2 · tree depth) + 1 pairs; a median-split tree over fewer than 2^63 edges is less than
-# 64 deep.
+# 2 · (2 · tree depth) + 1 pairs; a tree whose splits halve the leaves, over fewer than 2^63
+# edges, is less than 64 deep.
 _STACK = 512
 
 

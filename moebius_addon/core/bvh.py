@@ -21,6 +21,8 @@ import numpy as np
 
 from ._layout import Layout
 
+# Edges per leaf: the near field's SIMD width (``_near_field._LANES``); leaves of 4, 12 and 16
+# edges measured slower (docs/benchmarks.md, "Tree engine").
 LEAF_SIZE = 8
 
 
