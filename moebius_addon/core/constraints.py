@@ -19,6 +19,7 @@ import numba as nb
 import numpy as np
 
 from ._layout import Layout
+from ._tridiagonal import cyclic_tridiagonal_solve
 
 
 @dataclass
@@ -189,3 +190,68 @@ def make_constraints(
         layout, np.asarray(lengths0, float), weighted_barycenters(X, layout), edge_lengths,
         barycenter,
     )
+
+
+@nb.njit(cache=True)
+def _edge_gram(T, ln, nxt, starts):
+    """``C_e C_eᵀ`` of the edge rows as a cyclic tridiagonal matrix per component: diagonal
+    ``2 / l_I²``, and ``−<t_I, t_J> / (l_I l_J)`` for the edges ``J = nxt I`` sharing vertex
+    ``nxt I``."""
+    n = T.shape[0]
+    diag = np.empty(n)
+    off = np.empty(n)
+    for i in range(n):
+        j = nxt[i]
+        diag[i] = 2.0 / (ln[i] * ln[i])
+        off[i] = -(T[i, 0] * T[j, 0] + T[i, 1] * T[j, 1] + T[i, 2] * T[j, 2]) / (ln[i] * ln[j])
+    return diag, off
+
+
+class TangentProjector:
+    """The Euclidean orthogonal projection ``Π = I − Cᵀ(CCᵀ)⁻¹C`` onto the tangent space of the
+    constraints (``C u = 0``), in O(N): ``CCᵀ`` is cyclic tridiagonal per component in the
+    edge rows (edges sharing a vertex), bordered by the three barycenter rows of each component
+    (a 3 × 3 Schur complement per component). Needs both kinds of rows."""
+
+    def __init__(self, jac: Jacobian):
+        con = jac.con
+        if not (con.edge_lengths and con.barycenter):
+            raise ValueError("the tangent projector needs the edge-length and barycenter rows")
+        lay = con.layout
+        self.jac, self.layout = jac, lay
+        self.diag, self.off = _edge_gram(jac.T, jac.ln, lay.nxt, lay.starts)
+        F = jac.barycenter_fields()  # (3k, N, 3): the barycenter rows as fields
+        n, k = lay.n, lay.k
+        # B = C_e C_bᵀ (N × 3k, block-diagonal by component), D = C_b C_bᵀ (3k × 3k)
+        self.TiB = np.zeros((k, 3, n))
+        self.schur = np.empty((k, 3, 3))
+        for c in range(k):
+            s = slice(lay.starts[c], lay.starts[c + 1])
+            B = np.stack([jac.matvec(F[3 * c + d])[:n][s] for d in range(3)])
+            for d in range(3):
+                self.TiB[c, d, s] = self._tri(c, B[d])
+            D = np.array([[np.sum(F[3 * c + d] * F[3 * c + e]) for e in range(3)]
+                          for d in range(3)])
+            self.schur[c] = np.linalg.inv(D - B @ self.TiB[c, :, s].T)
+
+    def _tri(self, c: int, r: np.ndarray) -> np.ndarray:
+        s = slice(self.layout.starts[c], self.layout.starts[c + 1])
+        return cyclic_tridiagonal_solve(self.diag[s], self.off[s], np.ascontiguousarray(r))
+
+    def multipliers(self, W: np.ndarray) -> np.ndarray:
+        """``(CCᵀ)⁻¹ C W`` for a field ``W`` (N, 3)."""
+        lay = self.layout
+        n = lay.n
+        cw = self.jac.matvec(W)
+        y = np.empty(n)
+        z = cw[n:].reshape(lay.k, 3).copy()
+        for c in range(lay.k):
+            s = slice(lay.starts[c], lay.starts[c + 1])
+            t = self._tri(c, cw[:n][s])
+            z[c] = self.schur[c] @ (z[c] - self.TiB[c, :, s] @ cw[:n][s])
+            y[s] = t - z[c] @ self.TiB[c, :, s]
+        return np.concatenate([y, z.ravel()])
+
+    def __call__(self, W: np.ndarray) -> np.ndarray:
+        """``Π W``: ``W`` (N, 3) moved orthogonally onto ``C u = 0``."""
+        return W - self.jac.rmatvec(self.multipliers(W))
