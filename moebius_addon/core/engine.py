@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import barnes_hut, hs_tree
+from . import barnes_hut, hs_solve, hs_tree
 from ._layout import Layout
 from .banded import BANDED_METRICS, BandedSaddle
 from .collision import contact_time_x
@@ -107,7 +107,7 @@ class DenseEngine:
         self.layout = layout
         self.metric = metric
         self.theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
-        self.krylov_rtol = hs_tree.RTOL if krylov_rtol is None else hs_tree.check_rtol(
+        self.krylov_rtol = hs_solve.RTOL if krylov_rtol is None else hs_solve.check_rtol(
             krylov_rtol)
         self.exact_backprojection = bool(exact_backprojection)
         self.solver = SaddlePointSolver(
@@ -234,10 +234,10 @@ class TreeEngine(DenseEngine):
             self._saddle = BandedSaddle(banded_parts(self.metric, X, self.layout), jac,
                                         old if isinstance(old, BandedSaddle) else None)
         else:
-            self._saddle = hs_tree.HsSaddle(
+            self._saddle = hs_solve.HsSaddle(
                 hs_tree.HsOperator(X, self.layout, self.metric), jac, rtol=self.krylov_rtol,
                 exact_backprojection=self.exact_backprojection, log=self._tree_krylov,
-                recycle=old if isinstance(old, hs_tree.HsSaddle) else None, X=X)
+                recycle=old if isinstance(old, hs_solve.HsSaddle) else None, X=X)
         self._banded_factorizations += 1
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
