@@ -207,6 +207,36 @@ def _edge_gram(T, ln, nxt, starts):
     return diag, off
 
 
+@nb.njit(cache=True)
+def _bordered_solve(cw, diag, off, TiB, schur, starts):
+    """``(CCᵀ)⁻¹ cw`` with ``CCᵀ = [[T, B], [Bᵀ, D]]`` per component (T cyclic tridiagonal,
+    ``TiB = T⁻¹B`` and ``schur = (D − BᵀT⁻¹B)⁻¹`` precomputed): the barycenter part by the
+    Schur complement, then the edge part."""
+    k = starts.shape[0] - 1
+    n = starts[k]
+    out = np.empty(cw.shape[0])
+    for c in range(k):
+        s0, s1 = starts[c], starts[c + 1]
+        t = cyclic_tridiagonal_solve(diag[s0:s1], off[s0:s1], cw[s0:s1].copy())
+        rhs = np.empty(3)
+        for d in range(3):
+            acc = cw[n + 3 * c + d]
+            for i in range(s0, s1):
+                acc -= TiB[c, d, i] * cw[i]
+            rhs[d] = acc
+        for d in range(3):
+            z = 0.0
+            for e in range(3):
+                z += schur[c, d, e] * rhs[e]
+            out[n + 3 * c + d] = z
+        for i in range(s0, s1):
+            y = t[i - s0]
+            for d in range(3):
+                y -= out[n + 3 * c + d] * TiB[c, d, i]
+            out[i] = y
+    return out
+
+
 class TangentProjector:
     """The Euclidean orthogonal projection ``Π = I − Cᵀ(CCᵀ)⁻¹C`` onto the tangent space of the
     constraints (``C u = 0``), in O(N): ``CCᵀ`` is cyclic tridiagonal per component in the
@@ -240,17 +270,8 @@ class TangentProjector:
 
     def multipliers(self, W: np.ndarray) -> np.ndarray:
         """``(CCᵀ)⁻¹ C W`` for a field ``W`` (N, 3)."""
-        lay = self.layout
-        n = lay.n
-        cw = self.jac.matvec(W)
-        y = np.empty(n)
-        z = cw[n:].reshape(lay.k, 3).copy()
-        for c in range(lay.k):
-            s = slice(lay.starts[c], lay.starts[c + 1])
-            t = self._tri(c, cw[:n][s])
-            z[c] = self.schur[c] @ (z[c] - self.TiB[c, :, s] @ cw[:n][s])
-            y[s] = t - z[c] @ self.TiB[c, :, s]
-        return np.concatenate([y, z.ravel()])
+        return _bordered_solve(self.jac.matvec(W), self.diag, self.off, self.TiB, self.schur,
+                               self.layout.starts)
 
     def __call__(self, W: np.ndarray) -> np.ndarray:
         """``Π W``: ``W`` (N, 3) moved orthogonally onto ``C u = 0``."""
