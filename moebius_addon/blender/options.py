@@ -104,7 +104,8 @@ def check_relax_options(max_iterations, tolerance, keyframe_stride, frame_start,
 
 
 def check_edge_count(n: int, metric: str = "hs", method: str = DEFAULT_METHOD,
-                     engine: str = DEFAULT_ENGINE, allow_large: bool = False) -> None:
+                     engine: str = DEFAULT_ENGINE, allow_large: bool = False, *,
+                     edge_lengths: bool = True, barycenter: bool = True) -> None:
     """Refuse ``n`` edges in total for a run of ``method`` in ``metric`` on ``engine`` before any
     work: the core's refusal where it holds the metric as a dense matrix (``core.check_size``,
     whose message names the way out; its sizes crash or exhaust the machine), else more than
@@ -118,7 +119,8 @@ def check_edge_count(n: int, metric: str = "hs", method: str = DEFAULT_METHOD,
     n = int(n)
     # "auto" picks one of two methods by the curve's knot type; both hold the metric alike
     for m in (EXPLICIT_METHOD, KNOT_METHOD) if method == AUTO_METHOD else (method,):
-        core.check_size(n, metric, m, engine)
+        core.check_size(n, metric, m, engine, edge_lengths=edge_lengths,
+                        barycenter=barycenter)
     tree = issubclass(engine_class(engine, n), core.ENGINES["tree"])
     if n > EDGE_LIMIT and not allow_large and tree:
         raise ValueError(

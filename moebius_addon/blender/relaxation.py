@@ -145,7 +145,9 @@ class ObjectRelaxation:
             frame_start = int(frames[-1])
         try:  # before any work: no size may crash the process
             check_edge_count(sum(len(p) for p in polygons), metric, method, engine,
-                             options.pop("allow_large", False))
+                             options.pop("allow_large", False),
+                             edge_lengths=options.get("edge_lengths", True),
+                             barycenter=options.get("barycenter", True))
         except ValueError as err:
             raise ValueError(f"'{obj.name}': {err}") from None
         try:

@@ -44,10 +44,12 @@ _SPLIT_CHUNKS = 16
 
 
 ENGINE_NAMES = ("auto", "exact", "tree")
-# From this many edges on, "auto" takes the tree for moebius_energy / moebius_gradient: at the
-# default theta (frame included, 7_2, alternated on a shared machine) the energy alone measured
-# 0.5-0.8x the exact speed at 1 000 edges, 0.7-1.2x at 2 000, 1.6-2.2x at 3 000, energy+gradient
-# 1.4-2.3x at 1 000, 2.9-3.9x at 2 000, 4.5-6.0x at 3 000 (docs/benchmarks.md, "Tree engine").
+# From this many edges on, "auto" evaluates the energy alone (moebius_energy, moebius_gradient)
+# with the tree (runs take the tree earlier, from engine.AUTO_TREE_FROM, where its metric
+# pays): at the default theta (frame included, 7_2, alternated on a shared machine) the energy
+# alone measured 0.5-0.8x the exact speed at 1 000 edges, 0.7-1.2x at 2 000, 1.6-2.2x at
+# 3 000, energy+gradient 1.4-2.3x at 1 000, 2.9-3.9x at 2 000, 4.5-6.0x at 3 000
+# (docs/benchmarks.md, "Tree engine").
 TREE_FROM = 3000
 
 

@@ -317,6 +317,8 @@ def test_check_size_says_before_any_work_what_a_run_would_refuse():
     for metric in ("h2", "h1", "hs", "hs_pure"):  # the tree engine holds nothing dense
         check_size(n, metric, "projected_gradient", "tree")
         check_size(n, metric, "projected_gradient_implicit", "auto")
+    with pytest.raises(ValueError, match="keep both constraints"):
+        check_size(n, "hs", "projected_gradient", "tree", barycenter=False)
     for bad, word in ((("hs", "projected_gradient", "nope"), "engine"),
                       (("nope", "projected_gradient", "auto"), "metric"),
                       (("hs", "nope", "auto"), "method")):

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import hs_tree
+from moebius_addon.core import hs_solve, hs_tree
 from moebius_addon.core._layout import as_layout
 from moebius_addon.core.constraints import jacobian, make_constraints, residual
 from moebius_addon.core.metrics import gram_x
@@ -200,7 +200,22 @@ def test_krylov_solves_against_a_dense_solve(name, rng):
     A = slow_matrix(X, lay, op)
     g = rng.standard_normal((lay.n, 3))
     r = 1e-3 * rng.standard_normal(con.size)
-    solver = hs_tree.HsSaddle(op, jac)
+    solver = hs_solve.HsSaddle(op, jac)
+    _check_solves(solver, A, jac, g, r, con)
+    # the same with the preconditioner's coarse level (a quarter of the vertices)
+    coarse = hs_solve.HsSaddle(op, jac, X=X, coarse=lay.n // 4)
+    assert coarse.coarse is not None
+    _check_solves(coarse, A, jac, g, r, con)
+    # back-projection steps: onto C d = φ, in the preconditioner's metric or in Ã's
+    phi = residual(X + 1e-3 * rng.standard_normal(X.shape) * ln.mean(), con)
+    for exact in (False, True):
+        solver.exact_backprojection = exact
+        d = solver.pseudo_inverse(phi)
+        assert np.abs(jac.matvec(d) - phi).max() < 1e-10 * np.abs(phi).max()
+    assert solver.iterations and max(solver.iterations) < 100
+
+
+def _check_solves(solver, A, jac, g, r, con):
     for rtol, tol in ((1e-8, 1e-6), (1e-2, 3e-2)):
         for rhs in ((g, np.zeros(con.size)), (g, r), (0 * g, r)):
             u0, lam0 = _dense_saddle(A, jac, *rhs)
@@ -209,13 +224,23 @@ def test_krylov_solves_against_a_dense_solve(name, rng):
             assert np.linalg.norm(u - u0) <= tol * np.linalg.norm(u0)
             if rtol == 1e-8:
                 assert np.allclose(lam, lam0, rtol=0, atol=1e-6 * np.abs(lam0).max())
-    # back-projection steps: onto C d = φ, in the preconditioner's metric or in Ã's
-    phi = residual(X + 1e-3 * rng.standard_normal(X.shape) * ln.mean(), con)
-    for exact in (False, True):
-        solver.exact_backprojection = exact
-        d = solver.pseudo_inverse(phi)
-        assert np.abs(jac.matvec(d) - phi).max() < 1e-10 * np.abs(phi).max()
-    assert solver.iterations and max(solver.iterations) < 100
+
+
+def test_coarse_level_interpolates_along_the_curve(rng):
+    X, lay = _unit(CURVES["link"]())
+    ln = np.linalg.norm(X[lay.nxt] - X, axis=1)
+    jac = jacobian(X, make_constraints(X, lay, ln))
+    op = hs_tree.HsOperator(X, lay, "hs")
+    level = hs_solve.HsSaddle(op, jac, X=X, coarse=60).coarse
+    Uc = rng.standard_normal((level.n, 3))
+    R = rng.standard_normal((lay.n, 3))
+    # restriction is the transpose of the interpolation
+    assert np.isclose(np.sum(level.prolong(Uc) * R), np.sum(Uc * level.restrict(R)))
+    # constants and the coarse polygon itself are interpolated exactly at coarse vertices
+    assert np.allclose(level.prolong(np.ones((level.n, 3))), 1.0)
+    # the correction lies on the constraints' tangent space
+    w = level(R)
+    assert np.abs(jac.matvec(w)).max() < 1e-10 * np.abs(w).max() / ln.mean()
 
 
 def test_tree_flow_ends_at_the_circle_like_the_exact_flow():
@@ -264,3 +289,20 @@ def test_bad_krylov_tolerance_refused_by_name():
     for bad in (0.0, 1.0, -1e-3, float("nan"), "x"):
         with pytest.raises(ValueError, match="krylov_rtol"):
             core.relax(P, max_iter=1, krylov_rtol=bad)
+
+
+def test_flow_with_the_coarse_level(monkeypatch):
+    # the coarse level starts at 10 000 vertices; the same path on a smaller curve
+    monkeypatch.setattr(hs_solve, "COARSE_FROM", 1000)
+    P = core.resample(core.knots.named("5_2"), 2000)
+    r = core.relax(P, max_iter=6, engine="tree")
+    assert r.nit == 6 and np.all(np.diff(r.history["energy"]) < 0)
+    assert max(r.history["constraint_residual"]) <= 1e-10
+    assert max(r.stats["krylov_iterations"]) < 40
+
+
+def test_hs_pure_flow_on_the_tree():
+    P = core.resample(trefoil(300), 300)
+    r = core.relax(P, metric="hs_pure", max_iter=4, engine="tree")
+    assert r.nit == 4 and r.fun < r.history["energy"][0] and r.metric == "hs_pure"
+    assert max(r.history["constraint_residual"]) <= 1e-10

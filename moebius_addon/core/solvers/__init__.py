@@ -71,11 +71,14 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
 
 
 def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
-               engine: str = "auto") -> None:
+               engine: str = "auto", *, edge_lengths: bool = True,
+               barycenter: bool = True) -> None:
     """Refuse, before any work, a polygon of ``n`` vertices (in all) that a run of ``method``
     in ``metric`` on ``engine`` would refuse for its size: the same ``ValueError`` (naming the
     way out) the run's constructor raises. Sizes are bounded where the metric is held as a
-    dense matrix: the exact engine, and the penalty methods on every engine.
+    dense matrix: the exact engine, the penalty methods on every engine, and a feasible
+    method without one of its constraints (``edge_lengths``, ``barycenter``: the tree's
+    solvers need both).
 
     Raises
     ------
@@ -90,3 +93,5 @@ def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
         check_dense_size(n, "method")
     elif engine_class(engine, n).holds_dense(metric):
         check_dense_size(n)
+    elif not (edge_lengths and barycenter):
+        check_dense_size(n, "constraints")
