@@ -110,11 +110,9 @@ class CoarseLevel:
         Xc = X[idx]
         lc = np.linalg.norm(Xc[clay.nxt] - Xc, axis=1)
         self.jc = jacobian(Xc, make_constraints(Xc, clay, lc))
-        Ac = gram_x(metric, Xc, clay)
-        try:  # a preconditioner: single precision is plenty
-            self.fac = Factorization(Ac, self.jc, np.float32)
-        except np.linalg.LinAlgError:
-            self.fac = Factorization(Ac, self.jc, np.float64)
+        # double precision: a single-precision factorization of a nearly relaxed 7_2's coarse
+        # polygon (1 131 vertices) made the preconditioner indefinite (rᵀz < 0)
+        self.fac = Factorization(gram_x(metric, Xc, clay), self.jc, np.float64)
 
     def prolong(self, Uc: np.ndarray) -> np.ndarray:
         """``P Uc``: (coarse vertices, 3) to (N, 3), linear along the curve."""
@@ -202,6 +200,13 @@ class HsSaddle:
         lam = -mu
         res -= self.jac.rmatvec(mu)
         rz = float(np.einsum("ij,ij->", res, z))
+        if not rz > 0.0 and self.coarse is not None and np.any(res):
+            # the coarse level made the preconditioner indefinite here: go on without it
+            self.coarse = None
+            z, _ = self._precondition(res)
+            rz = float(np.einsum("ij,ij->", res, z))
+        if not rz >= 0.0:  # NaN, or an indefinite constraint preconditioner
+            raise np.linalg.LinAlgError("the hs preconditioner is not positive definite here")
         stop = rtol * rtol * rz
         p = -z
         its = 0
@@ -217,6 +222,8 @@ class HsSaddle:
             lam -= mu
             res -= self.jac.rmatvec(mu)
             rz_new = float(np.einsum("ij,ij->", res, z))
+            if not rz_new > 0.0:  # converged to rounding, or the preconditioner broke down
+                break
             p *= rz_new / rz
             p -= z
             rz = rz_new

@@ -306,3 +306,26 @@ def test_hs_pure_flow_on_the_tree():
     r = core.relax(P, metric="hs_pure", max_iter=4, engine="tree")
     assert r.nit == 4 and r.fun < r.history["energy"][0] and r.metric == "hs_pure"
     assert max(r.history["constraint_residual"]) <= 1e-10
+
+
+def test_an_indefinite_coarse_level_is_dropped_not_followed(monkeypatch, rng):
+    # a coarse level whose correction points against the residual (what a single-precision
+    # coarse factorization did on a nearly relaxed 7_2): the solve goes on without it; a
+    # preconditioner that gives NaN is an error, never a zero direction (which read as
+    # "converged")
+    X, lay = _unit(CURVES["trefoil"]())
+    ln = np.linalg.norm(X[lay.nxt] - X, axis=1)
+    con = make_constraints(X, lay, ln)
+    jac = jacobian(X, con)
+    op = hs_tree.HsOperator(X, lay, "hs")
+    g = rng.standard_normal((lay.n, 3))
+    good, _ = hs_solve.HsSaddle(op, jac).solve(g, np.zeros(con.size))
+    solver = hs_solve.HsSaddle(op, jac, X=X, coarse=60)
+    monkeypatch.setattr(hs_solve.CoarseLevel, "__call__", lambda self, R: -1e6 * R)
+    u, _ = solver.solve(g, np.zeros(con.size))
+    assert solver.coarse is None
+    assert np.linalg.norm(u - good) < 1e-2 * np.linalg.norm(good)
+    broken = hs_solve.HsSaddle(op, jac)
+    monkeypatch.setattr(broken.K, "_solve", lambda R, r: (np.full_like(R, np.nan), 0 * r))
+    with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
+        broken.solve(g, np.zeros(con.size))
