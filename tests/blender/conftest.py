@@ -10,6 +10,7 @@ drives the installed copy (``bl_ext.user_default.moebius_addon``) through ``bpy.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import os
 import shutil
 import sys
@@ -26,7 +27,13 @@ os.environ["BLENDER_USER_RESOURCES"] = str(USER_DIR)
 
 bpy = pytest.importorskip("bpy")
 
-from bpy_helpers import EXT_MODULE, ROOT  # noqa: E402 - after BLENDER_USER_RESOURCES is set
+# The venv of a Blender line (mk/lines.mk) holds bpy and pytest only: numba comes with the
+# extension, as in a user's Blender. Modules that import the repository's core at collection
+# (it needs numba in the venv) or run its scripts are for the main venv.
+if importlib.util.find_spec("numba") is None:
+    collect_ignore = ["test_methods.py", "test_scripts.py"]
+
+from bpy_helpers import EXT_MODULE, PYTHON, ROOT  # noqa: E402 - after BLENDER_USER_RESOURCES is set
 
 
 def pytest_sessionfinish(session, exitstatus):
@@ -35,14 +42,14 @@ def pytest_sessionfinish(session, exitstatus):
 
 @pytest.fixture(scope="session")
 def extension_zip(tmp_path_factory) -> Path:
-    """The linux-x64 extension zip (Python 3.11 wheels only), built and validated."""
+    """The linux-x64 extension zip with the wheels for this Python only, built and validated."""
     sys.path.insert(0, str(ROOT / "mk"))
     try:
         import build_extension
     finally:
         sys.path.pop(0)
     out = tmp_path_factory.mktemp("dist")
-    (zip_path,) = build_extension.build(out, ["linux-x64"], ["3.11"])
+    (zip_path,) = build_extension.build(out, ["linux-x64"], [PYTHON])
     return zip_path
 
 

@@ -3,14 +3,7 @@
 import bpy
 import numpy as np
 import pytest
-from bpy_helpers import poly_curve, scene_state, spline_points
-
-
-def _fcurves(idblock):
-    from bpy_extras import anim_utils
-
-    adt = idblock.animation_data
-    return anim_utils.action_get_channelbag_for_slot(adt.action, adt.action_slot).fcurves
+from bpy_helpers import fcurves_of, poly_curve, scene_state, spline_points
 
 
 @pytest.fixture
@@ -30,8 +23,9 @@ def test_relax_keyframes_every_iterate(scene, mb, trefoil):
     assert 1 <= nit <= 6 and s.last_keyframes == nit + 1
     assert (scene.frame_start, scene.frame_end) == (10, 10 + nit)
     assert scene.frame_current == 10 + nit
-    # slotted action (Blender 5.0): one channelbag, 3 F-curves per point, LINEAR keys
-    fcurves = _fcurves(trefoil.data)
+    # one channelbag of a slotted action (4.4+; action.fcurves before), 3 F-curves per point,
+    # LINEAR keys
+    fcurves = fcurves_of(trefoil.data)
     assert len(fcurves) == 3 * 60
     fc = fcurves.find("splines[0].points[7].co", index=2)
     co = np.empty(2 * len(fc.keyframe_points))
@@ -46,7 +40,7 @@ def test_relax_keyframes_every_iterate(scene, mb, trefoil):
     final = spline_points(trefoil)
     assert np.abs(final - start).max() > 1e-3
     # energy keyed on the object, strictly decreasing, matching the core's energy
-    efc = _fcurves(trefoil).find('["moebius_energy"]')
+    efc = fcurves_of(trefoil).find('["moebius_energy"]')
     energies = np.array([k.co[1] for k in efc.keyframe_points])
     assert len(energies) == nit + 1 and np.all(np.diff(energies) < 0)
     assert trefoil["moebius_energy"] == pytest.approx(energies[-1], rel=1e-6)
@@ -139,7 +133,7 @@ def test_other_animation_is_left_alone(scene, mb, trefoil):
     scene.moebius.max_iterations = 2
     bpy.ops.moebius.relax()
     bpy.ops.moebius.clear_animation()
-    fcurves = _fcurves(trefoil)
+    fcurves = fcurves_of(trefoil)
     assert sorted(fc.data_path for fc in fcurves) == ["location"] * 3
 
 
@@ -153,7 +147,7 @@ def test_link_relaxes_both_components(scene, mb):
     link = bpy.context.active_object
     scene.moebius.max_iterations = 3
     assert bpy.ops.moebius.relax() == {"FINISHED"}
-    assert len(_fcurves(link.data)) == 3 * 80
+    assert len(fcurves_of(link.data)) == 3 * 80
     assert scene.moebius.last_energy_end < scene.moebius.last_energy_start
 
 
@@ -254,7 +248,7 @@ def _flow_keys(obj):
     """Every flow F-curve's keys (frame, value) by channel."""
     out = {}
     for idblock in (obj.data, obj):
-        for fc in _fcurves(idblock):
+        for fc in fcurves_of(idblock):
             co = np.empty(2 * len(fc.keyframe_points))
             fc.keyframe_points.foreach_get("co", co)
             out[fc.data_path, fc.array_index] = co.reshape(-1, 2)
@@ -298,7 +292,7 @@ def test_continue_without_keys_is_a_new_run_and_edited_keys_are_refused(scene, m
     scene.moebius.max_iterations = 2
     assert bpy.ops.moebius.relax(append=True) == {"FINISHED"}
     assert mb.keyed_frames(trefoil) == [1, 2, 3]
-    _fcurves(trefoil.data)[0].keyframe_points.insert(10, 0.5)  # a key edited by hand
+    fcurves_of(trefoil.data)[0].keyframe_points.insert(10, 0.5)  # a key edited by hand
     before = scene_state()
     with pytest.raises(RuntimeError, match="were edited"):
         bpy.ops.moebius.relax(append=True)
