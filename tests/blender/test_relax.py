@@ -32,6 +32,7 @@ def test_relax_keyframes_every_iterate(scene, mb, trefoil):
     fc.keyframe_points.foreach_get("co", co)
     np.testing.assert_array_equal(co[0::2], np.arange(10, 11 + nit))
     assert {k.interpolation for k in fc.keyframe_points} == {"LINEAR"}
+    assert {f.group.name for f in fcurves} == {"Möbius flow"}
     assert co[1] == pytest.approx(start[7, 2], abs=1e-6)
     # frame_start shows the start; the current (last) frame the final iterate
     scene.frame_set(10)
