@@ -16,6 +16,16 @@ EXT_MODULE = "bl_ext.user_default.moebius_addon"
 PYTHON = f"{sys.version_info.major}.{sys.version_info.minor}"
 
 
+def build_extension():
+    """``mk/build_extension.py`` as a module (build, build_repo, blender_ext)."""
+    sys.path.insert(0, str(ROOT / "mk"))
+    try:
+        import build_extension as module
+    finally:
+        sys.path.pop(0)
+    return module
+
+
 def fcurves_of(idblock):
     """The F-curves of ``idblock``'s action as Blender stores them: in the channelbag of the
     assigned slot on Blender 4.4+ (slotted actions), in ``action.fcurves`` on 4.2-4.3."""

@@ -12,6 +12,7 @@ def trefoil(scene, mb):
     return bpy.context.active_object
 
 
+@pytest.mark.lines
 def test_relax_keyframes_every_iterate(scene, mb, trefoil):
     start = spline_points(trefoil)
     s = scene.moebius
@@ -114,6 +115,7 @@ def test_callback_stops_the_run(scene, mb, trefoil):
     assert len(mb.keyed_frames(trefoil)) == 3
 
 
+@pytest.mark.lines
 def test_apply_frame_then_relax_again(scene, mb, trefoil):
     scene.moebius.max_iterations = 4
     bpy.ops.moebius.relax()
@@ -129,6 +131,7 @@ def test_apply_frame_then_relax_again(scene, mb, trefoil):
     np.testing.assert_allclose(spline_points(trefoil), mid, atol=1e-6)
 
 
+@pytest.mark.lines
 def test_other_animation_is_left_alone(scene, mb, trefoil):
     trefoil.keyframe_insert("location", frame=1)
     scene.moebius.max_iterations = 2
@@ -162,6 +165,7 @@ def test_failed_setup_keeps_the_previous_flow(scene, mb, trefoil):
     assert scene_state() == before and mb.keyed_frames(trefoil) == frames
 
 
+@pytest.mark.lines
 def test_failure_while_keyframing_restores_the_curve(scene, mb, trefoil, monkeypatch):
     """The end of a run (writing the keyframes) can fail too, e.g. when the object was
     deleted during a modal run: the operator restores the curve and reports, like any
@@ -256,6 +260,7 @@ def _flow_keys(obj):
     return out
 
 
+@pytest.mark.lines
 def test_continue_appends_after_the_last_keyed_frame(scene, mb, core, trefoil):
     # Relax replaced the previous run and restarted at frame 1 from the current shape; Continue
     # starts from the last keyed iterate and keys the new iterates after it

@@ -199,6 +199,7 @@ def _blocks(obj):
     return np.array(out)
 
 
+@pytest.mark.lines
 def test_shape_keys_hold_every_iterate_and_play_linearly(scene, mb, core, trefoil, shape_keys):
     start = spline_points(trefoil)
     s = scene.moebius
@@ -236,6 +237,7 @@ def test_shape_keys_hold_every_iterate_and_play_linearly(scene, mb, core, trefoi
     assert energies[-1] == pytest.approx(ref.fun, rel=1e-6)
 
 
+@pytest.mark.lines
 def test_shape_keys_continue_clear_and_apply(scene, mb, core, trefoil, shape_keys):
     start = spline_points(trefoil)
     s = scene.moebius
@@ -317,6 +319,7 @@ def test_a_curve_with_shape_keys_of_its_own_is_refused_before_the_run(scene, mb,
     assert scene_state() == before
 
 
+@pytest.mark.lines
 @pytest.mark.parametrize("suffix", [".abc", ".usda"])
 def test_shape_keys_export_round_trip(scene, mb, trefoil, shape_keys, tmp_path, suffix):
     trefoil.location = (0.5, -1.0, 2.0)  # the transform too
