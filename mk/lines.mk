@@ -83,4 +83,4 @@ test-lines: $(TEST_REPO)/index.json $(LINE_STAMPS)
 
 bench-first-relax: $(TEST_REPO)/index.json $(STAMP) $(LINE_STAMPS)
 	@for venv in .venv $(foreach l,$(LINES),.venv-blender-$(l)); do \
-	  $$venv/bin/python bench/first_relax.py --repo $(TEST_REPO); done
+	  $$venv/bin/python bench/first_relax.py --repo $(TEST_REPO) --update; done
