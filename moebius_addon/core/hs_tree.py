@@ -44,10 +44,9 @@ import numba as nb
 import numpy as np
 
 from . import bvh
-from ._layout import Layout
+from ._layout import Layout, layout_from_sizes
 from .banded import BandedSaddle
 from .barnes_hut import _by_target
-from ._layout import layout_from_sizes
 from .constraints import Jacobian, jacobian, make_constraints
 from .linalg import Factorization
 from .metrics import _PURE_L2, _barycenter_weights, banded_parts_of_lengths, gram_x
