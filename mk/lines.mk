@@ -13,9 +13,10 @@
 #   make bench-first-relax   the first relaxation after installing, and on later starts, on
 #                            every line (docs/blender.md, Install)
 
-# bpy from PyPI, its Python, and numpy: 1.26.4 on the Python 3.11 lines (bpy 4.5 and 5.0 ask for
-# numpy >= 1.26, < 2; 4.2 for any numpy, and Blender 4.2 itself ships numpy 1.x); bpy 5.2 asks
-# for numpy >= 2.2, < 3, and numba 0.68 takes numpy < 2.6.
+# bpy from PyPI, its Python, and numpy (the bpy wheels bundle none): 1.26.4 on the Python 3.11
+# lines (bpy 4.5 and 5.0 ask for numpy >= 1.26, < 2, bpy 4.2 for any; one numpy for the three);
+# 2.3.4 on 5.2, inside bpy 5.2.3's >= 2.2, < 3 and numba 0.68's < 2.6 (Blender's own library
+# build lists numpy 2.3.4 in a 2026 copy of its versions.cmake).
 BPY_4.2   := 4.2.23
 PYV_4.2   := 3.11
 NUMPY_4.2 := 1.26.4
