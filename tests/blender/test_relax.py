@@ -153,6 +153,23 @@ def test_link_relaxes_both_components(scene, mb):
     assert bpy.ops.moebius.relax() == {"FINISHED"}
     assert len(fcurves_of(link.data)) == 3 * 80
     assert scene.moebius.last_energy_end < scene.moebius.last_energy_start
+    # Automatic runs the explicit method on links and unknots (the knots' tests: the implicit)
+    assert scene.moebius.last_method == "projected_gradient"
+
+
+@pytest.mark.lines
+def test_new_user_relaxes_the_fhw_unknot_into_keyframes(scene, mb):
+    # issue 17's new user: Add Knot ▸ Freedman–He–Wang (its default edges), Relax
+    assert bpy.ops.moebius.add_knot(kind="fhw") == {"FINISHED"}
+    fhw = bpy.context.active_object
+    n = len(spline_points(fhw))
+    s = scene.moebius
+    s.max_iterations = 5
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    assert (s.last_method, s.last_iterations, s.last_keyframes) == ("projected_gradient", 5, 6)
+    assert s.last_energy_end < s.last_energy_start
+    assert len(fcurves_of(fhw.data)) == 3 * n
+    assert mb.keyed_frames(fhw) == [float(f) for f in range(1, 7)]
 
 
 def test_failed_setup_keeps_the_previous_flow(scene, mb, trefoil):
