@@ -1,5 +1,6 @@
 # Two commands on a fresh clone:  `make demo`  and  `make test`.
-# Each creates .venv (Python 3.11, as bpy==5.0.1 requires) and installs what it needs.
+# Each creates .venv (Python 3.11, as bpy==5.0.1 requires) and installs what it needs; `make test`
+# also creates a venv per Blender line (mk/lines.mk; bpy 5.2 needs Python 3.13).
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV   := .venv
 PY     := $(VENV)/bin/python
@@ -16,12 +17,19 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q -e '.[test,blender,build]'
 	touch $@
 
-# CI runs this (via .ci/run): the whole suite except runs marked slow.
-test: $(STAMP)
-	$(PY) -m pytest -q -m "not slow"
+include mk/lines.mk
 
-test-all: $(STAMP)
-	$(PY) -m pytest -q
+# CI runs this (via .ci/run): the whole suite except runs marked slow on Blender 5.0 (.venv),
+# then the Blender tests marked `lines` on Blender 4.2, 4.5 and 5.2 (mk/lines.mk). Every part
+# runs even when one before it failed; the status is the worst.
+test: $(STAMP) $(TEST_REPO)/index.json $(LINE_STAMPS)
+	@status=0; t=$$(date +%s); \
+	MOEBIUS_TEST_REPO=$(TEST_REPO) $(PY) -m pytest -q -m "not slow" || status=1; \
+	echo "[time] whole suite, Blender 5.0: $$(( $$(date +%s) - t )) s"; \
+	$(RUN_LINES); exit $$status
+
+test-all: $(STAMP) $(TEST_REPO)/index.json
+	MOEBIUS_TEST_REPO=$(TEST_REPO) $(PY) -m pytest -q
 
 lint: $(STAMP)
 	$(PY) -m ruff check moebius_addon tests bench
@@ -33,7 +41,7 @@ bench: $(STAMP)
 	$(PY) bench/core_bench.py
 
 clean:
-	rm -rf $(VENV) out dist build
+	rm -rf $(VENV) .venv-blender-* out dist build
 
 include mk/blender.mk
 include mk/ui.mk

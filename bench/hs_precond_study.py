@@ -28,7 +28,7 @@ import argparse
 
 import numpy as np
 
-from moebius_addon.core import hs_tree, knots, resample
+from moebius_addon.core import hs_solve, hs_tree, knots, resample
 from moebius_addon.core.banded import BandedSaddle
 from moebius_addon.core.constraints import jacobian
 from moebius_addon.core.linalg import field_product
@@ -99,7 +99,7 @@ def study(curve: str, n: int, at: int) -> None:
     line = [f"{curve} N={n} iterate {run.nit} (E {run.E:.2f}):"]
     op = _Dense(A, lay, exact_weights)
     for name, parts in candidates.items():
-        solver = hs_tree.HsSaddle(op, jac, max_iter=1000)
+        solver = hs_solve.HsSaddle(op, jac, max_iter=1000)
         solver.K = BandedSaddle(parts, jac)
         counts = []
         for rtol in (1e-2, 1e-4):
@@ -108,7 +108,7 @@ def study(curve: str, n: int, at: int) -> None:
                 counts.append(solver.iterations[-1])
         line.append(f"{name} {counts}")
     rl, cl, vl, _ = banded_parts_of_lengths("h1", ln, lay)
-    solver = hs_tree.HsSaddle(op, jac, max_iter=1000)
+    solver = hs_solve.HsSaddle(op, jac, max_iter=1000)
     solver.K = _Sandwich(BandedSaddle((rl, cl, vl, beta), jac), w_half_vertices(X, lay))
     counts = []
     for rtol in (1e-2, 1e-4):

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from moebius_addon import core
-from moebius_addon.core import hs_tree
+from moebius_addon.core import hs_solve, hs_tree
 from moebius_addon.core._layout import as_layout
 from moebius_addon.core.banded import BandedSaddle
 from moebius_addon.core.constraints import jacobian, make_constraints
@@ -110,7 +110,7 @@ def accuracy(n: int, thetas) -> list[dict]:
 
 def pcg(sizes) -> list[dict]:
     """Iterations of the gradient's solve and of a random right-hand side, with the shipped
-    preconditioner (coarse level from ``hs_tree.COARSE_FROM`` vertices), without its coarse
+    preconditioner (coarse level from ``hs_solve.COARSE_FROM`` vertices), without its coarse
     level, and with h1 alone (neither the coarse level nor the lumped lower-order term)."""
     rows = []
     for name in ("fhw", "7_2"):
@@ -125,7 +125,7 @@ def pcg(sizes) -> list[dict]:
             rnd = np.random.default_rng(1).standard_normal(g.shape)
             row = {"curve": name, "edges": n}
             for label in ("shipped", "one level", "h1 only"):
-                solver = hs_tree.HsSaddle(op, jac, X=X, coarse=0 if label != "shipped" else None)
+                solver = hs_solve.HsSaddle(op, jac, X=X, coarse=0 if label != "shipped" else None)
                 if label == "h1 only":
                     rows_, cols, vals, _ = banded_parts_of_lengths("h1", ln, lay)
                     s = op.diagonal().sum() / vals[rows_ == cols].sum()

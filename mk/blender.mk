@@ -1,7 +1,7 @@
 # Blender extension targets; included from the main Makefile (`include mk/blender.mk`).
 # Uses PY and STAMP from the main Makefile.
 
-.PHONY: extension extension-linux test-blender demo-core
+.PHONY: extension extension-linux repo release test-blender demo-core
 
 # Per-platform extension zips in dist/ (downloads the pinned numba/llvmlite wheels into wheels/).
 extension: $(STAMP)
@@ -9,6 +9,21 @@ extension: $(STAMP)
 
 extension-linux: $(STAMP)
 	$(PY) mk/build_extension.py --platforms linux-x64 --out dist
+
+# A static extension repository in dist/repo: the zip of every platform and index.json (with
+# blender_ext.py server-generate), to upload to any static host; users add the URL of its
+# index.json as a Remote Repository (docs/blender.md, "A repository users can add").
+repo: $(STAMP)
+	$(PY) mk/build_extension.py --repo --out dist/repo
+
+# A release: the versions equal (blender_manifest.toml, pyproject.toml, bl_info) and dated in
+# CHANGELOG.md (mk/release.py), then the repository, and its zips copied to dist/ to attach to
+# the release. Publishing is then uploading dist/repo (docs/blender.md, "Publishing a release").
+release: $(STAMP)
+	$(PY) mk/release.py
+	$(PY) mk/build_extension.py --repo --out dist/repo
+	cp dist/repo/*.zip dist/
+	@echo "release: dist/*.zip and dist/repo/ built from $$(git describe --always --dirty)"
 
 # Only the Blender tests (installs the linux-x64 zip into a throw-away user directory).
 test-blender: $(STAMP)

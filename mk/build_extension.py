@@ -5,10 +5,17 @@ Stages ``blender_manifest.toml``, the ``moebius_addon`` package and the numba/ll
 repository keeps the package in ``moebius_addon/``), then runs ``blender_ext.py build
 --split-platforms`` and ``validate`` from the installed ``bpy`` wheel.
 
+With ``--repo`` the output directory becomes a static extension repository (what ``make repo``
+builds in ``dist/repo``): the zips of this version replace any earlier ones there (a repository
+lists one version per platform) and ``blender_ext.py server-generate`` writes its
+``index.json`` (and an ``index.html`` to browse it); users add the URL of ``index.json`` as a
+*Remote Repository* in Blender (docs/blender.md, "A repository users can add").
+
 Usage::
 
     python mk/build_extension.py                      # every platform in the manifest
     python mk/build_extension.py --platforms linux-x64 --out build/test-dist
+    python mk/build_extension.py --repo --out dist/repo
 """
 
 from __future__ import annotations
@@ -84,8 +91,10 @@ def download_wheels(wheels: list[str]) -> None:
             sys.exit(f"pip did not produce {name}; check the pinned versions in {MANIFEST.name}")
 
 
-def stage(dest: Path, platforms: list[str], pythons: list[str] | None = None) -> list[str]:
-    """Copy the manifest (restricted to ``platforms`` and ``pythons``), package and wheels."""
+def stage(dest: Path, platforms: list[str], pythons: list[str] | None = None,
+          version: str | None = None) -> list[str]:
+    """Copy the manifest (restricted to ``platforms`` and ``pythons``, with ``version`` if
+    given), package and wheels."""
     manifest = tomllib.loads(MANIFEST.read_text())
     wheels = [w for w in manifest["wheels"] if wheel_platform(Path(w).name) in platforms
               and (pythons is None or wheel_python(Path(w).name) in pythons)]
@@ -104,26 +113,34 @@ def stage(dest: Path, platforms: list[str], pythons: list[str] | None = None) ->
     text = re.sub(r"(?ms)^platforms = \[.*?\]$", f"platforms = [{listed_platforms}]", text)
     listed = "".join(f'  "{w}",\n' for w in wheels)
     text = re.sub(r"(?ms)^wheels = \[.*?\]$", f"wheels = [\n{listed}]", text)
+    if version is not None:
+        text = re.sub(r'(?m)^version = ".*"$', f'version = "{version}"', text)
     (dest / "blender_manifest.toml").write_text(text)
     return wheels
 
 
-def build(out: Path, platforms: list[str], pythons: list[str] | None = None) -> list[Path]:
+def blender_ext() -> Path:
+    """``blender_ext.py`` of the installed ``bpy`` wheel (build, validate, server-generate)."""
+    return bpy_scripts() / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
+
+
+def build(out: Path, platforms: list[str], pythons: list[str] | None = None,
+          version: str | None = None) -> list[Path]:
     """Stage, build with ``blender_ext.py --split-platforms`` and validate; return the zips.
 
     ``pythons`` (e.g. ``["3.11"]``) limits the wheels to those Python versions (the tests use
     this to build a smaller zip); by default every wheel of the manifest is shipped.
+    ``version`` overrides the manifest's (the repository test builds a newer version).
     """
     scripts = bpy_scripts()
-    tool = scripts / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
+    tool = blender_ext()
     tags = scripts / "modules" / "_bpy_internal" / "extensions" / "tags.py"
     src = ROOT / "build" / "extension"
-    stage(src, platforms, pythons)
+    stage(src, platforms, pythons, version)
     out.mkdir(parents=True, exist_ok=True)
     manifest = tomllib.loads(MANIFEST.read_text())
-    zips = [
-        out / f"{manifest['id']}-{manifest['version']}-{p.replace('-', '_')}.zip" for p in platforms
-    ]
+    version = version or manifest["version"]
+    zips = [out / f"{manifest['id']}-{version}-{p.replace('-', '_')}.zip" for p in platforms]
     for z in zips:
         z.unlink(missing_ok=True)
     subprocess.run(
@@ -138,6 +155,27 @@ def build(out: Path, platforms: list[str], pythons: list[str] | None = None) -> 
     return zips
 
 
+def build_repo(out: Path, platforms: list[str], pythons: list[str] | None = None,
+               version: str | None = None) -> Path:
+    """Build the zips into ``out`` as a static repository and write its ``index.json``.
+
+    Earlier zips of this extension in ``out`` are removed first: ``server-generate`` refuses
+    two versions of one extension for the same platform and Blender versions, so a repository
+    serves the newest version only (older ones stay wherever the releases are archived).
+    Returns the path of ``index.json``.
+    """
+    manifest = tomllib.loads(MANIFEST.read_text())
+    out.mkdir(parents=True, exist_ok=True)
+    for old in out.glob(f"{manifest['id']}-*.zip"):
+        old.unlink()
+    build(out, platforms, pythons, version)
+    subprocess.run(
+        [sys.executable, str(blender_ext()), "server-generate", "--repo-dir", str(out), "--html"],
+        check=True,
+    )
+    return out / "index.json"
+
+
 def main(argv: list[str] | None = None) -> int:
     manifest = tomllib.loads(MANIFEST.read_text())
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -146,9 +184,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pythons", nargs="+", default=None,
                         help="only wheels for these Python versions, e.g. 3.11 (default: all)")
     parser.add_argument("--out", type=Path, default=ROOT / "dist")
+    parser.add_argument("--repo", action="store_true",
+                        help="make --out a static repository: the zips and index.json")
     args = parser.parse_args(argv)
-    for z in build(args.out, args.platforms, args.pythons):
+    if args.repo:
+        index = build_repo(args.out, args.platforms, args.pythons)
+        zips = sorted(args.out.glob("*.zip"))
+    else:
+        zips = build(args.out, args.platforms, args.pythons)
+    for z in zips:
         print(f"{z}  {z.stat().st_size / 1e6:.1f} MB")
+    if args.repo:
+        print(f"{index}: to try it, add file://{index.resolve()} as a Remote Repository")
     return 0
 
 

@@ -15,11 +15,11 @@ The positions are stored one of two ways, by the curve's size (measured in docs/
   points, not the keys).
 
 Blender 4.4+ stores F-curves in *channelbags* of slotted actions; 4.2-4.3 keep them on
-``action.fcurves``. Keys are written in bulk (``keyframe_points.add`` + ``foreach_set``) with
-LINEAR interpolation, and the shape keys with KEY_LINEAR: the core's step-size control keeps
-the straight segment between two successive iterates free of self-intersections, so linear
-in-betweens never pass the curve through itself (with ``keyframe_stride`` > 1 that guarantee
-is for the skipped iterates only).
+``action.fcurves`` (``make test`` runs both: Blender 4.2, 4.5, 5.0 and 5.2). Keys are written in
+bulk (``keyframe_points.add`` + ``foreach_set``) with LINEAR interpolation, and the shape keys
+with KEY_LINEAR: the core's step-size control keeps the straight segment between two successive
+iterates free of self-intersections, so linear in-betweens never pass the curve through itself
+(with ``keyframe_stride`` > 1 that guarantee is for the skipped iterates only).
 """
 
 from __future__ import annotations
@@ -77,9 +77,20 @@ def _fcurves(idblock: bpy.types.ID, create: bool):
         slot = action.slots.new(id_type=idblock.id_type, name=idblock.name)
         adt.action_slot = slot
     if create:
-        return anim_utils.action_ensure_channelbag_for_slot(action, slot).fcurves
+        return _ensure_channelbag(action, slot).fcurves
     channelbag = anim_utils.action_get_channelbag_for_slot(action, slot)
     return None if channelbag is None else channelbag.fcurves
+
+
+def _ensure_channelbag(action: bpy.types.Action, slot: bpy.types.ActionSlot):
+    """The channelbag of ``slot`` in the first keyframe strip of ``action``, made if missing.
+
+    What ``bpy_extras.anim_utils.action_ensure_channelbag_for_slot`` does from Blender 5.0 on;
+    4.4 and 4.5 have slotted actions but not that function.
+    """
+    layer = action.layers[0] if len(action.layers) else action.layers.new("Layer")
+    strip = layer.strips[0] if len(layer.strips) else layer.strips.new(type="KEYFRAME")
+    return strip.channelbag(slot, ensure=True)
 
 
 def _drop_empty_action(idblock: bpy.types.ID) -> None:
@@ -154,10 +165,12 @@ def remove_flow_keyframes(obj: bpy.types.Object) -> int:
 
 def _write_channel(fcurves, data_path: str, index: int, frames: np.ndarray,
                    values: np.ndarray) -> None:
-    try:  # channelbag F-curves (4.4+)
-        fc = fcurves.new(data_path, index=index, group_name=_GROUP)
-    except TypeError:  # legacy action.fcurves (4.2-4.3)
+    owner = fcurves.data  # the channelbag (4.4+) or the legacy action (4.2-4.3)
+    if isinstance(owner, bpy.types.Action):
         fc = fcurves.new(data_path, index=index, action_group=_GROUP)
+    else:  # 4.4 and 4.5 have no group_name argument here (5.0 added it)
+        fc = fcurves.new(data_path, index=index)
+        fc.group = owner.groups.get(_GROUP) or owner.groups.new(_GROUP)
     keys = fc.keyframe_points
     keys.add(len(frames))
     keys.foreach_set("co", np.column_stack([frames, values]).ravel())

@@ -1,11 +1,11 @@
 """Bounding-volume hierarchy over the edges of a knot or link (private; the tree engine's and
 the contact search's shared structure).
 
-A binary tree built by median splits of the edge midpoints along the longest side of their
-bounding box, ``O(N log N)``. Nodes are stored in arrays in creation order, so a parent always
-comes before its children: a pass in reverse index order is bottom-up (refit), one in index
-order top-down. Each node owns the contiguous range ``perm[lo:hi]`` of edge indices; a leaf
-holds at most ``leaf_size`` edges.
+A binary tree built by splits of the edge midpoints along the longest side of their bounding
+box at the quantile that leaves every leaf but one full, ``O(N log N)``. Nodes are stored in
+preorder, so a parent always comes before its children: a pass in reverse index order is
+bottom-up (refit), one in index order top-down. Each node owns the contiguous range
+``perm[lo:hi]`` of edge indices; a leaf holds at most ``leaf_size`` edges.
 
 The topology depends only on the midpoints at build time. ``refit`` recomputes the bounds for
 moved vertices in ``O(N)``: the tree stays valid (every bound is exact for its edges), only
@@ -21,6 +21,8 @@ import numpy as np
 
 from ._layout import Layout
 
+# Edges per leaf: the near field's SIMD width (``_near_field._LANES``); leaves of 4, 12 and 16
+# edges measured slower (docs/benchmarks.md, "Tree engine").
 LEAF_SIZE = 8
 
 
@@ -39,64 +41,133 @@ class Tree(NamedTuple):
         return int(self.lo.shape[0])
 
 
+@nb.njit(cache=True, inline="always")
+def _before(key, perm, p, q):
+    """Position ``p`` sorts before ``q``: by key, ties by edge index (a total order)."""
+    return key[p] < key[q] or (key[p] == key[q] and perm[p] < perm[q])
+
+
+@nb.njit(cache=True, inline="always")
+def _swap(key, perm, p, q):
+    key[p], key[q] = key[q], key[p]
+    perm[p], perm[q] = perm[q], perm[p]
+
+
 @nb.njit(cache=True)
+def _select(key, perm, a, b, k):
+    """Reorder ``key[a:b]``, ``perm[a:b]`` so that the ``k − a`` smallest (key, edge index)
+    come first: quickselect with pivots at pseudo-random positions (a hash of the range, so
+    the same every time; median-of-three pivots went quadratic on a circle, whose coordinates
+    along an axis rise and fall), and after 64 rounds a sort of what is left (O(n log n) at
+    worst)."""
+    lo, hi = a, b - 1
+    state = np.uint64(0x9E3779B97F4A7C15) ^ np.uint64(a) ^ (np.uint64(b) << np.uint64(32))
+    rounds = 0
+    while hi > lo:
+        rounds += 1
+        if rounds > 64:
+            _sort_range(key, perm, lo, hi + 1)
+            return
+        # xorshift64*
+        state ^= state >> np.uint64(12)
+        state ^= state << np.uint64(25)
+        state ^= state >> np.uint64(27)
+        r = state * np.uint64(0x2545F4914F6CDD1D)
+        _swap(key, perm, lo + np.int64(r % np.uint64(hi - lo + 1)), hi)
+        store = lo
+        for q in range(lo, hi):
+            if _before(key, perm, q, hi):
+                _swap(key, perm, q, store)
+                store += 1
+        _swap(key, perm, store, hi)
+        if store == k:
+            return
+        if store < k:
+            lo = store + 1
+        else:
+            hi = store - 1
+
+
+@nb.njit(cache=True)
+def _sort_range(key, perm, a, b):
+    """Sort ``key[a:b]``, ``perm[a:b]`` by (key, edge index): by index, then stably by key."""
+    order = np.argsort(perm[a:b], kind="mergesort")
+    k1 = key[a:b][order]
+    p1 = perm[a:b][order]
+    order = np.argsort(k1, kind="mergesort")
+    key[a:b] = k1[order]
+    perm[a:b] = p1[order]
+
+
+@nb.njit(cache=True, inline="always")
+def _leaves(count, leaf_size):
+    return (count + leaf_size - 1) // leaf_size
+
+
+@nb.njit(cache=True, parallel=True)
 def _build(mid, leaf_size):
+    """Nodes in preorder (a node, its left subtree, its right subtree): a node of ``k`` leaves
+    splits into ``⌈k/2⌉`` full leaves' worth of edges on the left and the rest on the right,
+    at that quantile of the midpoints along the longest side of their box; so every leaf but
+    the last is full and a subtree of ``k`` leaves has ``2k − 1`` nodes. Built level by level,
+    each level's nodes in parallel (each reorders its own range): the same tree for every
+    thread count."""
     n = mid.shape[0]
+    m = 2 * _leaves(n, leaf_size) - 1
     perm = np.arange(n)
-    cap = 2 * (n // max(leaf_size // 2, 1) + 1) + 1
-    lo = np.empty(cap, np.int64)
-    hi = np.empty(cap, np.int64)
-    left = np.full(cap, -1, np.int64)
-    right = np.full(cap, -1, np.int64)
+    key = np.empty(n)
+    lo = np.empty(m, np.int64)
+    hi = np.empty(m, np.int64)
+    left = np.full(m, -1, np.int64)
+    right = np.full(m, -1, np.int64)
     lo[0] = 0
     hi[0] = n
-    count = 1
-    stack = np.empty(64, np.int64)
-    stack[0] = 0
-    top = 1
-    key = np.empty(n)
-    while top > 0:
-        top -= 1
-        node = stack[top]
-        a, b = lo[node], hi[node]
-        if b - a <= leaf_size:
-            continue
-        # longest side of the midpoints' box
-        axis = 0
-        ext = -1.0
-        for k in range(3):
-            mn = np.inf
-            mx = -np.inf
+    level = np.zeros(1, np.int64)
+    while level.shape[0] > 0:
+        nxt = np.full(2 * level.shape[0], -1, np.int64)
+        for t in nb.prange(level.shape[0]):
+            node = level[t]
+            a, b = lo[node], hi[node]
+            k = _leaves(b - a, leaf_size)
+            if k <= 1:
+                continue
+            # longest side of the midpoints' box
+            axis = 0
+            ext = -1.0
+            for d in range(3):
+                mn = np.inf
+                mx = -np.inf
+                for q in range(a, b):
+                    v = mid[perm[q], d]
+                    mn = min(mn, v)
+                    mx = max(mx, v)
+                if mx - mn > ext:
+                    ext = mx - mn
+                    axis = d
             for q in range(a, b):
-                v = mid[perm[q], k]
-                mn = min(mn, v)
-                mx = max(mx, v)
-            if mx - mn > ext:
-                ext = mx - mn
-                axis = k
-        for q in range(a, b):
-            key[q] = mid[perm[q], axis]
-        # stable: ties keep their order, so the tree is a function of the input alone
-        order = np.argsort(key[a:b], kind="mergesort")
-        seg = perm[a:b].copy()
-        for q in range(b - a):
-            perm[a + q] = seg[order[q]]
-        m = (a + b) // 2
-        for child, (ca, cb) in enumerate(((a, m), (m, b))):
-            lo[count] = ca
-            hi[count] = cb
-            if child == 0:
-                left[node] = count
-            else:
-                right[node] = count
-            stack[top] = count
-            top += 1
-            count += 1
-    return perm, lo[:count].copy(), hi[:count].copy(), left[:count].copy(), right[:count].copy()
+                key[q] = mid[perm[q], axis]
+            kl = (k + 1) // 2
+            cut = a + leaf_size * kl
+            _select(key, perm, a, b, cut)
+            c1 = node + 1
+            c2 = node + 2 * kl
+            left[node] = c1
+            right[node] = c2
+            lo[c1], hi[c1] = a, cut
+            lo[c2], hi[c2] = cut, b
+            nxt[2 * t] = c1
+            nxt[2 * t + 1] = c2
+        count = 0
+        for t in range(nxt.shape[0]):
+            if nxt[t] >= 0:
+                nxt[count] = nxt[t]
+                count += 1
+        level = nxt[:count].copy()
+    return perm, lo, hi, left, right
 
 
 def build(X: np.ndarray, layout: Layout, leaf_size: int = LEAF_SIZE) -> Tree:
-    """Hierarchy over the edges ``(X[I], X[nxt[I]])`` split at their midpoints' medians."""
+    """Hierarchy over the edges ``(X[I], X[nxt[I]])`` split at their midpoints' quantiles."""
     mid = np.ascontiguousarray(0.5 * (X + X[layout.nxt]))
     return Tree(*_build(mid, int(leaf_size)))
 

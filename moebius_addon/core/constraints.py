@@ -19,6 +19,7 @@ import numba as nb
 import numpy as np
 
 from ._layout import Layout
+from ._tridiagonal import cyclic_tridiagonal_solve
 
 
 @dataclass
@@ -189,3 +190,89 @@ def make_constraints(
         layout, np.asarray(lengths0, float), weighted_barycenters(X, layout), edge_lengths,
         barycenter,
     )
+
+
+@nb.njit(cache=True)
+def _edge_gram(T, ln, nxt, starts):
+    """``C_e C_eᵀ`` of the edge rows as a cyclic tridiagonal matrix per component: diagonal
+    ``2 / l_I²``, and ``−<t_I, t_J> / (l_I l_J)`` for the edges ``J = nxt I`` sharing vertex
+    ``nxt I``."""
+    n = T.shape[0]
+    diag = np.empty(n)
+    off = np.empty(n)
+    for i in range(n):
+        j = nxt[i]
+        diag[i] = 2.0 / (ln[i] * ln[i])
+        off[i] = -(T[i, 0] * T[j, 0] + T[i, 1] * T[j, 1] + T[i, 2] * T[j, 2]) / (ln[i] * ln[j])
+    return diag, off
+
+
+@nb.njit(cache=True)
+def _bordered_solve(cw, diag, off, TiB, schur, starts):
+    """``(CCᵀ)⁻¹ cw`` with ``CCᵀ = [[T, B], [Bᵀ, D]]`` per component (T cyclic tridiagonal,
+    ``TiB = T⁻¹B`` and ``schur = (D − BᵀT⁻¹B)⁻¹`` precomputed): the barycenter part by the
+    Schur complement, then the edge part."""
+    k = starts.shape[0] - 1
+    n = starts[k]
+    out = np.empty(cw.shape[0])
+    for c in range(k):
+        s0, s1 = starts[c], starts[c + 1]
+        t = cyclic_tridiagonal_solve(diag[s0:s1], off[s0:s1], cw[s0:s1].copy())
+        rhs = np.empty(3)
+        for d in range(3):
+            acc = cw[n + 3 * c + d]
+            for i in range(s0, s1):
+                acc -= TiB[c, d, i] * cw[i]
+            rhs[d] = acc
+        for d in range(3):
+            z = 0.0
+            for e in range(3):
+                z += schur[c, d, e] * rhs[e]
+            out[n + 3 * c + d] = z
+        for i in range(s0, s1):
+            y = t[i - s0]
+            for d in range(3):
+                y -= out[n + 3 * c + d] * TiB[c, d, i]
+            out[i] = y
+    return out
+
+
+class TangentProjector:
+    """The Euclidean orthogonal projection ``Π = I − Cᵀ(CCᵀ)⁻¹C`` onto the tangent space of the
+    constraints (``C u = 0``), in O(N): ``CCᵀ`` is cyclic tridiagonal per component in the
+    edge rows (edges sharing a vertex), bordered by the three barycenter rows of each component
+    (a 3 × 3 Schur complement per component). Needs both kinds of rows."""
+
+    def __init__(self, jac: Jacobian):
+        con = jac.con
+        if not (con.edge_lengths and con.barycenter):
+            raise ValueError("the tangent projector needs the edge-length and barycenter rows")
+        lay = con.layout
+        self.jac, self.layout = jac, lay
+        self.diag, self.off = _edge_gram(jac.T, jac.ln, lay.nxt, lay.starts)
+        F = jac.barycenter_fields()  # (3k, N, 3): the barycenter rows as fields
+        n, k = lay.n, lay.k
+        # B = C_e C_bᵀ (N × 3k, block-diagonal by component), D = C_b C_bᵀ (3k × 3k)
+        self.TiB = np.zeros((k, 3, n))
+        self.schur = np.empty((k, 3, 3))
+        for c in range(k):
+            s = slice(lay.starts[c], lay.starts[c + 1])
+            B = np.stack([jac.matvec(F[3 * c + d])[:n][s] for d in range(3)])
+            for d in range(3):
+                self.TiB[c, d, s] = self._tri(c, B[d])
+            D = np.array([[np.sum(F[3 * c + d] * F[3 * c + e]) for e in range(3)]
+                          for d in range(3)])
+            self.schur[c] = np.linalg.inv(D - B @ self.TiB[c, :, s].T)
+
+    def _tri(self, c: int, r: np.ndarray) -> np.ndarray:
+        s = slice(self.layout.starts[c], self.layout.starts[c + 1])
+        return cyclic_tridiagonal_solve(self.diag[s], self.off[s], np.ascontiguousarray(r))
+
+    def multipliers(self, W: np.ndarray) -> np.ndarray:
+        """``(CCᵀ)⁻¹ C W`` for a field ``W`` (N, 3)."""
+        return _bordered_solve(self.jac.matvec(W), self.diag, self.off, self.TiB, self.schur,
+                               self.layout.starts)
+
+    def __call__(self, W: np.ndarray) -> np.ndarray:
+        """``Π W``: ``W`` (N, 3) moved orthogonally onto ``C u = 0``."""
+        return W - self.jac.rmatvec(self.multipliers(W))

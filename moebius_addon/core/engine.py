@@ -14,9 +14,10 @@ Engines by name (the ``engine=`` option of ``relax``, ``make_run`` and every run
 * ``"exact"``: :class:`DenseEngine`, every pair of edges summed exactly, dense metric.
 * ``"tree"``: :class:`TreeEngine`, the energy and its gradient by Barnes–Hut
   (:mod:`.barnes_hut`, admissibility ``theta``); contacts exact (the hierarchy of
-  :mod:`.bvh` serves the contact search of every engine above its crossover); the saddle-point
-  solves O(N) for the banded metrics (``l2``, ``h1``, ``h2``: :mod:`.banded`), dense as in the
-  exact engine for ``hs`` and ``hs_pure`` (until a matrix-free ``hs`` lands).
+  :mod:`.bvh` serves the contact search of every engine above its crossover); no dense
+  matrix: direct O(N) saddle-point solves for the banded metrics (``l2``, ``h1``, ``h2``:
+  :mod:`.banded`), preconditioned Krylov solves for ``hs`` and ``hs_pure`` (:mod:`.hs_tree`,
+  :mod:`.hs_solve`).
 * ``"auto"``: the tree from ``AUTO_TREE_FROM`` vertices on, else exact.
 
 :func:`make_engine` is the one place that maps names to classes.
@@ -26,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import barnes_hut, hs_tree
+from . import barnes_hut, hs_solve, hs_tree
 from ._layout import Layout
 from .banded import BANDED_METRICS, BandedSaddle
 from .collision import contact_time_x
@@ -107,7 +108,7 @@ class DenseEngine:
         self.layout = layout
         self.metric = metric
         self.theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
-        self.krylov_rtol = hs_tree.RTOL if krylov_rtol is None else hs_tree.check_rtol(
+        self.krylov_rtol = hs_solve.RTOL if krylov_rtol is None else hs_solve.check_rtol(
             krylov_rtol)
         self.exact_backprojection = bool(exact_backprojection)
         self.solver = SaddlePointSolver(
@@ -208,9 +209,9 @@ class TreeEngine(DenseEngine):
     Nothing dense either in the metric (except the penalty methods' :meth:`penalty_solver`,
     dense as in the exact engine): the banded metrics (``l2``, ``h1``, ``h2``) are solved
     directly in O(N) (:class:`banded.BandedSaddle`, factored afresh at every iterate); ``hs``
-    and ``hs_pure`` are applied through a hierarchy of arcs and solved by preconditioned
-    conjugate gradients (:mod:`.hs_tree`; ``krylov_rtol`` their tolerance), the
-    back-projection's steps in the preconditioner's banded metric unless
+    and ``hs_pure`` are applied through a hierarchy of arcs (:mod:`.hs_tree`) and solved by
+    preconditioned conjugate gradients (:mod:`.hs_solve`; ``krylov_rtol`` their tolerance),
+    the back-projection's steps in the preconditioner's banded metric unless
     ``exact_backprojection``."""
 
     name = "tree"
@@ -234,10 +235,10 @@ class TreeEngine(DenseEngine):
             self._saddle = BandedSaddle(banded_parts(self.metric, X, self.layout), jac,
                                         old if isinstance(old, BandedSaddle) else None)
         else:
-            self._saddle = hs_tree.HsSaddle(
+            self._saddle = hs_solve.HsSaddle(
                 hs_tree.HsOperator(X, self.layout, self.metric), jac, rtol=self.krylov_rtol,
                 exact_backprojection=self.exact_backprojection, log=self._tree_krylov,
-                recycle=old if isinstance(old, hs_tree.HsSaddle) else None, X=X)
+                recycle=old if isinstance(old, hs_solve.HsSaddle) else None, X=X)
         self._banded_factorizations += 1
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

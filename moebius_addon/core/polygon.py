@@ -12,6 +12,7 @@ import numba as nb
 import numpy as np
 
 from ._layout import Layout, as_unit_layout, unit_exponent
+from ._tridiagonal import cyclic_tridiagonal_solve
 from .collision import closest_pairs
 
 # Closest pair of vertices at least CONTACT_GAP edges apart, divided by the mean edge length,
@@ -200,40 +201,6 @@ def _equal_chords(P, cum, n, closed):
     return best, best_miss
 
 
-@nb.njit(cache=True)
-def _cyclic_tridiagonal_solve(a, b, r):
-    """Solve ``M x = r`` for the symmetric cyclic tridiagonal M with diagonal ``a`` and
-    ``M[i, i+1] = M[i+1, i] = b[i]`` (indices mod n): Thomas' algorithm on the tridiagonal
-    part, the corners by Sherman–Morrison (Numerical Recipes' ``cyclic``). ``b[n−1] = 0``
-    leaves the plain tridiagonal system (``equalize``'s open chains)."""
-    n = a.shape[0]
-    c = b[n - 1]
-    g = -a[0]
-    d = a.copy()
-    d[0] -= g
-    d[n - 1] -= c * c / g
-    u = np.zeros(n)
-    u[0] = g
-    u[n - 1] = c
-    # forward elimination on both right-hand sides
-    y = r.copy()
-    z = u
-    w = np.empty(n)
-    piv = d[0]
-    y[0] /= piv
-    z[0] /= piv
-    for i in range(1, n):
-        w[i] = b[i - 1] / piv
-        piv = d[i] - b[i - 1] * w[i]
-        y[i] = (y[i] - b[i - 1] * y[i - 1]) / piv
-        z[i] = (z[i] - b[i - 1] * z[i - 1]) / piv
-    for i in range(n - 2, -1, -1):
-        y[i] -= w[i + 1] * y[i + 1]
-        z[i] -= w[i + 1] * z[i + 1]
-    f = (y[0] + c / g * y[n - 1]) / (1.0 + z[0] + c / g * z[n - 1])
-    return y - f * z
-
-
 def equalize(P: np.ndarray, tol: float = 1e-13, closed: bool = True) -> np.ndarray:
     """The equilateral polygon nearest to ``P`` found by Gauss–Newton on the log edge lengths:
     every step moves the vertices by the least (Euclidean) amount that corrects the linearized
@@ -275,7 +242,7 @@ def equalize(P: np.ndarray, tol: float = 1e-13, closed: bool = True) -> np.ndarr
             b = -np.einsum("ij,ij->i", F, np.roll(F, -1, axis=0))
             if not closed:
                 b[-1] = 0.0  # the last edge does not wrap around to the first
-            mu = _cyclic_tridiagonal_solve(free / l2, b, phi)
+            mu = cyclic_tridiagonal_solve(free / l2, b, phi)
             if closed:
                 X -= np.roll(mu[:, None] * F, 1, axis=0) - mu[:, None] * F
             else:

@@ -4,6 +4,7 @@ Import only after ``conftest.py`` has pointed ``BLENDER_USER_RESOURCES`` at a th
 directory (pytest loads the conftest first).
 """
 
+import sys
 from pathlib import Path
 
 import bpy
@@ -11,6 +12,29 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 EXT_MODULE = "bl_ext.user_default.moebius_addon"
+#: This Python's version, e.g. "3.11": the extension's wheels are built and shipped for it.
+PYTHON = f"{sys.version_info.major}.{sys.version_info.minor}"
+
+
+def build_extension():
+    """``mk/build_extension.py`` as a module (build, build_repo, blender_ext)."""
+    sys.path.insert(0, str(ROOT / "mk"))
+    try:
+        import build_extension as module
+    finally:
+        sys.path.pop(0)
+    return module
+
+
+def fcurves_of(idblock):
+    """The F-curves of ``idblock``'s action as Blender stores them: in the channelbag of the
+    assigned slot on Blender 4.4+ (slotted actions), in ``action.fcurves`` on 4.2-4.3."""
+    adt = idblock.animation_data
+    if bpy.app.version < (4, 4):
+        return adt.action.fcurves
+    from bpy_extras import anim_utils
+
+    return anim_utils.action_get_channelbag_for_slot(adt.action, adt.action_slot).fcurves
 
 
 def poly_curve(name: str, polygons, cyclic: bool = True, spline_type: str = "POLY"):

@@ -1,15 +1,18 @@
-"""Fixtures for tests with the real ``bpy`` module (Blender 5.0 as a Python module, headless).
+"""Fixtures for tests with the real ``bpy`` module (Blender as a Python module, headless: 5.0 in
+the main venv, 4.2, 4.5 and 5.2 in the venvs of mk/lines.mk).
 
 Blender reads ``BLENDER_USER_RESOURCES`` when ``bpy`` is first imported, so it is pointed at a
 throw-away directory here, at collection time, before anything imports ``bpy``. The session
-builds the extension zip for this platform with ``blender_ext.py`` (mk/build_extension.py) and
-installs it with ``bpy.ops.extensions.package_install_files`` as a user would; every test then
-drives the installed copy (``bl_ext.user_default.moebius_addon``) through ``bpy.ops``.
+takes the extension zip for this platform from a repository built with ``blender_ext.py``
+(mk/build_extension.py; ``make test`` builds one for every line) and installs it with
+``bpy.ops.extensions.package_install_files`` as a user would; every test then drives the
+installed copy (``bl_ext.user_default.moebius_addon``) through ``bpy.ops``.
 """
 
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import os
 import shutil
 import sys
@@ -26,7 +29,18 @@ os.environ["BLENDER_USER_RESOURCES"] = str(USER_DIR)
 
 bpy = pytest.importorskip("bpy")
 
-from bpy_helpers import EXT_MODULE, ROOT  # noqa: E402 - after BLENDER_USER_RESOURCES is set
+# The venv of a Blender line (mk/lines.mk) holds bpy and pytest only: numba comes with the
+# extension, as in a user's Blender. Modules that import the repository's core at collection
+# (it needs numba in the venv) or run its scripts are for the main venv.
+if importlib.util.find_spec("numba") is None:
+    collect_ignore = ["test_methods.py", "test_scripts.py"]
+
+from bpy_helpers import (  # noqa: E402 - after BLENDER_USER_RESOURCES is set
+    EXT_MODULE,
+    PYTHON,
+    ROOT,
+    build_extension,
+)
 
 
 def pytest_sessionfinish(session, exitstatus):
@@ -34,15 +48,25 @@ def pytest_sessionfinish(session, exitstatus):
 
 
 @pytest.fixture(scope="session")
-def extension_zip(tmp_path_factory) -> Path:
-    """The linux-x64 extension zip (Python 3.11 wheels only), built and validated."""
-    sys.path.insert(0, str(ROOT / "mk"))
-    try:
-        import build_extension
-    finally:
-        sys.path.pop(0)
-    out = tmp_path_factory.mktemp("dist")
-    (zip_path,) = build_extension.build(out, ["linux-x64"], ["3.11"])
+def repo_index(tmp_path_factory) -> Path:
+    """``index.json`` of a static repository with the linux-x64 zip.
+
+    ``$MOEBIUS_TEST_REPO`` when set (``make test``: built by the main venv as ``make repo``
+    builds what users get, with the wheels of every Python), else a repository built here with
+    this venv's ``blender_ext.py`` and the wheels of this Python only.
+    """
+    if os.environ.get("MOEBIUS_TEST_REPO"):
+        index = ROOT / os.environ["MOEBIUS_TEST_REPO"] / "index.json"
+        if not index.exists():
+            raise RuntimeError(f"{index} is missing; `make test` builds it")
+        return index
+    return build_extension().build_repo(tmp_path_factory.mktemp("repo"), ["linux-x64"], [PYTHON])
+
+
+@pytest.fixture(scope="session")
+def extension_zip(repo_index) -> Path:
+    """The linux-x64 extension zip of :func:`repo_index`, built and validated."""
+    (zip_path,) = repo_index.parent.glob("*-linux_x64.zip")
     return zip_path
 
 

@@ -20,6 +20,7 @@ def _circle(n, r=1.0):
     return np.column_stack([r * np.cos(t), r * np.sin(t), 0 * t])
 
 
+@pytest.mark.lines
 def test_nothing_selected(scene, mb):
     bpy.ops.curve.primitive_bezier_circle_add()
     bpy.context.active_object.select_set(False)
@@ -32,11 +33,13 @@ def test_nothing_selected(scene, mb):
     _refused(bpy.ops.moebius.show_gradient, "Select a curve object")
 
 
+@pytest.mark.lines
 def test_cube_is_not_a_curve(scene, mb):
     bpy.ops.mesh.primitive_cube_add()
     _refused(bpy.ops.moebius.convert, "6 faces.*closed edge loops")
 
 
+@pytest.mark.lines
 def test_branching_mesh(scene, mb):
     mesh = bpy.data.meshes.new("Star")
     mesh.from_pydata([(0, 0, 0), (1, 0, 0), (0, 1, 0), (-1, 0, 0)], [(0, 1), (0, 2), (0, 3)], [])
@@ -47,6 +50,7 @@ def test_branching_mesh(scene, mb):
     _refused(bpy.ops.moebius.convert, "vertex 0 has 3 edges")
 
 
+@pytest.mark.lines
 def test_open_spline_refused_with_the_fix(scene, mb):
     poly_curve("Arc", [_circle(20)[:15]], cyclic=False)
     _refused(bpy.ops.moebius.convert, r"open curve; close it \(.*Alt\+C.*'Close open splines'")
@@ -57,6 +61,7 @@ def test_fewer_than_four_points(scene, mb):
     _refused(bpy.ops.moebius.convert, "only 3 distinct points.*at least 4")
 
 
+@pytest.mark.lines
 def test_nan_points(scene, mb):
     P = _circle(40)
     P[7, 1] = np.nan
@@ -99,6 +104,7 @@ def test_convert_to_too_few_edges(scene, mb, core):
     _refused(bpy.ops.moebius.convert, r"too coarse .* use at least \d+ edges per component")
 
 
+@pytest.mark.lines
 def test_self_touching_curve(scene, mb):
     # a figure-eight drawn in a plane: the curve passes through the origin twice
     t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
@@ -118,6 +124,7 @@ def test_absurd_edge_count(scene, mb):
                                       r"\(100000, on the tree engine")
 
 
+@pytest.mark.lines
 def test_relax_refuses_unconverted_and_touching_curves(scene, mb):
     bpy.ops.curve.primitive_bezier_circle_add()
     _refused(bpy.ops.moebius.relax, "Bezier spline; convert it")
@@ -128,6 +135,7 @@ def test_relax_refuses_unconverted_and_touching_curves(scene, mb):
     _refused(bpy.ops.moebius.relax, "3 vertices.*at least 4")
 
 
+@pytest.mark.lines
 def test_one_bad_object_converts_none(scene, mb):
     poly_curve("Good", [_circle(30)])
     good = bpy.context.active_object
@@ -136,6 +144,7 @@ def test_one_bad_object_converts_none(scene, mb):
     _refused(bpy.ops.moebius.convert, "'Open' is an open curve")
 
 
+@pytest.mark.lines
 def test_clear_animation_without_keys(scene, mb):
     bpy.ops.moebius.add_knot(kind="3_1", edges=60)
     before = scene_state()

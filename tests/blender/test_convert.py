@@ -21,6 +21,7 @@ def _converted(obj):
     return [np.array([p.co[:3] for p in s.points]) for s in obj.data.splines]
 
 
+@pytest.mark.lines
 @pytest.mark.parametrize("add", ["bezier", "nurbs"])
 def test_convert_smooth_curve(scene, mb, add):
     if add == "bezier":
@@ -75,6 +76,7 @@ def test_convert_sharp_cornered_poly_curve_gives_equal_edges(scene, mb):
     _assert_equilateral(P)
 
 
+@pytest.mark.lines
 def test_convert_mesh_edge_loop_and_edge_length(scene, mb):
     bpy.ops.mesh.primitive_circle_add(vertices=32, radius=1.0, fill_type="NOTHING")
     scene.moebius.use_edge_length = True
@@ -84,6 +86,7 @@ def test_convert_mesh_edge_loop_and_edge_length(scene, mb):
     assert 38 <= len(P) <= 40  # the 32-gon is a little shorter than the circle
 
 
+@pytest.mark.lines
 def test_convert_two_splines_gives_a_link(scene, mb):
     t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
     a = np.column_stack([np.cos(t), np.sin(t), 0 * t])
@@ -95,6 +98,7 @@ def test_convert_two_splines_gives_a_link(scene, mb):
     assert [len(P) for P in link] == [30, 30]
 
 
+@pytest.mark.lines
 def test_convert_obj_polyline_import(scene, mb, core, tmp_path):
     from importlib import import_module
 
@@ -149,6 +153,7 @@ def test_add_knot_catalogue_entries(scene, mb, core):
         assert obj["moebius_energy"] >= 4.0 - 1e-9
 
 
+@pytest.mark.lines
 def test_add_knot_menu_entry(mb):
     draw_funcs = bpy.types.VIEW3D_MT_curve_add.draw._draw_funcs
     assert any(f.__module__.endswith("moebius_addon.blender.operators") for f in draw_funcs)

@@ -20,6 +20,7 @@ def relaxed(scene, mb):
     return obj
 
 
+@pytest.mark.lines
 @pytest.mark.parametrize("suffix", [".abc", ".usda"])
 def test_export_round_trip(relaxed, mb, tmp_path, suffix):
     keyed = mb.keyed_frames(relaxed)
@@ -99,6 +100,7 @@ def test_gradient_fields_follow_the_relaxed_curve(scene, mb, core):
         bpy.ops.moebius.clear_animation()
 
 
+@pytest.mark.lines
 def test_cli_command(scene, mb, tmp_path, capfd):
     from importlib import import_module
 
@@ -134,6 +136,7 @@ def test_cli_command(scene, mb, tmp_path, capfd):
     assert len(bpy.data.objects) == objects and not other.exists()
 
 
+@pytest.mark.lines
 def test_panels_registered(mb):
     for name in ("VIEW3D_PT_moebius", "VIEW3D_PT_moebius_polygon", "VIEW3D_PT_moebius_flow",
                  "VIEW3D_PT_moebius_keyframes", "VIEW3D_PT_moebius_advanced"):

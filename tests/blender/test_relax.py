@@ -3,14 +3,7 @@
 import bpy
 import numpy as np
 import pytest
-from bpy_helpers import poly_curve, scene_state, spline_points
-
-
-def _fcurves(idblock):
-    from bpy_extras import anim_utils
-
-    adt = idblock.animation_data
-    return anim_utils.action_get_channelbag_for_slot(adt.action, adt.action_slot).fcurves
+from bpy_helpers import fcurves_of, poly_curve, scene_state, spline_points
 
 
 @pytest.fixture
@@ -19,6 +12,7 @@ def trefoil(scene, mb):
     return bpy.context.active_object
 
 
+@pytest.mark.lines
 def test_relax_keyframes_every_iterate(scene, mb, trefoil):
     start = spline_points(trefoil)
     s = scene.moebius
@@ -30,14 +24,16 @@ def test_relax_keyframes_every_iterate(scene, mb, trefoil):
     assert 1 <= nit <= 6 and s.last_keyframes == nit + 1
     assert (scene.frame_start, scene.frame_end) == (10, 10 + nit)
     assert scene.frame_current == 10 + nit
-    # slotted action (Blender 5.0): one channelbag, 3 F-curves per point, LINEAR keys
-    fcurves = _fcurves(trefoil.data)
+    # one channelbag of a slotted action (4.4+; action.fcurves before), 3 F-curves per point,
+    # LINEAR keys
+    fcurves = fcurves_of(trefoil.data)
     assert len(fcurves) == 3 * 60
     fc = fcurves.find("splines[0].points[7].co", index=2)
     co = np.empty(2 * len(fc.keyframe_points))
     fc.keyframe_points.foreach_get("co", co)
     np.testing.assert_array_equal(co[0::2], np.arange(10, 11 + nit))
     assert {k.interpolation for k in fc.keyframe_points} == {"LINEAR"}
+    assert {f.group.name for f in fcurves} == {"Möbius flow"}
     assert co[1] == pytest.approx(start[7, 2], abs=1e-6)
     # frame_start shows the start; the current (last) frame the final iterate
     scene.frame_set(10)
@@ -46,7 +42,7 @@ def test_relax_keyframes_every_iterate(scene, mb, trefoil):
     final = spline_points(trefoil)
     assert np.abs(final - start).max() > 1e-3
     # energy keyed on the object, strictly decreasing, matching the core's energy
-    efc = _fcurves(trefoil).find('["moebius_energy"]')
+    efc = fcurves_of(trefoil).find('["moebius_energy"]')
     energies = np.array([k.co[1] for k in efc.keyframe_points])
     assert len(energies) == nit + 1 and np.all(np.diff(energies) < 0)
     assert trefoil["moebius_energy"] == pytest.approx(energies[-1], rel=1e-6)
@@ -119,6 +115,7 @@ def test_callback_stops_the_run(scene, mb, trefoil):
     assert len(mb.keyed_frames(trefoil)) == 3
 
 
+@pytest.mark.lines
 def test_apply_frame_then_relax_again(scene, mb, trefoil):
     scene.moebius.max_iterations = 4
     bpy.ops.moebius.relax()
@@ -134,12 +131,13 @@ def test_apply_frame_then_relax_again(scene, mb, trefoil):
     np.testing.assert_allclose(spline_points(trefoil), mid, atol=1e-6)
 
 
+@pytest.mark.lines
 def test_other_animation_is_left_alone(scene, mb, trefoil):
     trefoil.keyframe_insert("location", frame=1)
     scene.moebius.max_iterations = 2
     bpy.ops.moebius.relax()
     bpy.ops.moebius.clear_animation()
-    fcurves = _fcurves(trefoil)
+    fcurves = fcurves_of(trefoil)
     assert sorted(fc.data_path for fc in fcurves) == ["location"] * 3
 
 
@@ -153,8 +151,25 @@ def test_link_relaxes_both_components(scene, mb):
     link = bpy.context.active_object
     scene.moebius.max_iterations = 3
     assert bpy.ops.moebius.relax() == {"FINISHED"}
-    assert len(_fcurves(link.data)) == 3 * 80
+    assert len(fcurves_of(link.data)) == 3 * 80
     assert scene.moebius.last_energy_end < scene.moebius.last_energy_start
+    # Automatic runs the explicit method on links and unknots (the knots' tests: the implicit)
+    assert scene.moebius.last_method == "projected_gradient"
+
+
+@pytest.mark.lines
+def test_new_user_relaxes_the_fhw_unknot_into_keyframes(scene, mb):
+    # issue 17's new user: Add Knot ▸ Freedman–He–Wang (its default edges), Relax
+    assert bpy.ops.moebius.add_knot(kind="fhw") == {"FINISHED"}
+    fhw = bpy.context.active_object
+    n = len(spline_points(fhw))
+    s = scene.moebius
+    s.max_iterations = 5
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    assert (s.last_method, s.last_iterations, s.last_keyframes) == ("projected_gradient", 5, 6)
+    assert s.last_energy_end < s.last_energy_start
+    assert len(fcurves_of(fhw.data)) == 3 * n
+    assert mb.keyed_frames(fhw) == [float(f) for f in range(1, 7)]
 
 
 def test_failed_setup_keeps_the_previous_flow(scene, mb, trefoil):
@@ -167,6 +182,7 @@ def test_failed_setup_keeps_the_previous_flow(scene, mb, trefoil):
     assert scene_state() == before and mb.keyed_frames(trefoil) == frames
 
 
+@pytest.mark.lines
 def test_failure_while_keyframing_restores_the_curve(scene, mb, trefoil, monkeypatch):
     """The end of a run (writing the keyframes) can fail too, e.g. when the object was
     deleted during a modal run: the operator restores the curve and reports, like any
@@ -254,13 +270,14 @@ def _flow_keys(obj):
     """Every flow F-curve's keys (frame, value) by channel."""
     out = {}
     for idblock in (obj.data, obj):
-        for fc in _fcurves(idblock):
+        for fc in fcurves_of(idblock):
             co = np.empty(2 * len(fc.keyframe_points))
             fc.keyframe_points.foreach_get("co", co)
             out[fc.data_path, fc.array_index] = co.reshape(-1, 2)
     return out
 
 
+@pytest.mark.lines
 def test_continue_appends_after_the_last_keyed_frame(scene, mb, core, trefoil):
     # Relax replaced the previous run and restarted at frame 1 from the current shape; Continue
     # starts from the last keyed iterate and keys the new iterates after it
@@ -298,7 +315,7 @@ def test_continue_without_keys_is_a_new_run_and_edited_keys_are_refused(scene, m
     scene.moebius.max_iterations = 2
     assert bpy.ops.moebius.relax(append=True) == {"FINISHED"}
     assert mb.keyed_frames(trefoil) == [1, 2, 3]
-    _fcurves(trefoil.data)[0].keyframe_points.insert(10, 0.5)  # a key edited by hand
+    fcurves_of(trefoil.data)[0].keyframe_points.insert(10, 0.5)  # a key edited by hand
     before = scene_state()
     with pytest.raises(RuntimeError, match="were edited"):
         bpy.ops.moebius.relax(append=True)

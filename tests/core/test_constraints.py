@@ -191,3 +191,22 @@ def test_refactoring_reuses_the_old_arrays_without_changing_the_solution(dtype, 
     u_ref, lam_ref = Factorization(A, jac, dtype).solve(g, np.zeros(con.size))
     np.testing.assert_array_equal(u, u_ref)
     np.testing.assert_array_equal(lam, lam_ref)
+
+
+@pytest.mark.parametrize("link", [False, True])
+def test_tangent_projector_is_the_euclidean_projection(link, rng):
+    # I − Cᵀ(CCᵀ)⁻¹C against a dense solve
+    from moebius_addon.core.constraints import TangentProjector
+    from tests.conftest import ngon, trefoil
+
+    P = [trefoil(40), ngon(17) * 3 + 10, trefoil(23) + 20] if link else trefoil(60)
+    X, lay = as_layout(P)
+    ln = np.linalg.norm(X[lay.nxt] - X, axis=1)  # not equilateral: lengths vary
+    jac = jacobian(X, make_constraints(X, lay, ln))
+    n = lay.n
+    C = np.column_stack([jac.matvec(e.reshape(n, 3)) for e in np.eye(3 * n)])
+    W = rng.standard_normal((n, 3))
+    ref = W.ravel() - C.T @ np.linalg.solve(C @ C.T, C @ W.ravel())
+    w = TangentProjector(jac)(W)
+    assert np.allclose(w.ravel(), ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    assert np.abs(jac.matvec(w)).max() < 1e-10

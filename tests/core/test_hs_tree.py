@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import hs_tree
+from moebius_addon.core import hs_solve, hs_tree
 from moebius_addon.core._layout import as_layout
 from moebius_addon.core.constraints import jacobian, make_constraints, residual
 from moebius_addon.core.metrics import gram_x
@@ -200,10 +200,10 @@ def test_krylov_solves_against_a_dense_solve(name, rng):
     A = slow_matrix(X, lay, op)
     g = rng.standard_normal((lay.n, 3))
     r = 1e-3 * rng.standard_normal(con.size)
-    solver = hs_tree.HsSaddle(op, jac)
+    solver = hs_solve.HsSaddle(op, jac)
     _check_solves(solver, A, jac, g, r, con)
     # the same with the preconditioner's coarse level (a quarter of the vertices)
-    coarse = hs_tree.HsSaddle(op, jac, X=X, coarse=lay.n // 4)
+    coarse = hs_solve.HsSaddle(op, jac, X=X, coarse=lay.n // 4)
     assert coarse.coarse is not None
     _check_solves(coarse, A, jac, g, r, con)
     # back-projection steps: onto C d = φ, in the preconditioner's metric or in Ã's
@@ -231,7 +231,7 @@ def test_coarse_level_interpolates_along_the_curve(rng):
     ln = np.linalg.norm(X[lay.nxt] - X, axis=1)
     jac = jacobian(X, make_constraints(X, lay, ln))
     op = hs_tree.HsOperator(X, lay, "hs")
-    level = hs_tree.HsSaddle(op, jac, X=X, coarse=60).coarse
+    level = hs_solve.HsSaddle(op, jac, X=X, coarse=60).coarse
     Uc = rng.standard_normal((level.n, 3))
     R = rng.standard_normal((lay.n, 3))
     # restriction is the transpose of the interpolation
@@ -293,7 +293,7 @@ def test_bad_krylov_tolerance_refused_by_name():
 
 def test_flow_with_the_coarse_level(monkeypatch):
     # the coarse level starts at 10 000 vertices; the same path on a smaller curve
-    monkeypatch.setattr(hs_tree, "COARSE_FROM", 1000)
+    monkeypatch.setattr(hs_solve, "COARSE_FROM", 1000)
     P = core.resample(core.knots.named("5_2"), 2000)
     r = core.relax(P, max_iter=6, engine="tree")
     assert r.nit == 6 and np.all(np.diff(r.history["energy"]) < 0)
@@ -306,3 +306,26 @@ def test_hs_pure_flow_on_the_tree():
     r = core.relax(P, metric="hs_pure", max_iter=4, engine="tree")
     assert r.nit == 4 and r.fun < r.history["energy"][0] and r.metric == "hs_pure"
     assert max(r.history["constraint_residual"]) <= 1e-10
+
+
+def test_an_indefinite_coarse_level_is_dropped_not_followed(monkeypatch, rng):
+    # a coarse level whose correction points against the residual (what a single-precision
+    # coarse factorization did on a nearly relaxed 7_2): the solve goes on without it; a
+    # preconditioner that gives NaN is an error, never a zero direction (which read as
+    # "converged")
+    X, lay = _unit(CURVES["trefoil"]())
+    ln = np.linalg.norm(X[lay.nxt] - X, axis=1)
+    con = make_constraints(X, lay, ln)
+    jac = jacobian(X, con)
+    op = hs_tree.HsOperator(X, lay, "hs")
+    g = rng.standard_normal((lay.n, 3))
+    good, _ = hs_solve.HsSaddle(op, jac).solve(g, np.zeros(con.size))
+    solver = hs_solve.HsSaddle(op, jac, X=X, coarse=60)
+    monkeypatch.setattr(hs_solve.CoarseLevel, "__call__", lambda self, R: -1e6 * R)
+    u, _ = solver.solve(g, np.zeros(con.size))
+    assert solver.coarse is None
+    assert np.linalg.norm(u - good) < 1e-2 * np.linalg.norm(good)
+    broken = hs_solve.HsSaddle(op, jac)
+    monkeypatch.setattr(broken.K, "_solve", lambda R, r: (np.full_like(R, np.nan), 0 * r))
+    with pytest.raises(np.linalg.LinAlgError, match="not positive definite"):
+        broken.solve(g, np.zeros(con.size))

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from moebius_addon.core import check_polygon, contact_ratio, resample, suggest_edge_count
-from moebius_addon.core.polygon import _cyclic_tridiagonal_solve, equalize
+from moebius_addon.core._tridiagonal import cyclic_tridiagonal_solve
+from moebius_addon.core.polygon import equalize
 from tests.conftest import ngon, trefoil
 
 
@@ -195,7 +196,7 @@ def test_cyclic_tridiagonal_solve(n, cyclic, rng):
         M[i, (i + 1) % n] += b[i]
         M[(i + 1) % n, i] += b[i]
     r = rng.standard_normal(n)
-    np.testing.assert_allclose(M @ _cyclic_tridiagonal_solve(a, b, r), r, atol=1e-12)
+    np.testing.assert_allclose(M @ cyclic_tridiagonal_solve(a, b, r), r, atol=1e-12)
 
 
 @pytest.mark.parametrize("s", [1e-300, 1e300])

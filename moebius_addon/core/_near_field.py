@@ -1,0 +1,149 @@
+"""The near field of the tree engine: every pair of edges in near pairs of leaves, summed exactly
+with the kernel of ``energy.py`` (private; :mod:`barnes_hut` splits the pairs).
+
+The sum is ordered: each edge of a leaf sums over the edges of the leaf's near partners (itself
+included), so every pair is computed once per side and no edge's sums depend on another's (the
+same bits for any thread count; no buffers shared between threads). A leaf's edges are the SIMD
+lanes; the partner edges go by one at a time.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+# Pieces of the near field's parallel loop over leaves (each edge's sums are its own: any split
+# gives the same bits); a piece reuses one work array.
+_NEAR_CHUNKS = 256
+
+
+# The near field's lanes: up to this many edges of a leaf against one partner edge at a time.
+# One work array per parallel piece: lane j's edge at W[_LANES k + j] (k: midpoint, edge
+# vector, length, then its tree position, its neighbours' and its component, as floats: exact
+# below 2^53) and its sums at W[_NW_SUMS + _LANES k + j]. One array, constant offsets plus j:
+# the loop over lanes vectorizes (an index array beside it kept it scalar). No fast-math: a
+# lane's sums are sequential, nothing to reassociate (an earlier near field with "reassoc" and
+# "contract" gave the compiling process and numba's cache different last bits).
+_LANES = 8
+_NW_ID = 7 * _LANES
+_NW_SUMS = 11 * _LANES
+_NW_SIZE = 19 * _LANES
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _near_lanes(W, rx, ry, rz, bx0, by0, bz0, lj, r, cr, grad):
+    """Partner edge ``r`` (midpoint, edge vector, length, tree position and component, the
+    last two as floats) against every lane's edge, added to the lane's sums: ``f`` and, with
+    ``grad``, ``l_J/|d|²`` and the partial ``∂f/∂e_I`` (without its length term) and
+    ``∂f/∂m_I``. The edge itself and its neighbours count zero, an edge of another component
+    its length part only: by selects, no branch."""
+    for j in range(_LANES):
+        px = W[j]
+        py = W[_LANES + j]
+        pz = W[2 * _LANES + j]
+        ax = W[3 * _LANES + j]
+        ay = W[4 * _LANES + j]
+        az = W[5 * _LANES + j]
+        li = W[6 * _LANES + j]
+        dx = px - rx
+        dy = py - ry
+        dz = pz - rz
+        inv = 1.0 / (dx * dx + dy * dy + dz * dz)
+        skip = r == W[_NW_ID + j] or r == W[_NW_ID + _LANES + j] or r == W[_NW_ID + 2 * _LANES + j]
+        inv = 0.0 if skip else inv
+        same = cr == W[_NW_ID + 3 * _LANES + j]
+        bx = bx0 if same else 0.0
+        by = by0 if same else 0.0
+        bz = bz0 if same else 0.0
+        ab = ax * bx + ay * by + az * bz
+        da = dx * ax + dy * ay + dz * az
+        db = dx * bx + dy * by + dz * bz
+        sv = (li * lj + ab) * inv
+        qq = da * db * inv * inv
+        W[_NW_SUMS + j] += sv - 2.0 * qq
+        if grad:
+            tb = 2.0 * db * inv
+            ta = 2.0 * da * inv
+            W[_NW_SUMS + _LANES + j] += lj * inv
+            W[_NW_SUMS + 2 * _LANES + j] += (bx - tb * dx) * inv
+            W[_NW_SUMS + 3 * _LANES + j] += (by - tb * dy) * inv
+            W[_NW_SUMS + 4 * _LANES + j] += (bz - tb * dz) * inv
+            cd = 8.0 * qq - 2.0 * sv
+            W[_NW_SUMS + 5 * _LANES + j] += (cd * dx - tb * ax - ta * bx) * inv
+            W[_NW_SUMS + 6 * _LANES + j] += (cd * dy - tb * ay - ta * by) * inv
+            W[_NW_SUMS + 7 * _LANES + j] += (cd * dz - tb * az - ta * bz) * inv
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _near(E, M, ln, cp, lo, hi, leaves, noff, npart, nbr, grad):
+    """The near field as an ordered sum: every edge of a leaf against every edge of the leaf's
+    near partners (itself included), except itself and its neighbours along the curve, with
+    the kernel of ``energy.py``. Per edge (tree order): ``rows[0]`` its share ``Σ_J f(I, J)``
+    of the energy and, with ``grad``, rows 1–3 and 4–6 the derivatives of the ordered sum
+    (``2 Σ_J ∂f(I, J)``, ``f`` symmetric) in its edge vector and midpoint. A leaf's edges
+    are the lanes (:func:`_near_lanes`), the partners' edges go by one at a time; every pair is
+    summed twice (once per side), and nothing is shared between edges: the same bits for any
+    thread count and any split of the leaves."""
+    n = ln.shape[0]
+    nl = leaves.shape[0]
+    rows = np.empty((7 if grad else 1, n))
+    nchunks = min(nl, _NEAR_CHUNKS)
+    for cc in nb.prange(nchunks):
+        ch = np.int64(cc)
+        W = np.zeros(_NW_SIZE)
+        for t in range(ch * nl // nchunks, (ch + 1) * nl // nchunks):
+            a = leaves[t]
+            for q0 in range(lo[a], hi[a], _LANES):
+                count = min(_LANES, hi[a] - q0)
+                for j in range(_LANES):
+                    q = q0 + min(j, count - 1)  # lanes past the leaf's end repeat its last edge
+                    W[j] = M[q, 0]
+                    W[_LANES + j] = M[q, 1]
+                    W[2 * _LANES + j] = M[q, 2]
+                    W[3 * _LANES + j] = E[q, 0]
+                    W[4 * _LANES + j] = E[q, 1]
+                    W[5 * _LANES + j] = E[q, 2]
+                    W[6 * _LANES + j] = ln[q]
+                    W[_NW_ID + j] = q
+                    W[_NW_ID + _LANES + j] = nbr[q, 0]
+                    W[_NW_ID + 2 * _LANES + j] = nbr[q, 1]
+                    W[_NW_ID + 3 * _LANES + j] = cp[q]
+                W[_NW_SUMS:] = 0.0
+                for p in range(noff[a], noff[a + 1]):
+                    b = npart[p]
+                    for r in range(lo[b], hi[b]):
+                        if grad:
+                            _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
+                                        ln[r], float(r), float(cp[r]), True)
+                        else:
+                            _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
+                                        ln[r], float(r), float(cp[r]), False)
+                for j in range(count):
+                    q = q0 + j
+                    rows[0, q] = W[_NW_SUMS + j]
+                    if grad:
+                        # the length term of ∂f/∂e_I: (l_J/l_I) e_I/|d|²
+                        w = W[_NW_SUMS + _LANES + j] / ln[q]
+                        for k in range(3):
+                            ga = W[_NW_SUMS + (2 + k) * _LANES + j]
+                            rows[1 + k, q] = 2.0 * (ga + w * E[q, k])
+                            rows[4 + k, q] = 2.0 * W[_NW_SUMS + (5 + k) * _LANES + j]
+    return rows
+
+
+@nb.njit(cache=True, parallel=True)
+def _to_vertices(part, prv, at):
+    """The gradient ``(N, 3)`` from the derivatives in the edge vectors (rows 1–3 of ``part``)
+    and midpoints (rows 4–6) in tree order: ``e_I = P[nxt I] − P[I]`` and
+    ``m_I = (P[I] + P[nxt I]) / 2``, so vertex ``v`` takes ``½ ∂m − ∂e`` of the edge it starts
+    and ``∂e + ½ ∂m`` of the edge ``prv[v]`` it ends. Per vertex, in parallel."""
+    n = at.shape[0]
+    G = np.empty((n, 3))
+    for vv in nb.prange(n):
+        v = np.int64(vv)
+        q = at[v]
+        p = at[prv[v]]
+        for k in range(3):
+            G[v, k] = (0.5 * part[4 + k, q] - part[1 + k, q]) + (part[1 + k, p]
+                                                                 + 0.5 * part[4 + k, p])
+    return G

@@ -1,0 +1,243 @@
+"""Saddle-point solves with the hs metric of the tree (:mod:`.hs_tree`) by a preconditioned
+Krylov method.
+
+The systems ``[[Ã ⊗ I₃, Cᵀ], [C, 0]] [u; λ] = [g; r]`` (docs/design.md, steps 2 and 4) are
+solved by projected conjugate gradients (Gould, Hribar & Nocedal 2001, with their residual
+update) preconditioned by
+
+* the constraint preconditioner ``[[H ⊗ I₃, Cᵀ], [C, 0]]``, solved exactly in O(N) by
+  :mod:`.banded`: ``H = s·h1 + 2 Mᵀ diag(Ṽ1_folded) M``, the h1 metric scaled to ``Ã``'s trace
+  plus, on the diagonal, the lower-order weights of folded pairs (strands that come close
+  again along the curve, and other components), which carry the strong coupling of strands
+  close in space (without them the iterates' errors moved such strands against each other and
+  the collision bound stalled the flow);
+* from ``COARSE_FROM`` vertices on, plus a coarse level (:class:`CoarseLevel`, two-level
+  additive Schwarz): what the banded ``H`` misses most on smooth curves are the lowest modes.
+
+Every iterate stays on ``C u = r`` to rounding, whatever the tolerance. Measured iterations
+(docs/benchmarks.md, "hs on the tree"): 6–15 per gradient at the start of FHW and 7_2 from
+1 000 to 100 000 edges, 10–12 along their flows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._layout import Layout, layout_from_sizes
+from .banded import BandedSaddle
+from .constraints import Jacobian, TangentProjector, jacobian, make_constraints
+from .hs_tree import HsOperator
+from .linalg import Factorization
+from .metrics import gram_x
+
+#: Relative tolerance of the gradient's Krylov solve (preconditioned residual norm).
+RTOL = 1e-2
+#: The coarse level of the preconditioner: about ``COARSE_PER_ROOT · √N`` vertices, at most
+#: ``COARSE_MAX`` (solved densely), none below ``COARSE_FROM`` vertices (median iteration,
+#: alternated, busy machine: 7_2 at 10 000 edges 217-222 ms without, 233-248 ms with it; FHW
+#: at 20 000 0.46 / 0.47 s; 7_2 at 100 000 5.0 / 3.0 s).
+COARSE_PER_ROOT = 8.0
+COARSE_MAX = 2500
+COARSE_FROM = 20000
+
+
+def check_rtol(rtol) -> float:
+    """``rtol`` as a float in [1e-10, 1), else ValueError naming ``krylov_rtol``."""
+    try:
+        t = float(rtol)
+    except (TypeError, ValueError):
+        raise ValueError(f"krylov_rtol must be a number in [1e-10, 1), got {rtol!r}") from None
+    if not 1e-10 <= t < 1.0:
+        raise ValueError(f"krylov_rtol must be a number in [1e-10, 1), got {rtol!r}")
+    return t
+
+
+def coarse_size(n: int) -> int:
+    """Vertices of the preconditioner's coarse level for ``n`` fine ones (0: none)."""
+    if n < COARSE_FROM:
+        return 0
+    return int(min(COARSE_MAX, COARSE_PER_ROOT * np.sqrt(n)))
+
+
+class CoarseLevel:
+    """The coarse level of the preconditioner: the polygon of every ``m``-th vertex of each
+    component, its own metric (dense) and constraints, and linear interpolation along the
+    curve between the two (``P``). Applied to a residual ``r`` it returns ``Π P S_c Pᵀ Π r``:
+    the coarse constrained solve ``S_c`` of the restricted residual, interpolated, on the
+    tangent space of the fine constraints (``Π``: their Euclidean orthogonal projection,
+    :class:`constraints.TangentProjector`, O(N) with a tiny constant; symmetric, so the sum
+    stays a symmetric preconditioner that annihilates ``range Cᵀ`` and maps into ``ker C``).
+    Added to the constraint preconditioner (a two-level additive Schwarz preconditioner) it
+    carries what the banded ``H`` misses most on smooth curves, the lowest modes, whose hs
+    energy grows one power of the frequency faster than h1's. (Projecting with the banded
+    ``H`` instead, one more band solve per application, measured one iteration fewer: 7_2 at
+    20 000 edges, iterate 15, 11 / 11 / 25 against 12 / 12 / 29.)
+
+    Parameters
+    ----------
+    X : (N, 3) array
+    layout : Layout
+    metric : {"hs", "hs_pure"}
+    jac : Jacobian
+        The fine constraint Jacobian.
+    size : int
+        Coarse vertices wanted in all; components keep at least 8 (or all they have).
+    """
+
+    def __init__(self, X: np.ndarray, layout: Layout, metric: str, jac: Jacobian, size: int):
+        self.project = TangentProjector(jac)
+        m = max(1, int(round(layout.n / max(size, 1))))
+        idx, sizes, a, b, f = [], [], [], [], []
+        offset = 0
+        for c in range(layout.k):
+            s0, s1 = int(layout.starts[c]), int(layout.starts[c + 1])
+            step = m if (s1 - s0) // m >= 8 else 1
+            local = np.arange(s1 - s0)
+            ci = s0 + local[::step]
+            k = len(ci)
+            j = local // step  # the coarse vertex before each fine one, and the next
+            a.append(offset + j)
+            b.append(offset + (j + 1) % k)
+            f.append((local - j * step) / step)
+            idx.append(ci)
+            sizes.append(k)
+            offset += k
+        self.a, self.b = np.concatenate(a), np.concatenate(b)
+        self.f = np.concatenate(f)[:, None]
+        self.n = offset
+        idx = np.concatenate(idx)
+        clay = layout_from_sizes(sizes, layout.is_link)
+        Xc = X[idx]
+        lc = np.linalg.norm(Xc[clay.nxt] - Xc, axis=1)
+        self.jc = jacobian(Xc, make_constraints(Xc, clay, lc))
+        # double precision: a single-precision factorization of a nearly relaxed 7_2's coarse
+        # polygon (1 131 vertices) made the preconditioner indefinite (rᵀz < 0)
+        self.fac = Factorization(gram_x(metric, Xc, clay), self.jc, np.float64)
+
+    def prolong(self, Uc: np.ndarray) -> np.ndarray:
+        """``P Uc``: (coarse vertices, 3) to (N, 3), linear along the curve."""
+        return (1.0 - self.f) * Uc[self.a] + self.f * Uc[self.b]
+
+    def restrict(self, R: np.ndarray) -> np.ndarray:
+        """``Pᵀ R``: (N, 3) to (coarse vertices, 3)."""
+        out = np.empty((self.n, 3))
+        for d in range(3):
+            out[:, d] = (np.bincount(self.a, (1.0 - self.f[:, 0]) * R[:, d], self.n)
+                         + np.bincount(self.b, self.f[:, 0] * R[:, d], self.n))
+        return out
+
+    def __call__(self, R: np.ndarray) -> np.ndarray:
+        uc, _ = self.fac.solve(self.restrict(self.project(R)), np.zeros(self.jc.con.size))
+        return self.project(self.prolong(uc))
+
+
+class HsSaddle:
+    """Saddle-point solves with ``Ã`` (:class:`HsOperator`) at one iterate, by projected
+    preconditioned conjugate gradients (see the module's text).
+
+    Parameters
+    ----------
+    op : HsOperator
+    jac : Jacobian
+        Constraint Jacobian at the same polygon (edge-length and barycenter rows).
+    rtol : float
+        Relative tolerance of :meth:`solve`: the preconditioned residual norm
+        ``sqrt(rᵀ K r)`` against that of the start.
+    max_iter : int
+        Iterations at most per solve.
+    exact_backprojection : bool
+        :meth:`pseudo_inverse` in ``Ã`` by the same Krylov method (tolerance ``rtol``)
+        instead of in the preconditioner's metric ``H``.
+    log : list, optional
+        Where every solve appends its iteration count.
+    recycle : HsSaddle, optional
+        The previous iterate's solver, whose band memory this one takes over.
+    X : (N, 3) array, optional
+        The polygon (needed for the coarse level).
+    coarse : int, optional
+        Vertices of the coarse level (default :func:`coarse_size`; 0: none).
+    """
+
+    def __init__(self, op: HsOperator, jac: Jacobian, rtol: float = RTOL, max_iter: int = 200,
+                 exact_backprojection: bool = False, log: list | None = None,
+                 recycle: HsSaddle | None = None, X: np.ndarray | None = None,
+                 coarse: int | None = None):
+        self.op = op
+        self.jac = jac
+        self.rtol = rtol
+        self.max_iter = max_iter
+        self.exact_backprojection = exact_backprojection
+        self.K = BandedSaddle(op.preconditioner_parts(), jac,
+                              None if recycle is None else recycle.K)
+        self.iterations: list[int] = [] if log is None else log
+        size = coarse_size(op.layout.n) if coarse is None else int(coarse)
+        self.coarse = None
+        if size and X is not None and size < op.layout.n:
+            self.coarse = CoarseLevel(X, op.layout, op.metric, jac, size)
+
+    def _precondition(self, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(z, μ)``: the constraint preconditioner's ``H z + Cᵀμ = R``, ``C z = 0``, plus the
+        coarse level's correction."""
+        z, mu = self.K._solve(R, np.zeros(self.jac.con.size))
+        if self.coarse is not None:
+            z += self.coarse(R)
+        return z, mu
+
+    def solve(self, g: np.ndarray, r: np.ndarray, rtol: float | None = None
+              ) -> tuple[np.ndarray, np.ndarray]:
+        """``(u, λ)`` of ``[[Ã ⊗ I₃, Cᵀ], [C, 0]] [u; λ] = [g; r]``: ``C u = r`` to rounding,
+        the first rows to the relative tolerance (λ from the last preconditioner solve)."""
+        rtol = self.rtol if rtol is None else rtol
+        n = g.shape[0]
+        x = self.K._solve(np.zeros((n, 3)), r)[0] if np.any(r) else np.zeros((n, 3))
+        res = self.op.product(x) - g
+        z, mu = self._precondition(res)
+        # the residual keeps only what the constraints cannot absorb, its Cᵀμ part moved into
+        # the multipliers λ (Gould, Hribar & Nocedal's residual update; the same iterates in
+        # exact arithmetic, res = Ã x − g + Cᵀλ throughout): without it, a residual dominated
+        # by Cᵀλ swamped the projected part's rounding and the iterates left C u = r (2% of |u|
+        # after 125 iterations at rtol 1e-10 on a trefoil)
+        lam = -mu
+        res -= self.jac.rmatvec(mu)
+        rz = float(np.einsum("ij,ij->", res, z))
+        if not rz > 0.0 and self.coarse is not None and np.any(res):
+            # the coarse level made the preconditioner indefinite here: go on without it
+            self.coarse = None
+            z, _ = self._precondition(res)
+            rz = float(np.einsum("ij,ij->", res, z))
+        if not rz >= 0.0:  # NaN, or an indefinite constraint preconditioner
+            raise np.linalg.LinAlgError("the hs preconditioner is not positive definite here")
+        stop = rtol * rtol * rz
+        p = -z
+        its = 0
+        while rz > stop and its < self.max_iter:
+            Ap = self.op.product(p)
+            pAp = float(np.einsum("ij,ij->", p, Ap))
+            if not pAp > 0.0:
+                break
+            a = rz / pAp
+            x += a * p
+            res += a * Ap
+            z, mu = self._precondition(res)
+            lam -= mu
+            res -= self.jac.rmatvec(mu)
+            rz_new = float(np.einsum("ij,ij->", res, z))
+            if not rz_new > 0.0:  # converged to rounding, or the preconditioner broke down
+                break
+            p *= rz_new / rz
+            p -= z
+            rz = rz_new
+            its += 1
+        self.iterations.append(its)
+        return x, lam
+
+    def metric_product(self, V: np.ndarray) -> np.ndarray:
+        """``Ã V`` for a field (N, 3)."""
+        return self.op.product(V)
+
+    def pseudo_inverse(self, phi: np.ndarray) -> np.ndarray:
+        """``Ã⁻¹Cᵀ(CÃ⁻¹Cᵀ)⁻¹ φ`` (with ``exact_backprojection``), else the same in ``H``: a
+        step of the back-projection onto ``C d = φ`` either way."""
+        if self.exact_backprojection:
+            return self.solve(np.zeros((self.op.layout.n, 3)), phi)[0]
+        return self.K._solve(np.zeros((self.op.layout.n, 3)), phi)[0]
