@@ -9,9 +9,10 @@ JSON to out/; not a test.
     python bench/hs_tree_bench.py --ratio 5000 20000 100000   # one iteration in E+g units
 
 ``--flow`` runs ``core.relax(P, engine="tree")`` (the default metric ``hs``) and prints every
-iteration's seconds, the median, the energy, the constraint residual, the Krylov iterations and
-the process's peak resident memory; with ``--eg`` it also times one energy+gradient evaluation
-of the same engine at the start (best of 3) and prints the median iteration in those units.
+iteration's seconds, the median, the energy, the constraint residual, the Krylov iterations,
+the process's peak resident memory and the knot type before and after (``core.identify``);
+with ``--eg`` it also times one energy+gradient evaluation of the same engine at the start
+(best of 3) and prints the median iteration in those units.
 """
 
 from __future__ import annotations
@@ -156,6 +157,10 @@ def flow(n: int, name: str, iterations: int, target: float | None, eg: bool) -> 
            "max_constraint_residual": float(max(res.history["constraint_residual"])),
            "krylov_mean": float(np.mean(its)), "message": res.message,
            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+    # the knot type before and after (core.identify, after the peak memory was read)
+    start, end = core.identify(P), core.identify(res.x)
+    row.update(type_start=list(start.names), type_end=list(end.names),
+               type_kept=start.fingerprint == end.fingerprint)
     for k, (_t, e, c) in enumerate(marks, 1):
         if k <= 3 or k % 10 == 0 or k == len(marks):
             print(f"  iterate {k:4d}: {steps[k - 1]:7.3f} s, E {e:.6f}, constraints {c:.1e}",

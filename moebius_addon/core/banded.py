@@ -267,6 +267,13 @@ class BandedSaddle:
             Sinv[9:12, 9:12] += np.eye(3)
             self.cap[c] = np.linalg.inv(Sinv)
 
+    def release(self) -> None:
+        """Let go of everything but the band's memory, which the next iterate's solver takes
+        over (``recycle``): built while this one was still whole, the hs solver of a 7_2 at
+        100 000 edges held two iterates' operators, coarse levels and band fields at once,
+        about 240 MB more at the peak. The solver is unusable afterwards."""
+        self.__dict__ = {"ab": self.ab}
+
     def _band_inverse(self, G, lam=None):
         """Band solve for right-hand sides given as fields ``G`` (m, N, 3) and edge values
         ``lam`` (m, N): the core solution's fields and edge multipliers."""

@@ -231,6 +231,8 @@ class TreeEngine(DenseEngine):
             super().update(X, jac)
             return
         old, self._saddle = self._saddle, None  # its memory is reused: no longer usable
+        if old is not None:
+            old.release()  # all but the band, before the new one is built
         if self.metric in BANDED_METRICS:
             self._saddle = BandedSaddle(banded_parts(self.metric, X, self.layout), jac,
                                         old if isinstance(old, BandedSaddle) else None)

@@ -175,6 +175,13 @@ class HsSaddle:
         if size and X is not None and size < op.layout.n:
             self.coarse = CoarseLevel(X, op.layout, op.metric, jac, size)
 
+    def release(self) -> None:
+        """Let go of the operator, the coarse level and all of the constraint preconditioner
+        but its band's memory (:meth:`BandedSaddle.release`) before the next iterate's solver
+        is built. The solver is unusable afterwards."""
+        self.K.release()
+        self.__dict__ = {"K": self.K}
+
     def _precondition(self, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(z, μ)``: the constraint preconditioner's ``H z + Cᵀμ = R``, ``C z = 0``, plus the
         coarse level's correction."""
