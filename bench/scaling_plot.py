@@ -1,6 +1,6 @@
 """Seconds per iteration against the edge count, exact and tree engines, on a log-log plot.
 
-    python bench/scaling_plot.py                         # about 10 min on the 2-core machine
+    python bench/scaling_plot.py                         # about 2 min on the 2-core machine
     python bench/scaling_plot.py --sizes 500 1000 --iterations 3 --out out/scaling
 
 For each configuration and size: 7_2 resampled to N edges, ``core.relax`` for a few
