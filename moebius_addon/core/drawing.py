@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import jones
-from .pd import PlanarDiagram, edge_slots, faces, remove_crossings, simplify
+from .pd import DisjointSets, PlanarDiagram, edge_slots, faces, remove_crossings, simplify
 
 __all__ = ["diagram_curves"]
 
@@ -57,20 +57,13 @@ def reduce(d: PlanarDiagram) -> PlanarDiagram:
 
 def _pieces(d: PlanarDiagram) -> list[list[int]]:
     """Crossings of each connected piece of the diagram."""
-    parent = list(range(d.crossings))
-
-    def find(a):
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
+    sets = DisjointSets()
     for slots in edge_slots(d.X).values():
         (m1, _), (m2, _) = slots
-        parent[find(m1)] = find(m2)
+        sets.union(m2, m1)
     groups: dict[int, list[int]] = {}
     for m in range(d.crossings):
-        groups.setdefault(find(m), []).append(m)
+        groups.setdefault(sets.find(m), []).append(m)
     return list(groups.values())
 
 

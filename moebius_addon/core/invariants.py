@@ -29,7 +29,7 @@ import numpy as np
 
 from . import jones
 from ._layout import as_layout
-from .pd import PlanarDiagram, from_passages, simplify
+from .pd import DisjointSets, PlanarDiagram, from_passages, simplify
 
 # Two primes below 2^31: products of residues stay below 2^62 in int64.
 _PRIMES = (2147483647, 2147483629)
@@ -224,19 +224,10 @@ def _alexander_matrix(d: PlanarDiagram):
     if d.loops:
         return None, None
     # arcs: the edges joined through the crossings they pass over (j and l)
-    parent: dict[int, int] = {}
-
-    def find(a):
-        parent.setdefault(a, a)
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
+    sets = DisjointSets()
+    find = sets.find
     for m in range(c):
-        ra, rb = find(int(d.X[m, 1])), find(int(d.X[m, 3]))
-        if ra != rb:
-            parent[rb] = ra
+        sets.union(int(d.X[m, 1]), int(d.X[m, 3]))
     roots = sorted({find(int(e)) for e in np.unique(d.X)})
     if len(roots) != c:  # a component never passes under: it lies above the rest
         return None, None

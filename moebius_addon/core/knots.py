@@ -161,13 +161,7 @@ def braid_closure(word: Sequence[int], n: int | None = None, strands: int | None
     swap radii along a smooth step while the over strand rises and the under strand sinks, so
     that at every crossing they pass 1.2 spacings apart vertically.
     """
-    word = [int(g) for g in word]
-    if any(g == 0 for g in word):
-        raise ValueError(f"braid word {word}: generators are nonzero integers ±i (σ_i^±1)")
-    need = max((abs(g) for g in word), default=0) + 1
-    strands = need if strands is None else int(strands)
-    if strands < need:
-        raise ValueError(f"braid word {word} needs at least {need} strands, got {strands}")
+    word, strands = pd.braid_word(word, strands)
     curves = _braid_curves(word, strands)
     if n is None:
         n = _braid_default_n(curves)

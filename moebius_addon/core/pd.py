@@ -98,15 +98,37 @@ class PlanarDiagram:
         return PlanarDiagram(X, -self.sign, self.loops)
 
 
+class DisjointSets:
+    """Union–find over hashable items (path halving); each item is its own set until joined."""
+
+    def __init__(self):
+        self.parent: dict = {}
+
+    def find(self, a):
+        parent = self.parent
+        parent.setdefault(a, a)
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    def union(self, a, b) -> bool:
+        """Join the sets of ``a`` and ``b``, ``a``'s root staying the root; False when they
+        were one set already."""
+        ra, rb = self.find(a), self.find(b)
+        if ra == rb:
+            return False
+        self.parent[rb] = ra
+        return True
+
+
 # --------------------------------------------------------------------------------------------
 # Construction
 
 
-def from_braid(word, strands: int | None = None) -> PlanarDiagram:
-    """The closure of a braid (``σ_i`` as ``i``, ``σ_i⁻¹`` as ``-i``, 1-based; ``σ_i`` positive).
-
-    Strands run upwards; at ``σ_i`` the strand from position ``i`` to ``i + 1`` passes over
-    (the layout of ``knots.braid_closure``). Strands the word never touches are ``loops``."""
+def braid_word(word, strands: int | None = None) -> tuple[list[int], int]:
+    """``(word, strands)`` checked: nonzero integer generators, and at least ``max|i| + 1``
+    strands (the default)."""
     word = [int(g) for g in word]
     if any(g == 0 for g in word):
         raise ValueError(f"braid word {word}: generators are nonzero integers ±i (σ_i^±1)")
@@ -114,6 +136,15 @@ def from_braid(word, strands: int | None = None) -> PlanarDiagram:
     strands = need if strands is None else int(strands)
     if strands < need:
         raise ValueError(f"braid word {word} needs at least {need} strands, got {strands}")
+    return word, strands
+
+
+def from_braid(word, strands: int | None = None) -> PlanarDiagram:
+    """The closure of a braid (``σ_i`` as ``i``, ``σ_i⁻¹`` as ``-i``, 1-based; ``σ_i`` positive).
+
+    Strands run upwards; at ``σ_i`` the strand from position ``i`` to ``i + 1`` passes over
+    (the layout of ``knots.braid_closure``). Strands the word never touches are ``loops``."""
+    word, strands = braid_word(word, strands)
     label = list(range(strands))  # the edge now at each position
     fresh = strands
     rows, signs = [], []
@@ -337,17 +368,10 @@ def _check_planar(d: PlanarDiagram) -> None:
         return
     where = edge_slots(d.X)
     # connected pieces of the diagram (crossings joined by edges)
-    parent = list(range(d.crossings))
-
-    def find(a):
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
+    sets = DisjointSets()
     for (m1, _), (m2, _) in where.values():
-        parent[find(m1)] = find(m2)
-    pieces = len({find(m) for m in range(d.crossings)})
+        sets.union(m2, m1)
+    pieces = len({sets.find(m) for m in range(d.crossings)})
     f = len(faces(d))
     # Euler: V - E + F = 1 + pieces on the sphere, V = c, E = 2c
     if d.crossings - 2 * d.crossings + f != 1 + pieces:
@@ -397,28 +421,17 @@ def remove_crossings(d: PlanarDiagram, gone: list[int]) -> PlanarDiagram:
     """The diagram without the crossings ``gone``, the strands joined straight through each
     (under i–k, over j–l); a strand that closes up without any crossing left becomes a loop.
     The same link when the crossings form a kink, a removable bigon or a nugatory crossing."""
-    parent: dict[int, int] = {}
-
-    def find(a):
-        parent.setdefault(a, a)
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
+    sets = DisjointSets()
     loops = d.loops
     for m in gone:
         i, j, k, l = (int(v) for v in d.X[m])  # noqa: E741 - X[i, j, k, l]
         for a, b in ((i, k), (j, l)):
-            ra, rb = find(a), find(b)
-            if ra == rb:
+            if not sets.union(a, b):
                 loops += 1
-            else:
-                parent[rb] = ra
     keep = np.setdiff1d(np.arange(d.crossings), gone)
     X = d.X[keep].copy()
     if len(X):
-        X = np.vectorize(find, otypes=[np.int64])(X)
+        X = np.vectorize(lambda e: sets.find(int(e)), otypes=[np.int64])(X)
     return PlanarDiagram(X.reshape(-1, 4), d.sign[keep].copy(), loops)
 
 
