@@ -212,9 +212,9 @@ class BandedSaddle:
     def __init__(self, parts, jac: Jacobian, recycle: BandedSaddle | None = None):
         rows, cols, vals, beta = parts
         con = jac.con
-        if not (con.edge_lengths and con.barycenter):
+        if not (con.edge_lengths and con.barycenter) or con.pinned is not None:
             raise ValueError("the banded saddle-point solver needs the edge-length and "
-                             "barycenter constraints")
+                             "barycenter constraints and no pinned vertices")
         lay = con.layout
         self.layout, self.jac = lay, jac
         self.rows, self.cols, self.vals, self.beta = rows, cols, vals, beta

@@ -212,7 +212,8 @@ class TreeEngine(DenseEngine):
     and ``hs_pure`` are applied through a hierarchy of arcs (:mod:`.hs_tree`) and solved by
     preconditioned conjugate gradients (:mod:`.hs_solve`; ``krylov_rtol`` their tolerance),
     the back-projection's steps in the preconditioner's banded metric unless
-    ``exact_backprojection``."""
+    ``exact_backprojection``. With pinned vertices, or without one kind of constraint, the
+    saddle-point systems are solved as in the exact engine (dense; sizes are bounded)."""
 
     name = "tree"
     _frame = None  # the last frame and the polygon it was built at
@@ -227,7 +228,10 @@ class TreeEngine(DenseEngine):
         return metric not in BANDED_METRICS + hs_tree.METRICS
 
     def update(self, X: np.ndarray, jac: Jacobian) -> None:
-        if self.dense_metric or not (jac.con.edge_lengths and jac.con.barycenter):
+        con = jac.con
+        if self.dense_metric or not (con.edge_lengths and con.barycenter) or (
+                con.pinned is not None):
+            # the tree's solvers need both kinds of rows and no pins: solve densely
             super().update(X, jac)
             return
         old, self._saddle = self._saddle, None  # its memory is reused: no longer usable
