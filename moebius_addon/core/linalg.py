@@ -211,10 +211,23 @@ class CholeskySolve:
 
 
 @nb.njit(cache=True, parallel=True)
-def _edge_schur(Ainv, nxt, edges, inv_l, T, S):
-    """``S[a, b] = (D A⁻¹ Dᵀ)_IJ <t_I, t_J>`` for the edge rows ``a``, ``b`` of the edges
-    ``I = edges[a]``, ``J = edges[b]``, with ``(Du)_I = (u[nxt I] − u[I]) / l_I``: one pass
-    over ``A⁻¹``, no N × N temporaries."""
+def _edge_schur(Ainv, nxt, inv_l, T, S):
+    """``S[I, J] = (D A⁻¹ Dᵀ)_IJ <t_I, t_J>`` for the edge rows, with
+    ``(Du)_I = (u[nxt I] − u[I]) / l_I``: one pass over ``A⁻¹``, no N × N temporaries."""
+    n = nxt.shape[0]
+    for i in nb.prange(n):
+        i1 = nxt[i]
+        for j in range(n):
+            j1 = nxt[j]
+            y = (Ainv[i1, j1] - Ainv[i1, j] - Ainv[i, j1] + Ainv[i, j]) * inv_l[i] * inv_l[j]
+            S[i, j] = y * (T[i, 0] * T[j, 0] + T[i, 1] * T[j, 1] + T[i, 2] * T[j, 2])
+
+
+@nb.njit(cache=True, parallel=True)
+def _edge_schur_rows(Ainv, nxt, edges, inv_l, T, S):
+    """:func:`_edge_schur` for the rows of the edges ``edges`` only (with pins: an edge
+    between two pins has no row). Separate, because the index gather makes the loop about
+    three times slower (4.1 against 1.4 ms at 1648 edges, single precision)."""
     m = edges.shape[0]
     for a in nb.prange(m):
         i = edges[a]
@@ -270,8 +283,11 @@ class Factorization:
         ne = m - nb
         if ne:
             T, inv_l = jac.edge_fields()
-            _edge_schur(self.Ainv, lay.nxt, jac.con.edge_index, inv_l.astype(self.dtype),
-                        T.astype(self.dtype), S)
+            inv_l, T = inv_l.astype(self.dtype), T.astype(self.dtype)
+            if ne == lay.n:
+                _edge_schur(self.Ainv, lay.nxt, inv_l, T, S)
+            else:
+                _edge_schur_rows(self.Ainv, lay.nxt, jac.con.edge_index, inv_l, T, S)
         if nb:
             F = jac.barycenter_fields()  # (nb, N, 3)
             cols = np.stack([jac.matvec(self.ginv(F[r])) for r in range(nb)], axis=1)
