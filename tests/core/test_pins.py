@@ -24,8 +24,11 @@ from moebius_addon.core.constraints import (
     residual,
     weighted_barycenters,
 )
+from moebius_addon.core.hs_solve import HsSaddle
+from moebius_addon.core.hs_tree import HsOperator
 from moebius_addon.core.linalg import Factorization
 from moebius_addon.core.metrics import banded_parts, gram_x
+from moebius_addon.core.pinned_solve import TREE_MAX_PINS, BorderedPins, unpinned_jacobian
 from moebius_addon.core.solvers import FEASIBLE, INFEASIBLE, METHOD_CLASSES, make_run
 from moebius_addon.core.solvers import base as solvers_base
 from tests.core import _unchanged_runs as unchanged
@@ -90,6 +93,8 @@ def test_pinned_vertices_do_not_move(trefoil60, method, engine, metric):
     if len(xs) == run.nit:
         xs.append(run.x)
     assert run.nit == 6, run.message
+    if engine == "tree":  # its own O(N) solvers, bordered by the pins: nothing dense
+        assert run.engine.solver.n_factor == 0
     h = run.history
     assert np.all(np.diff(h["energy"]) <= 0)
     assert h["energy"][-1] < h["energy"][0] - 1.0
@@ -293,8 +298,58 @@ def test_penalty_methods_accept_no_pins(trefoil60, method):
         assert r.nit == 1
 
 
-def test_tree_with_pins_is_bounded_as_dense():
+def test_tree_with_many_pins_is_bounded_as_dense():
     check_size(16000, "hs", "projected_gradient", "tree")  # no dense matrix without pins
-    with pytest.raises(ValueError, match="or pin nothing: with pinned vertices the tree "
-                                         "engine solves with a dense matrix"):
-        check_size(16000, "hs", "projected_gradient", "tree", pinned=True)
+    check_size(16000, "hs", "projected_gradient", "tree", pinned=TREE_MAX_PINS)
+    with pytest.raises(ValueError, match=f"or pin at most {TREE_MAX_PINS} vertices: with "
+                                         f"more the tree engine solves with a dense matrix"):
+        check_size(16000, "hs", "projected_gradient", "tree", pinned=TREE_MAX_PINS + 1)
+
+
+def test_tree_with_many_pins_solves_densely(trefoil60):
+    free = list(range(3, 60, 6))[:60 - TREE_MAX_PINS - 1]  # single free vertices between pins
+    pins = [v for v in range(60) if v not in free]
+    assert len(pins) == TREE_MAX_PINS + 1
+    run = make_run("projected_gradient", trefoil60, "hs", 3, 0.0, engine="tree", pinned=pins)
+    while run.step():
+        pass
+    assert run.nit == 3, run.message
+    assert np.array_equal(run.x[pins], trefoil60[pins])
+    assert run.engine.solver.n_factor > 0  # the dense solver ran
+    assert run.history["energy"][-1] < run.history["energy"][0]
+
+
+# -- the tree engine's bordered solvers against the dense elimination -----------------------
+
+@pytest.mark.parametrize("metric", ["l2", "h1", "h2"])
+def test_bordered_banded_solve_is_the_dense_elimination(trefoil60, metric):
+    X, lay = as_layout(trefoil60)
+    pins = np.array(PINS)
+    jac = jacobian(X, make_constraints(X, lay, lengths(X, lay), pinned=pins))
+    dense = Factorization(gram_x(metric, X, lay), jac)
+    bordered = BorderedPins(BandedSaddle(banded_parts(metric, X, lay), unpinned_jacobian(jac)),
+                            jac)
+    rng = np.random.default_rng(3)
+    g = rng.standard_normal((lay.n, 3))
+    r = 1e-3 * rng.standard_normal(jac.con.size)
+    for (u1, l1), (u2, l2) in [(dense.solve(g, r), bordered.solve(g, r)),
+                               ((dense.pseudo_inverse(r), 0), (bordered.pseudo_inverse(r), 0))]:
+        np.testing.assert_allclose(u2, u1, atol=1e-10 * np.abs(u1).max())
+        np.testing.assert_allclose(l2, l1, atol=1e-10 * np.abs(l1).max())
+        assert np.all(u2[pins] == 0.0)
+
+
+def test_hs_krylov_solve_with_pins_is_the_dense_elimination(trefoil60):
+    X, lay = as_layout(trefoil60)
+    pins = np.array(PINS)
+    jac = jacobian(X, make_constraints(X, lay, lengths(X, lay), pinned=pins))
+    op = HsOperator(X, lay, "hs")
+    A = np.stack([op.product(np.outer(np.eye(lay.n)[i], [1.0, 0, 0]))[:, 0]
+                  for i in range(lay.n)], axis=1)  # the tree's metric Ã as a matrix
+    dense = Factorization(0.5 * (A + A.T), jac)
+    hs = HsSaddle(op, jac, rtol=1e-12, X=X)
+    g = np.random.default_rng(4).standard_normal((lay.n, 3))
+    u1, _ = dense.solve(g, np.zeros(jac.con.size))
+    u2, _ = hs.solve(g, np.zeros(jac.con.size))
+    np.testing.assert_allclose(u2, u1, atol=1e-8 * np.abs(u1).max())
+    assert np.all(u2[pins] == 0.0)

@@ -34,6 +34,7 @@ import numpy as np
 from .._layout import as_unit_layout
 from ..engine import make_engine
 from ..metrics import METRICS
+from ..pinned_solve import TREE_MAX_PINS
 from ..pins import check_pins
 from ..polygon import check_polygon
 
@@ -156,7 +157,8 @@ _DENSE_WHY = {
               "hold the metric as a dense matrix on every engine",
     "constraints": "or keep both constraints (edge_lengths and barycenter): without them the "
                    "tree engine solves with a dense matrix",
-    "pins": "or pin nothing: with pinned vertices the tree engine solves with a dense matrix",
+    "pins": f"or pin at most {TREE_MAX_PINS} vertices: with more the tree engine solves "
+            f"with a dense matrix",
 }
 
 

@@ -23,6 +23,7 @@ import time
 import numpy as np
 
 from ..constraints import Constraints, jacobian, make_constraints, residual
+from ..pinned_solve import tree_borders
 from .base import HISTORY_KEYS, Run, _check_names, check_dense_size, check_number
 
 # The modified Newton back-projection gives up on a trial step once |Φ| shrinks by less than
@@ -105,8 +106,9 @@ class Relaxation(Run):
         Vertices that keep their position exactly (for a link: one list per component). Their
         coordinates are eliminated from the saddle-point system and the back-projection (zero
         velocity); an edge between two pins has no length row and a component with a pin no
-        barycenter rows. The tree engine then solves densely (sizes bounded as for the exact
-        engine). See :func:`..pins.check_pins` for what is refused.
+        barycenter rows. The tree engine borders its O(N) solvers with the pin rows for up
+        to ``pinned_solve.TREE_MAX_PINS`` pins, and solves densely beyond (sizes bounded as
+        for the exact engine). See :func:`..pins.check_pins` for what is refused.
     pin_tangents : bool
         Also pin both neighbours of every pinned vertex (fixed tangents at the pins).
     """
@@ -156,8 +158,8 @@ class Relaxation(Run):
         self.backproject_iter = backproject_iter
         self.backproject_tol = backproject_tol
         self.interpolate = bool(interpolate)
-        if not self.engine.dense_metric:  # the tree's solvers need both rows and no pins
-            if self.pinned is not None:
+        if not self.engine.dense_metric:  # the tree's solvers need both rows and few pins
+            if self.pinned is not None and not tree_borders(self.pinned.size):
                 check_dense_size(self.layout.n, "pins")
             elif not (edge_lengths and barycenter):
                 check_dense_size(self.layout.n, "constraints")
