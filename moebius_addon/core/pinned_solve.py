@@ -10,7 +10,7 @@ the dropped rows' multipliers, the solution with pins is
     w = w₀ + K₀⁻¹ Qᵀ y,    (Q K₀⁻¹ Qᵀ) y = −Q w₀,    w₀ = K₀⁻¹ b₀
 
 (``y`` holds the pin rows' multipliers and the values the dropped rows take). It needs one
-solve of ``K₀`` per bordering column at every iterate, so it serves a few pins
+solve of ``K₀`` per bordering column at every iterate (batched), so it serves a few pins
 (``TREE_MAX_PINS``); the pinned coordinates of the result are then set to exactly zero (they
 are zero up to the solve's rounding). This is the same ``u`` as eliminating the pinned
 coordinates (:class:`.linalg.Factorization`), in the solver's own metric.
@@ -40,11 +40,17 @@ def unpinned_jacobian(jac: Jacobian) -> Jacobian:
     return Jacobian(full, jac.T, jac.ln, jac.M, jac.b)
 
 
+# Bordering columns solved per batch (memory: this many (N, 3) fields at a time).
+_BATCH = 32
+
+
 class BorderedPins:
     """Solver of the saddle-point system with pins from ``base``, a solver of the system
-    without pins (``base._solve(g, r)`` exact up to rounding, ``base.metric_product``), at
-    the same polygon; ``jac`` is the Jacobian with pins. Solves take and return the pinned
-    system's rows (the order of ``constraints.residual``)."""
+    without pins at the same polygon (:class:`.banded.BandedSaddle`: ``_solve``,
+    ``solve_many``, ``metric_product``); ``jac`` is the Jacobian with pins. Solves take and
+    return the pinned system's rows (the order of ``constraints.residual``). Memory O(N):
+    only the capacitance matrix ``Q K₀⁻¹ Qᵀ`` is kept, and every solve is two solves of
+    ``K₀`` (the second with the bordered right-hand side)."""
 
     def __init__(self, base, jac: Jacobian):
         con = jac.con
@@ -59,31 +65,39 @@ class BorderedPins:
         keep[self.kept] = True
         self.dropped = np.flatnonzero(~keep)
         p = self.pinned.size
-        nb = 3 * p + self.dropped.size
-        self.Zu = np.empty((nb, n, 3))
-        self.Zl = np.empty((nb, self.m0))
-        zero_g, zero_r = np.zeros((n, 3)), np.zeros(self.m0)
-        for a, v in enumerate(self.pinned):
-            for d in range(3):
-                e = zero_g.copy()
-                e[v, d] = 1.0
-                self.Zu[3 * a + d], self.Zl[3 * a + d] = base._solve(e, zero_r)
-        for b, t in enumerate(self.dropped):
-            e = zero_r.copy()
-            e[t] = 1.0
-            self.Zu[3 * p + b], self.Zl[3 * p + b] = base._solve(zero_g, e)
-        self.cap = np.concatenate([self.Zu[:, self.pinned].reshape(nb, -1),
-                                   self.Zl[:, self.dropped]], axis=1).T  # Q K₀⁻¹ Qᵀ
+        self.n_border = nb = 3 * p + self.dropped.size
+        cols = []
+        for s0 in range(0, nb, _BATCH):
+            G, R = self._border(np.eye(nb)[s0:s0 + _BATCH])
+            cols.append(self._select(*base.solve_many(G, R)))
+        # Q K₀⁻¹ Qᵀ, inverted once: a LAPACK solve per call cost 3 ms at 30 rows (FHW at
+        # 1 000 edges, 10 pins; threads contending after the parallel kernels), the product
+        # microseconds
+        self.cap_inv = np.linalg.inv(np.concatenate(cols).T)
+
+    def _border(self, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``Qᵀ y`` for the rows ``y`` of ``Y`` (m, n_border): fields and rows without pins."""
+        m = Y.shape[0]
+        p = self.pinned.size
+        G = np.zeros((m, self.jac.con.layout.n, 3))
+        G[:, self.pinned] = Y[:, :3 * p].reshape(m, p, 3)
+        R = np.zeros((m, self.m0))
+        R[:, self.dropped] = Y[:, 3 * p:]
+        return G, R
+
+    def _select(self, U: np.ndarray, L: np.ndarray) -> np.ndarray:
+        """``Q w`` for solutions given as fields ``U`` (m, N, 3) and multipliers ``L``."""
+        m = U.shape[0]
+        return np.concatenate([U[:, self.pinned].reshape(m, -1), L[:, self.dropped]], axis=1)
 
     def _solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(u, λ)`` of the system with pins, ``u`` exactly zero at the pins."""
         r0 = np.zeros(self.m0)
         r0[self.kept] = r
         u, lam = self.base._solve(g, r0)
-        y = np.linalg.solve(self.cap, -np.concatenate([u[self.pinned].ravel(),
-                                                        lam[self.dropped]]))
-        u = u + np.tensordot(y, self.Zu, axes=1)
-        lam = lam + y @ self.Zl
+        y = self.cap_inv @ -self._select(u[None], lam[None])[0]
+        G, R = self._border(y[None])
+        u, lam = self.base._solve(g + G[0], r0 + R[0])
         u[self.pinned] = 0.0
         return u, lam[self.kept]
 

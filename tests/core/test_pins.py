@@ -339,6 +339,20 @@ def test_bordered_banded_solve_is_the_dense_elimination(trefoil60, metric):
         assert np.all(u2[pins] == 0.0)
 
 
+def test_banded_solve_many_is_solve_for_each(trefoil60):
+    X, lay = as_layout(trefoil60)
+    jac = jacobian(X, make_constraints(X, lay, lengths(X, lay)))
+    band = BandedSaddle(banded_parts("h2", X, lay), jac)
+    rng = np.random.default_rng(5)
+    G = rng.standard_normal((3, lay.n, 3))
+    R = rng.standard_normal((3, jac.con.size))
+    U, L = band.solve_many(G, R)
+    for q in range(3):
+        u, lam = band._solve(G[q], R[q])
+        np.testing.assert_allclose(U[q], u, rtol=1e-12, atol=1e-12 * np.abs(u).max())
+        np.testing.assert_allclose(L[q], lam, rtol=1e-12, atol=1e-12 * np.abs(lam).max())
+
+
 def test_hs_krylov_solve_with_pins_is_the_dense_elimination(trefoil60):
     X, lay = as_layout(trefoil60)
     pins = np.array(PINS)
