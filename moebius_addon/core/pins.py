@@ -23,8 +23,10 @@ import numpy as np
 from ._layout import Layout
 
 #: A free stretch whose end-to-end distance reaches this fraction of its length is straight:
-#: its edge-length rows are dependent and the saddle-point system singular.
-_TAUT = 1.0 - 1e-9
+#: its edge-length rows are dependent and the saddle-point system singular. 1e-6 is the spread
+#: of edge lengths an "equilateral" start may have (solvers.base): a stretch closer to straight
+#: than that may be too short for its target lengths.
+_TAUT = 1.0 - 1e-6
 
 
 def count_pins(pinned) -> int:

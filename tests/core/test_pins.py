@@ -144,6 +144,17 @@ def test_link_with_pins_on_one_component():
     assert max(h["constraint_residual"]) <= 1e-10
 
 
+@pytest.mark.parametrize("engine", ["exact", "tree"])
+def test_a_whole_component_pinned_is_a_fixed_obstacle(engine):
+    P = unchanged.curves()["hopf"]
+    r = relax(P, max_iter=4, tol=0.0, engine=engine, pinned=[list(range(24)), []])
+    assert r.nit == 4, r.message
+    assert np.array_equal(r.x[0], P[0])
+    assert np.abs(r.x[1] - P[1]).max() > 1e-2
+    assert r.fun < r.history["energy"][0] - 0.1
+    assert max(r.history["constraint_residual"]) <= 1e-10
+
+
 def test_fixed_tangents_at_pins(trefoil60):
     P = trefoil60
     r = relax(P, max_iter=5, tol=0.0, engine="exact", pinned=[0, 30], pin_tangents=True)
