@@ -57,19 +57,33 @@ def lengths(X, layout):
 
 # -- without pins: the same bits as before pins existed ---------------------------------------
 
+def same_run(got: dict, ref: dict) -> None:
+    """The histories of ``got`` and ``ref`` to 1e-9 (constraint residuals, rounding-level
+    numbers, to 1e-12 absolute). Written on main before pins and compared bit for bit there
+    (same machine); across CPUs numba's vectorized sums may differ in the last bits."""
+    assert got["nit"] == ref["nit"]
+    for key in ("energy", "step", "grad_norm", "constraint_residual"):
+        a = np.array([float.fromhex(v) for v in got[key]])
+        b = np.array([float.fromhex(v) for v in ref[key]])
+        if key == "constraint_residual":
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-12, err_msg=key)
+        else:
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=0, err_msg=key)
+
+
 @pytest.mark.parametrize("case", unchanged.CASES, ids=unchanged.case_id)
 def test_without_pins_every_iterate_is_unchanged(case, reference_curves, reference):
-    got = unchanged.run_case(case, reference_curves[case[0]])
-    assert got == reference[unchanged.case_id(case)]
+    same_run(unchanged.run_case(case, reference_curves[case[0]]),
+             reference[unchanged.case_id(case)])
 
 
 @pytest.mark.parametrize("case", [unchanged.CASES[0], unchanged.CASES[-3]],
                          ids=unchanged.case_id)
-def test_empty_pins_are_no_pins(case, reference_curves, reference):
+def test_empty_pins_are_no_pins(case, reference_curves):
+    # in one process: bit for bit, the final polygon's hash included
     P = reference_curves[case[0]]
     empty = [[] for _ in P] if isinstance(P, list) else []
-    got = unchanged.run_case(case, P, pinned=empty)
-    assert got == reference[unchanged.case_id(case)]
+    assert unchanged.run_case(case, P, pinned=empty) == unchanged.run_case(case, P)
 
 
 # -- pins hold, the flow still relaxes --------------------------------------------------------
