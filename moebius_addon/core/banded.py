@@ -212,9 +212,9 @@ class BandedSaddle:
     def __init__(self, parts, jac: Jacobian, recycle: BandedSaddle | None = None):
         rows, cols, vals, beta = parts
         con = jac.con
-        if not (con.edge_lengths and con.barycenter):
+        if not (con.edge_lengths and con.barycenter) or con.pinned is not None:
             raise ValueError("the banded saddle-point solver needs the edge-length and "
-                             "barycenter constraints")
+                             "barycenter constraints and no pinned vertices")
         lay = con.layout
         self.layout, self.jac = lay, jac
         self.rows, self.cols, self.vals, self.beta = rows, cols, vals, beta
@@ -311,6 +311,26 @@ class BandedSaddle:
             lam_e -= w[:9] @ self.Zlam[9 * c:9 * c + 9]
             lam_b[c] -= w[9:]
         return u, np.concatenate([lam_e, lam_b.ravel()])
+
+    def solve_many(self, G: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_solve` (no refinement) for many right-hand sides at once: fields ``G``
+        (m, N, 3) and rows ``R`` (m, N + 3K); one parallel band solve for all of them."""
+        lay = self.layout
+        n, k = lay.n, lay.k
+        m = G.shape[0]
+        Y, Ylam = self._band_inverse(G, R[:, :n])
+        Yb = np.asarray(R[:, n:], float).reshape(m, k, 3)
+        U, Le, Lb = Y.copy(), Ylam.copy(), Yb.copy()
+        Yf = Y.reshape(m, -1)
+        for c in range(k):
+            t = np.empty((m, 12))
+            t[:, :9] = Yf @ self.U[c].reshape(9, -1).T
+            t[:, 9:] = Yb[:, c]
+            w = t @ self.cap[c].T
+            U -= (w[:, :9] @ self.Z[9 * c:9 * c + 9].reshape(9, -1)).reshape(U.shape)
+            Le -= w[:, :9] @ self.Zlam[9 * c:9 * c + 9]
+            Lb[:, c] -= w[:, 9:]
+        return U, np.concatenate([Le, Lb.reshape(m, -1)], axis=1)
 
     def pseudo_inverse(self, phi: np.ndarray) -> np.ndarray:
         """``G⁻¹Cᵀ(CG⁻¹Cᵀ)⁻¹ φ``: the ``u`` of :meth:`solve` with ``g = 0``, without its

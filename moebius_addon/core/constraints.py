@@ -9,6 +9,12 @@ the Jacobian touches vertices ``i`` and ``i+1`` only; ``C`` is never formed as a
 applied as ``C @ u`` and ``Cᵀ @ λ``, each by one numba loop over the edges (numpy's gathers
 and ``reduceat`` cost 50–70 µs per call at 500 vertices, and a run makes about 60 per
 iteration).
+
+With pinned vertices (:mod:`.pins`) the rows change: an edge whose two ends are pinned has no
+row (its length cannot change), and a component with a pin has no barycenter rows (the pins
+hold it). ``edge_rows`` and ``bary_rows`` map edges and components to their rows (−1: none);
+without pins they are the rows above, and every kernel computes the same numbers in the same
+order as before pins existed.
 """
 
 from __future__ import annotations
@@ -31,25 +37,61 @@ class Constraints:
     barycenter0: np.ndarray  # (K, 3) target Σ l_I m_I per component
     edge_lengths: bool = True
     barycenter: bool = True
+    pinned: np.ndarray | None = None  # sorted stacked indices of pinned vertices (.pins)
     log_lengths0: np.ndarray = field(init=False, repr=False)
     scale: float = field(init=False)  # L², L the total target length
+    edge_rows: np.ndarray = field(init=False, repr=False)  # (N,) row of edge I, or −1
+    bary_rows: np.ndarray = field(init=False, repr=False)  # (K,) first barycenter row, or −1
+    edge_index: np.ndarray = field(init=False, repr=False)  # edges that have a row, in order
+    bary_components: np.ndarray = field(init=False, repr=False)  # components that have rows
 
     def __post_init__(self):
         self.log_lengths0 = np.log(self.lengths0)
         self.scale = float(self.lengths0.sum()) ** 2
+        lay = self.layout
+        has_edge = np.full(lay.n, self.edge_lengths)
+        has_bary = np.full(lay.k, self.barycenter)
+        if self.pinned is not None:
+            pin = np.zeros(lay.n, bool)
+            pin[self.pinned] = True
+            has_edge &= ~(pin & pin[lay.nxt])  # both ends pinned: the length is fixed
+            has_bary[np.unique(lay.comp[self.pinned])] = False  # the pins hold the component
+        self.edge_index = np.flatnonzero(has_edge).astype(np.int64)
+        self.bary_components = np.flatnonzero(has_bary).astype(np.int64)
+        self.edge_rows = np.full(lay.n, -1, np.int64)
+        self.edge_rows[self.edge_index] = np.arange(self.edge_index.size)
+        self.bary_rows = np.full(lay.k, -1, np.int64)
+        self.bary_rows[self.bary_components] = (
+            self.edge_index.size + 3 * np.arange(self.bary_components.size))
+
+    @property
+    def n_edge_rows(self) -> int:
+        return int(self.edge_index.size)
+
+    @property
+    def n_bary_rows(self) -> int:
+        return 3 * int(self.bary_components.size)
 
     @property
     def size(self) -> int:
-        return (self.layout.n if self.edge_lengths else 0) + (
-            3 * self.layout.k if self.barycenter else 0
-        )
+        return self.n_edge_rows + self.n_bary_rows
+
+    @property
+    def free(self) -> np.ndarray | None:
+        """Indices of the vertices that may move, or None when nothing is pinned."""
+        if self.pinned is None:
+            return None
+        keep = np.ones(self.layout.n, bool)
+        keep[self.pinned] = False
+        return np.flatnonzero(keep)
 
 
 @nb.njit(cache=True)
-def _constraint_values(X, nxt, comp, k, log_l0, edge):
-    """Edge rows ``log l_I − log l0_I`` (when ``edge``) and ``Σ_I l_I m_I`` per component."""
+def _constraint_values(X, nxt, comp, k, log_l0, erow, ne):
+    """Edge rows ``log l_I − log l0_I`` (row ``erow[I]``, none where −1; ``ne`` rows) and
+    ``Σ_I l_I m_I`` per component."""
     n = X.shape[0]
-    rows = np.empty(n if edge else 0)
+    rows = np.empty(ne)
     wb = np.zeros((k, 3))
     for i in range(n):
         j = nxt[i]
@@ -57,8 +99,9 @@ def _constraint_values(X, nxt, comp, k, log_l0, edge):
         e1 = X[j, 1] - X[i, 1]
         e2 = X[j, 2] - X[i, 2]
         ln = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-        if edge:
-            rows[i] = np.log(ln) - log_l0[i]
+        r = erow[i]
+        if r >= 0:
+            rows[r] = np.log(ln) - log_l0[i]
         c = comp[i]
         for d in range(3):
             wb[c, d] += 0.5 * ln * (X[i, d] + X[j, d])
@@ -67,51 +110,55 @@ def _constraint_values(X, nxt, comp, k, log_l0, edge):
 
 def weighted_barycenters(X: np.ndarray, layout: Layout) -> np.ndarray:
     """``Σ_I l_I m_I`` per component, shape (K, 3)."""
-    return _constraint_values(X, layout.nxt, layout.comp, layout.k, np.zeros(0), False)[1]
+    return _constraint_values(X, layout.nxt, layout.comp, layout.k, np.zeros(0),
+                              np.full(layout.n, -1, np.int64), 0)[1]
 
 
 def residual(X: np.ndarray, con: Constraints) -> np.ndarray:
-    """Φ(X) as one vector: edge rows then 3 barycenter rows per component."""
+    """Φ(X) as one vector: edge rows then 3 barycenter rows per component (those that have
+    rows, see :class:`Constraints`)."""
     layout = con.layout
     rows, wb = _constraint_values(X, layout.nxt, layout.comp, layout.k, con.log_lengths0,
-                                  con.edge_lengths)
-    if not con.barycenter:
+                                  con.edge_rows, con.n_edge_rows)
+    if not con.n_bary_rows:
         return rows
-    return np.concatenate([rows, ((wb - con.barycenter0) / con.scale).ravel()])
+    bary = (wb - con.barycenter0) / con.scale
+    if con.bary_components.size < layout.k:
+        bary = bary[con.bary_components]
+    return np.concatenate([rows, bary.ravel()])
 
 
 @nb.njit(cache=True)
-def _matvec(U, nxt, comp, k, T, ln, b, M, scale, edge, bary):
+def _matvec(U, nxt, comp, k, T, ln, b, M, scale, erow, brow, size):
     n = U.shape[0]
-    ne = n if edge else 0
-    out = np.empty(ne + (3 * k if bary else 0))
+    out = np.empty(size)
     acc = np.zeros((k, 3))
     for i in range(n):
         j = nxt[i]
         proj = (T[i, 0] * (U[j, 0] - U[i, 0]) + T[i, 1] * (U[j, 1] - U[i, 1])
                 + T[i, 2] * (U[j, 2] - U[i, 2]))  # l_I <t_I, (Du)_I>
-        if edge:
-            out[i] = proj / ln[i]
-        if bary:
-            c = comp[i]
+        if erow[i] >= 0:
+            out[erow[i]] = proj / ln[i]
+        c = comp[i]
+        if brow[c] >= 0:
             for d in range(3):
                 acc[c, d] += b[i] * U[i, d] + M[i, d] * proj
-    if bary:
-        for c in range(k):
+    for c in range(k):
+        if brow[c] >= 0:
             for d in range(3):
-                out[ne + 3 * c + d] = acc[c, d] / scale
+                out[brow[c] + d] = acc[c, d] / scale
     return out
 
 
 @nb.njit(cache=True)
-def _rmatvec(lam, nxt, comp, T, ln, b, M, scale, edge, bary):
+def _rmatvec(lam, nxt, comp, T, ln, b, M, scale, erow, brow):
     n = T.shape[0]
-    ne = n if edge else 0
     U = np.zeros((n, 3))
     for i in range(n):
-        s = lam[i] / ln[i] if edge else 0.0  # coefficient of t_I in edge I's contribution
-        if bary:
-            r = ne + 3 * comp[i]
+        # coefficient of t_I in edge I's contribution
+        s = lam[erow[i]] / ln[i] if erow[i] >= 0 else 0.0
+        r = brow[comp[i]]
+        if r >= 0:
             for d in range(3):
                 mu = lam[r + d] / scale
                 U[i, d] += b[i] * mu
@@ -139,29 +186,31 @@ class Jacobian:
         con = self.con
         lay = con.layout
         return _matvec(np.ascontiguousarray(U, dtype=np.float64), lay.nxt, lay.comp, lay.k,
-                       self.T, self.ln, self.b, self.M, con.scale, con.edge_lengths,
-                       con.barycenter)
+                       self.T, self.ln, self.b, self.M, con.scale, con.edge_rows,
+                       con.bary_rows, con.size)
 
     def rmatvec(self, lam: np.ndarray) -> np.ndarray:
         """``Cᵀ @ λ`` as a field of shape (N, 3)."""
         con = self.con
         lay = con.layout
         return _rmatvec(np.ascontiguousarray(lam, dtype=np.float64), lay.nxt, lay.comp,
-                        self.T, self.ln, self.b, self.M, con.scale, con.edge_lengths,
-                        con.barycenter)
+                        self.T, self.ln, self.b, self.M, con.scale, con.edge_rows,
+                        con.bary_rows)
 
     def edge_fields(self) -> tuple[np.ndarray, np.ndarray]:
-        """Unit tangents and ``1/l`` for the structured Schur complement of the edge rows."""
+        """Unit tangents and ``1/l`` of every edge (those with a row: ``con.edge_index``) for
+        the structured Schur complement of the edge rows."""
         return self.T, 1.0 / self.ln
 
     def barycenter_fields(self) -> np.ndarray:
-        """The barycenter rows of ``C`` as fields: array (3K, N, 3)."""
-        lay = self.con.layout
-        k = lay.k
-        F = np.zeros((3 * k, lay.n, 3))
-        for row in range(3 * k):
-            lam = np.zeros(self.con.size)
-            lam[self.con.size - 3 * k + row] = 1.0
+        """The barycenter rows of ``C`` as fields: array (3K', N, 3), K' the components that
+        have them (all K without pins)."""
+        con = self.con
+        nb = con.n_bary_rows
+        F = np.zeros((nb, con.layout.n, 3))
+        for row in range(nb):
+            lam = np.zeros(con.size)
+            lam[con.n_edge_rows + row] = 1.0
             F[row] = self.rmatvec(lam)
         return F
 
@@ -185,10 +234,13 @@ def make_constraints(
     lengths0: np.ndarray,
     edge_lengths: bool = True,
     barycenter: bool = True,
+    pinned: np.ndarray | None = None,
 ) -> Constraints:
+    """The constraints of a run at its start ``X``; ``pinned``: checked stacked indices
+    (:func:`.pins.check_pins`) or None."""
     return Constraints(
         layout, np.asarray(lengths0, float), weighted_barycenters(X, layout), edge_lengths,
-        barycenter,
+        barycenter, pinned,
     )
 
 
@@ -241,12 +293,13 @@ class TangentProjector:
     """The Euclidean orthogonal projection ``Π = I − Cᵀ(CCᵀ)⁻¹C`` onto the tangent space of the
     constraints (``C u = 0``), in O(N): ``CCᵀ`` is cyclic tridiagonal per component in the
     edge rows (edges sharing a vertex), bordered by the three barycenter rows of each component
-    (a 3 × 3 Schur complement per component). Needs both kinds of rows."""
+    (a 3 × 3 Schur complement per component). Needs both kinds of rows, and no pins."""
 
     def __init__(self, jac: Jacobian):
         con = jac.con
-        if not (con.edge_lengths and con.barycenter):
-            raise ValueError("the tangent projector needs the edge-length and barycenter rows")
+        if not (con.edge_lengths and con.barycenter) or con.pinned is not None:
+            raise ValueError("the tangent projector needs the edge-length and barycenter rows "
+                             "and no pinned vertices")
         lay = con.layout
         self.jac, self.layout = jac, lay
         self.diag, self.off = _edge_gram(jac.T, jac.ln, lay.nxt, lay.starts)

@@ -35,6 +35,7 @@ from .constraints import Jacobian
 from .energy import energy_gradient_x, energy_x
 from .linalg import SaddlePointSolver, spd_inverse
 from .metrics import banded_parts, gram_x
+from .pinned_solve import BorderedPins, tree_borders, unpinned_jacobian
 
 # Deterministic refactorization rule (see SaddlePointSolver): one factorization costs about as
 # much as N / _FACTOR_PER_ITER preconditioned Krylov iterations (measured here at N = 3000:
@@ -212,7 +213,10 @@ class TreeEngine(DenseEngine):
     and ``hs_pure`` are applied through a hierarchy of arcs (:mod:`.hs_tree`) and solved by
     preconditioned conjugate gradients (:mod:`.hs_solve`; ``krylov_rtol`` their tolerance),
     the back-projection's steps in the preconditioner's banded metric unless
-    ``exact_backprojection``."""
+    ``exact_backprojection``. With up to ``pinned_solve.TREE_MAX_PINS`` pinned vertices
+    these solvers are bordered by the pin rows (:mod:`.pinned_solve`; hs then without its
+    coarse level); with more pins, or without one kind of constraint, the saddle-point
+    systems are solved as in the exact engine (dense; sizes are bounded)."""
 
     name = "tree"
     _frame = None  # the last frame and the polygon it was built at
@@ -227,15 +231,22 @@ class TreeEngine(DenseEngine):
         return metric not in BANDED_METRICS + hs_tree.METRICS
 
     def update(self, X: np.ndarray, jac: Jacobian) -> None:
-        if self.dense_metric or not (jac.con.edge_lengths and jac.con.barycenter):
+        con = jac.con
+        pins = 0 if con.pinned is None else con.pinned.size
+        if self.dense_metric or not (con.edge_lengths and con.barycenter) or (
+                pins and not tree_borders(pins)):
+            # the tree's solvers need both kinds of rows, and few pins: else solve densely
             super().update(X, jac)
             return
         old, self._saddle = self._saddle, None  # its memory is reused: no longer usable
         if old is not None:
             old.release()  # all but the band, before the new one is built
         if self.metric in BANDED_METRICS:
-            self._saddle = BandedSaddle(banded_parts(self.metric, X, self.layout), jac,
-                                        old if isinstance(old, BandedSaddle) else None)
+            old = getattr(old, "base", old)
+            band = BandedSaddle(banded_parts(self.metric, X, self.layout),
+                                unpinned_jacobian(jac) if pins else jac,
+                                old if isinstance(old, BandedSaddle) else None)
+            self._saddle = BorderedPins(band, jac) if pins else band
         else:
             self._saddle = hs_solve.HsSaddle(
                 hs_tree.HsOperator(X, self.layout, self.metric), jac, rtol=self.krylov_rtol,
@@ -246,7 +257,7 @@ class TreeEngine(DenseEngine):
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self._saddle is None:
             return super().solve(g, r)
-        if isinstance(self._saddle, BandedSaddle):
+        if isinstance(self._saddle, (BandedSaddle, BorderedPins)):
             self._tree_krylov.append(0)
         return self._saddle.solve(g, r)
 

@@ -59,7 +59,9 @@ def relax(
         See :class:`Relaxation` (``energy_target``, ``ftol``, ``max_seconds``, ``initial_step``,
         ``armijo``, ``growth``, ``backproject_iter``, ``backproject_tol``, ``edge_lengths``,
         ``barycenter``, ``target_lengths``, ``check``, ``reuse_factorization``,
-        ``precision``) and the method's own class.
+        ``precision``, ``pinned``, ``pin_tangents``) and the method's own class.
+        ``pinned``: vertex indices (a list per component for a link) that keep their
+        positions exactly; feasible methods only (docs/api.md, "Pinned vertices").
 
     Returns
     -------

@@ -29,6 +29,7 @@ from .constraints import Jacobian, TangentProjector, jacobian, make_constraints
 from .hs_tree import HsOperator
 from .linalg import Factorization
 from .metrics import gram_x
+from .pinned_solve import BorderedPins, unpinned_jacobian
 
 #: Relative tolerance of the gradient's Krylov solve (preconditioned residual norm).
 RTOL = 1e-2
@@ -139,7 +140,9 @@ class HsSaddle:
     ----------
     op : HsOperator
     jac : Jacobian
-        Constraint Jacobian at the same polygon (edge-length and barycenter rows).
+        Constraint Jacobian at the same polygon (edge-length and barycenter rows; with pins
+        the constraint preconditioner is bordered, :mod:`.pinned_solve`, and the coarse level
+        is left out).
     rtol : float
         Relative tolerance of :meth:`solve`: the preconditioned residual norm
         ``sqrt(rᵀ K r)`` against that of the start.
@@ -167,12 +170,17 @@ class HsSaddle:
         self.rtol = rtol
         self.max_iter = max_iter
         self.exact_backprojection = exact_backprojection
-        self.K = BandedSaddle(op.preconditioner_parts(), jac,
-                              None if recycle is None else recycle.K)
+        old = None if recycle is None else getattr(recycle.K, "base", recycle.K)
+        if jac.con.pinned is None:
+            self.K = BandedSaddle(op.preconditioner_parts(), jac, old)
+        else:  # the constraint preconditioner with pins: bordered (the iterates stay 0 there)
+            self.K = BorderedPins(BandedSaddle(op.preconditioner_parts(),
+                                               unpinned_jacobian(jac), old), jac)
         self.iterations: list[int] = [] if log is None else log
         size = coarse_size(op.layout.n) if coarse is None else int(coarse)
         self.coarse = None
-        if size and X is not None and size < op.layout.n:
+        # the coarse level projects with the constraints' TangentProjector, which has no pins
+        if size and X is not None and size < op.layout.n and jac.con.pinned is None:
             self.coarse = CoarseLevel(X, op.layout, op.metric, jac, size)
 
     def release(self) -> None:

@@ -223,6 +223,22 @@ def _edge_schur(Ainv, nxt, inv_l, T, S):
             S[i, j] = y * (T[i, 0] * T[j, 0] + T[i, 1] * T[j, 1] + T[i, 2] * T[j, 2])
 
 
+@nb.njit(cache=True, parallel=True)
+def _edge_schur_rows(Ainv, nxt, edges, inv_l, T, S):
+    """:func:`_edge_schur` for the rows of the edges ``edges`` only (with pins: an edge
+    between two pins has no row). Separate, because the index gather makes the loop about
+    three times slower (4.1 against 1.4 ms at 1648 edges, single precision)."""
+    m = edges.shape[0]
+    for a in nb.prange(m):
+        i = edges[a]
+        i1 = nxt[i]
+        for b in range(m):
+            j = edges[b]
+            j1 = nxt[j]
+            y = (Ainv[i1, j1] - Ainv[i1, j] - Ainv[i, j1] + Ainv[i, j]) * inv_l[i] * inv_l[j]
+            S[a, b] = y * (T[i, 0] * T[j, 0] + T[i, 1] * T[j, 1] + T[i, 2] * T[j, 2])
+
+
 class Factorization:
     """Solver of the saddle-point system at one iterate (A, C fixed).
 
@@ -230,6 +246,12 @@ class Factorization:
     memory traffic): then :meth:`solve` is accurate to about ``κ(A)·1e-7`` only and serves as
     the preconditioner of a float64 Krylov solve. ``κ(A)`` of the hs metric is ~1e5 at 1648
     edges once the constant mode is scaled (see metrics.py), well inside single precision.
+
+    Pinned vertices (``jac.con.pinned``) are eliminated: ``A⁻¹`` is replaced by the inverse of
+    the free vertices' block ``A_ff`` with zero rows and columns at the pins, i.e. ``G⁻¹`` by
+    ``E (E ᵀG E)⁻¹ Eᵀ`` (``E`` the free coordinates). Every solve and every back-projection
+    step is then exactly zero at the pins: the same ``u`` as with pin rows ``u_p = 0`` in the
+    saddle-point system, whose ``C`` is restricted to the free coordinates.
     """
 
     def __init__(self, A: np.ndarray, jac: Jacobian, dtype=np.float64,
@@ -243,21 +265,29 @@ class Factorization:
         # of this size are page-faulted in anew: 27 ms per 72 MB at 3000 vertices)
         old = recycle if recycle is not None and recycle.dtype == self.dtype else None
         M = old.Ainv if old is not None and old.Ainv.shape == A.shape else None
-        if M is None:
-            M = np.array(A, dtype=self.dtype, order="C")
+        free = jac.con.free
+        if free is not None:
+            self.Ainv = self._free_inverse(A, free, M)
         else:
-            np.copyto(M, A, casting="same_kind")
-        self.Ainv = spd_inverse(M, overwrite=True)
+            if M is None:
+                M = np.array(A, dtype=self.dtype, order="C")
+            else:
+                np.copyto(M, A, casting="same_kind")
+            self.Ainv = spd_inverse(M, overwrite=True)
         S = None
         if old is not None and old.sinv is not None and old.sinv.F.shape == (m, m):
             S = old.sinv.F
         if S is None:
             S = np.empty((m, m), dtype=self.dtype)
-        nb = 3 * lay.k if jac.con.barycenter else 0
+        nb = jac.con.n_bary_rows
         ne = m - nb
         if ne:
             T, inv_l = jac.edge_fields()
-            _edge_schur(self.Ainv, lay.nxt, inv_l.astype(self.dtype), T.astype(self.dtype), S)
+            inv_l, T = inv_l.astype(self.dtype), T.astype(self.dtype)
+            if ne == lay.n:
+                _edge_schur(self.Ainv, lay.nxt, inv_l, T, S)
+            else:
+                _edge_schur_rows(self.Ainv, lay.nxt, jac.con.edge_index, inv_l, T, S)
         if nb:
             F = jac.barycenter_fields()  # (nb, N, 3)
             cols = np.stack([jac.matvec(self.ginv(F[r])) for r in range(nb)], axis=1)
@@ -269,18 +299,35 @@ class Factorization:
             LS = _lapack.cholesky(S, overwrite=True)
             self.sinv = CholeskySolve(LS if LS is not None else np.linalg.cholesky(S))
 
+    def _free_inverse(self, A: np.ndarray, free: np.ndarray, out: np.ndarray | None):
+        """``A_ff⁻¹`` of the free vertices' block, embedded with zeros at the pins (in
+        ``out`` when given)."""
+        block = np.array(A[np.ix_(free, free)], dtype=self.dtype, order="C")
+        inv = spd_inverse(block, overwrite=True)
+        if out is None:
+            out = np.zeros(A.shape, dtype=self.dtype)
+        else:
+            out.fill(0)
+        out[np.ix_(free, free)] = inv
+        return out
+
     def ginv(self, U: np.ndarray) -> np.ndarray:
-        """``G⁻¹ U`` for a field (N, 3) (``A⁻¹`` on every coordinate, float64 sums)."""
+        """``G⁻¹ U`` for a field (N, 3) (``A⁻¹`` on every coordinate, float64 sums; zero at
+        pinned vertices)."""
         return field_product(self.Ainv, U)
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``[u; λ]`` with ``G u + Cᵀ λ = g``, ``C u = r``."""
         z = self.ginv(g)
+        if self.sinv is None:  # no constraint rows at all
+            return z, np.zeros(0)
         lam = self.sinv(self.jac.matvec(z) - r)
         return z - self.ginv(self.jac.rmatvec(lam)), lam
 
     def pseudo_inverse(self, phi: np.ndarray) -> np.ndarray:
         """``G⁻¹Cᵀ(CG⁻¹Cᵀ)⁻¹ φ``: :meth:`solve` with ``g = 0``, one product with ``A⁻¹``."""
+        if self.sinv is None:
+            return np.zeros((self.jac.con.layout.n, 3))
         return self.ginv(self.jac.rmatvec(self.sinv(phi)))
 
 
@@ -356,7 +403,13 @@ class SaddlePointSolver:
         self.last += units
 
     def _apply_K(self, U: np.ndarray, lam: np.ndarray):
-        return field_product(self.A, U) + self.jac.rmatvec(lam), self.jac.matvec(U)
+        GU = field_product(self.A, U) + self.jac.rmatvec(lam)
+        pinned = self.jac.con.pinned
+        if pinned is not None:
+            # pinned coordinates are eliminated: the system acts on the free ones only (the
+            # Krylov vectors are zero there, see _gmres)
+            GU[pinned] = 0.0
+        return GU, self.jac.matvec(U)
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Solve ``[[G, Cᵀ], [C, 0]] [u; λ] = [g; r]`` at the current iterate."""
@@ -382,6 +435,10 @@ class SaddlePointSolver:
         factorization. Returns ((u, λ), iterations, converged)."""
         n = g.shape[0]
         m = r.shape[0]
+        pinned = self.jac.con.pinned
+        if pinned is not None:  # the equations of pinned coordinates are not part of it
+            g = g.copy()
+            g[pinned] = 0.0
 
         def pack(U, lam):
             return np.concatenate([U.ravel(), lam])

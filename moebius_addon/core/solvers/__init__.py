@@ -9,7 +9,8 @@ Figs. 3 and 4), each usable with every metric, and the table that names them.
 * :mod:`.penalty`: ``ncg``, ``lbfgs``, ``nesterov`` (edge lengths held by a penalty).
 
 Feasible methods keep the constraints of docs/design.md (edge lengths, barycenter) at every
-iterate; infeasible ones replace the edge-length constraints by a penalty. Every run has the
+iterate, and can pin vertices (``pinned=``: those keep their positions exactly); infeasible
+ones replace the edge-length constraints by a penalty and refuse pins. Every run has the
 same interface: ``step()``, ``state()``, ``stop()``, ``result()``, ``x``, ``energy``, ``nit``,
 ``history`` (the Möbius energy ``E``, never the penalized one, so methods compare directly),
 and reaches the numerics only through its engine (:mod:`..engine`).
@@ -19,8 +20,9 @@ from __future__ import annotations
 
 from ..engine import engine_class
 from ..metrics import METRICS
+from ..pinned_solve import tree_borders
 from .base import Run, check_dense_size
-from .penalty import LBFGS, Nesterov, NonlinearCG
+from .penalty import LBFGS, Nesterov, NonlinearCG, pinned_refusal
 from .projected import Relaxation
 from .second_order import ImplicitProjectedGradient, TrustRegion
 
@@ -62,7 +64,8 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
     Raises
     ------
     ValueError
-        For an unknown method (the message lists the valid ones), metric or engine.
+        For an unknown method (the message lists the valid ones), metric or engine; for
+        ``pinned=`` with a penalty method or bad pins (:func:`..pins.check_pins`).
     """
     if method not in METHOD_CLASSES:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
@@ -72,26 +75,32 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
 
 def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
                engine: str = "auto", *, edge_lengths: bool = True,
-               barycenter: bool = True) -> None:
+               barycenter: bool = True, pinned: int = 0) -> None:
     """Refuse, before any work, a polygon of ``n`` vertices (in all) that a run of ``method``
     in ``metric`` on ``engine`` would refuse for its size: the same ``ValueError`` (naming the
     way out) the run's constructor raises. Sizes are bounded where the metric is held as a
     dense matrix: the exact engine, the penalty methods on every engine, and a feasible
     method without one of its constraints (``edge_lengths``, ``barycenter``: the tree's
-    solvers need both).
+    solvers need both) or with more than ``pinned_solve.TREE_MAX_PINS`` pinned vertices
+    (``pinned``: how many, after ``pin_tangents``; ``True`` counts as one).
 
     Raises
     ------
     ValueError
-        For a size the run would refuse, or an unknown method, metric or engine.
+        For a size the run would refuse, or an unknown method, metric or engine; for
+        ``pinned`` with a method that cannot keep pins (the penalty methods).
     """
     if method not in METHOD_CLASSES:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     if metric not in METRICS:
         raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
+    if pinned and method not in FEASIBLE:
+        raise ValueError(pinned_refusal(method))
     if METHOD_CLASSES[method]._DENSE_METRIC:
         check_dense_size(n, "method")
     elif engine_class(engine, n).holds_dense(metric):
         check_dense_size(n)
+    elif pinned and not tree_borders(int(pinned)):
+        check_dense_size(n, "pins")
     elif not (edge_lengths and barycenter):
         check_dense_size(n, "constraints")

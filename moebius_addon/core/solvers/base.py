@@ -34,6 +34,8 @@ import numpy as np
 from .._layout import as_unit_layout
 from ..engine import make_engine
 from ..metrics import METRICS
+from ..pinned_solve import TREE_MAX_PINS
+from ..pins import check_pins
 from ..polygon import check_polygon
 
 HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
@@ -155,6 +157,8 @@ _DENSE_WHY = {
               "hold the metric as a dense matrix on every engine",
     "constraints": "or keep both constraints (edge_lengths and barycenter): without them the "
                    "tree engine solves with a dense matrix",
+    "pins": f"or pin at most {TREE_MAX_PINS} vertices: with more the tree engine solves "
+            f"with a dense matrix",
 }
 
 
@@ -200,6 +204,10 @@ class Run:
     distance ``eps``, and builds the ``engine``. Subclasses check their own options before
     calling it, then set ``E``, the history and their state; ``_objective`` is what the
     relative-change test watches, ``_GRADIENT`` how messages call the gradient norm.
+
+    ``pinned`` (with ``pin_tangents``) is checked first (:func:`..pins.check_pins`;
+    ``fixed_lengths``: whether the run keeps edge lengths) and kept as ``self.pinned``
+    (sorted stacked indices, or None); ``x`` returns the caller's own coordinates there.
     """
 
     _GRADIENT = "projected gradient norm"
@@ -210,7 +218,8 @@ class Run:
     def __init__(self, P, metric: str, max_iter: int, tol: float, *,
                  energy_target: float | None, ftol: float, max_seconds: float | None,
                  target_lengths: str, check: bool, equilateral: bool, engine: str = "auto",
-                 theta: float | None = None, **engine_options):
+                 theta: float | None = None, pinned=None, pin_tangents: bool = False,
+                 fixed_lengths: bool = True, **engine_options):
         _check_names(metric, target_lengths)
         self.t0 = time.perf_counter()
         self.max_iter = check_number("max_iter", max_iter, 0, integer=True)
@@ -221,6 +230,12 @@ class Run:
         self.max_seconds = None if max_seconds is None else check_number("max_seconds",
                                                                          max_seconds, 0)
         X, layout, e2 = as_unit_layout(P)  # exact scaling of curves far from size 1
+        self.pinned = check_pins(pinned, layout, X, tangents=bool(pin_tangents),
+                                 edge_lengths=fixed_lengths)
+        if self.pinned is not None:
+            # the caller's own coordinates there (np.ldexp by an even exponent is exact):
+            # mapping the run's copy back would round them
+            self._pinned_at = np.ldexp(X[self.pinned], e2)
         # the engine is built first (cheap): it says whether its metric is a dense matrix
         self.engine = make_engine(engine, layout, metric, theta=theta, **engine_options)
         if self._DENSE_METRIC:
@@ -270,7 +285,10 @@ class Run:
     @property
     def x(self):
         """Current polygon (or list of arrays for a link) in the caller's coordinates."""
-        return self.layout.split(self.X * self._scale + self._shift)
+        Y = self.X * self._scale + self._shift
+        if self.pinned is not None:
+            Y[self.pinned] = self._pinned_at  # the run never moves them (their bits are kept)
+        return self.layout.split(Y)
 
     @property
     def energy(self) -> float:

@@ -24,6 +24,7 @@ import time
 import numpy as np
 
 from ..constraints import jacobian, make_constraints
+from ..pins import count_pins
 from .base import HISTORY_KEYS, Run, _check_names, _OutOfTime, check_number
 
 #: Default weight α of Hencky's stretch penalty (units where the total length is 1).
@@ -39,6 +40,14 @@ _FEASIBLE_ONLY = frozenset({
 
 def _dot(a, b) -> float:
     return float(np.einsum("ij,ij->", a, b))
+
+
+def pinned_refusal(method: str) -> str:
+    """Why ``method`` (a penalty method) refuses ``pinned=``, and what to use instead."""
+    return (f"method {method!r} cannot keep pinned vertices fixed (it holds the edge lengths "
+            f"by a penalty, without constraint rows to pin them with): use a feasible method, "
+            f"projected_gradient, projected_gradient_implicit or trust_region, or pass no "
+            f"pinned=")
 
 
 class _PenaltyRun(Run):
@@ -65,10 +74,13 @@ class _PenaltyRun(Run):
                  c2: float = 0.9, energy_target: float | None = None, ftol: float = 1e-12,
                  max_seconds: float | None = None, initial_step: float = 1.0,
                  target_lengths: str = "equal", check: bool = True, engine: str = "auto",
-                 theta: float | None = None, **ignored):
+                 theta: float | None = None, pinned=None, pin_tangents: bool = False,
+                 **ignored):
         unknown = set(ignored) - _FEASIBLE_ONLY
         if unknown:
             raise TypeError(f"unknown option(s) {', '.join(sorted(unknown))}")
+        if count_pins(pinned):
+            raise ValueError(pinned_refusal(self.NAME))
         _check_names(metric, target_lengths)
         if not 0 < c1 < c2 < 1:
             raise ValueError("Wolfe constants need 0 < c1 < c2 < 1")
@@ -218,6 +230,8 @@ class NonlinearCG(_PenaltyRun):
     ``β = max(0, <g₊, z₊ − z>/<g, z>)``, ``z = (metric)⁻¹ g``; restart with ``−z`` whenever
     the direction is not a descent direction."""
 
+    NAME = "ncg"
+
     def _init_method(self):
         self.D = -self.z
         self.gd_prev = None
@@ -251,6 +265,8 @@ class NonlinearCG(_PenaltyRun):
 class LBFGS(_PenaltyRun):
     """L-BFGS (Nocedal–Wright Alg. 7.4/7.5) with ``history`` pairs and the inverse of the
     *current* metric as initial inverse Hessian (the paper's modification)."""
+
+    NAME = "lbfgs"
 
     def __init__(self, P, metric="hs", max_iter=200, tol=1e-6, *, history: int = 30, **options):
         self.m = int(history)
@@ -307,6 +323,8 @@ class Nesterov(_PenaltyRun):
     is when the straight segment from X to X₊ would touch itself.
     One metric factorization per iterate (at Y); the recorded gradient norm at X₊ uses that
     metric, and the metric at X is built only for a reset."""
+
+    NAME = "nesterov"
 
     def _init_method(self):
         self.X_prev = self.X

@@ -23,6 +23,7 @@ import time
 import numpy as np
 
 from ..constraints import Constraints, jacobian, make_constraints, residual
+from ..pinned_solve import tree_borders
 from .base import HISTORY_KEYS, Run, _check_names, check_dense_size, check_number
 
 # The modified Newton back-projection gives up on a trial step once |Φ| shrinks by less than
@@ -101,6 +102,15 @@ class Relaxation(Run):
     exact_backprojection : bool
         The tree engine's back-projection steps in the metric itself (Krylov solves) instead
         of its banded preconditioner's metric.
+    pinned : sequence of int, optional
+        Vertices that keep their position exactly (for a link: one list per component). Their
+        coordinates are eliminated from the saddle-point system and the back-projection (zero
+        velocity); an edge between two pins has no length row and a component with a pin no
+        barycenter rows. The tree engine borders its O(N) solvers with the pin rows for up
+        to ``pinned_solve.TREE_MAX_PINS`` pins, and solves densely beyond (sizes bounded as
+        for the exact engine). See :func:`..pins.check_pins` for what is refused.
+    pin_tangents : bool
+        Also pin both neighbours of every pinned vertex (fixed tangents at the pins).
     """
 
     def __init__(
@@ -129,6 +139,8 @@ class Relaxation(Run):
         theta: float | None = None,
         krylov_rtol: float | None = None,
         exact_backprojection: bool = False,
+        pinned=None,
+        pin_tangents: bool = False,
     ):
         _check_names(metric, target_lengths)
         armijo, growth = check_line_search(armijo, growth)
@@ -139,16 +151,20 @@ class Relaxation(Run):
                          max_seconds=max_seconds, target_lengths=target_lengths, check=check,
                          equilateral=True, engine=engine, theta=theta, precision=precision,
                          reuse_factorization=reuse_factorization, krylov_rtol=krylov_rtol,
-                         exact_backprojection=exact_backprojection)
+                         exact_backprojection=exact_backprojection, pinned=pinned,
+                         pin_tangents=pin_tangents, fixed_lengths=bool(edge_lengths))
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter
         self.backproject_tol = backproject_tol
         self.interpolate = bool(interpolate)
-        if not (edge_lengths and barycenter) and not self.engine.dense_metric:
-            check_dense_size(self.layout.n, "constraints")  # the tree's solvers need both
+        if not self.engine.dense_metric:  # the tree's solvers need both rows and few pins
+            if self.pinned is not None and not tree_borders(self.pinned.size):
+                check_dense_size(self.layout.n, "pins")
+            elif not (edge_lengths and barycenter):
+                check_dense_size(self.layout.n, "constraints")
         self.con: Constraints = make_constraints(self.X, self.layout, self.lengths0,
-                                                 edge_lengths, barycenter)
+                                                 edge_lengths, barycenter, self.pinned)
         self.tau = initial_step / self.growth
         self._prepare(self.X, *self.engine.energy_gradient(self.X))
         self.history = {k: [] for k in HISTORY_KEYS}
