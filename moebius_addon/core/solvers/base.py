@@ -34,6 +34,7 @@ import numpy as np
 from .._layout import as_unit_layout
 from ..engine import make_engine
 from ..metrics import METRICS
+from ..obstacles import ObstacleField, check_obstacles
 from ..polygon import check_polygon
 
 HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
@@ -210,7 +211,8 @@ class Run:
     def __init__(self, P, metric: str, max_iter: int, tol: float, *,
                  energy_target: float | None, ftol: float, max_seconds: float | None,
                  target_lengths: str, check: bool, equilateral: bool, engine: str = "auto",
-                 theta: float | None = None, **engine_options):
+                 theta: float | None = None, obstacles=None, obstacle_weight: float = 1.0,
+                 **engine_options):
         _check_names(metric, target_lengths)
         self.t0 = time.perf_counter()
         self.max_iter = check_number("max_iter", max_iter, 0, integer=True)
@@ -220,6 +222,8 @@ class Run:
         self.ftol = check_number("ftol", ftol, 0)
         self.max_seconds = None if max_seconds is None else check_number("max_seconds",
                                                                          max_seconds, 0)
+        obstacle_weight = check_number("obstacle_weight", obstacle_weight, 0)
+        meshes = None if obstacles is None else check_obstacles(obstacles)
         X, layout, e2 = as_unit_layout(P)  # exact scaling of curves far from size 1
         # the engine is built first (cheap): it says whether its metric is a dense matrix
         self.engine = make_engine(engine, layout, metric, theta=theta, **engine_options)
@@ -241,6 +245,10 @@ class Run:
         self.lengths0 = ln.copy() if target_lengths == "keep" else self._equal_lengths(
             ln, equilateral)
         self.eps = 1e-3 * float(self.lengths0.mean())  # contact distance
+        if meshes is not None:
+            field = ObstacleField(meshes, self._shift, self._scale, obstacle_weight)
+            field.check_clear(self.X, layout, self.eps)
+            self.engine.obstacles = field
         self.nit = 0
         self.rejected = 0
         self.done = False

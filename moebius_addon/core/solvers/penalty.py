@@ -65,7 +65,8 @@ class _PenaltyRun(Run):
                  c2: float = 0.9, energy_target: float | None = None, ftol: float = 1e-12,
                  max_seconds: float | None = None, initial_step: float = 1.0,
                  target_lengths: str = "equal", check: bool = True, engine: str = "auto",
-                 theta: float | None = None, **ignored):
+                 theta: float | None = None, obstacles=None, obstacle_weight: float = 1.0,
+                 **ignored):
         unknown = set(ignored) - _FEASIBLE_ONLY
         if unknown:
             raise TypeError(f"unknown option(s) {', '.join(sorted(unknown))}")
@@ -77,7 +78,8 @@ class _PenaltyRun(Run):
         # the penalty pulls a non-equilateral start to the mean lengths: no equilateral check
         super().__init__(P, metric, max_iter, tol, energy_target=energy_target, ftol=ftol,
                          max_seconds=max_seconds, target_lengths=target_lengths, check=check,
-                         equilateral=False, engine=engine, theta=theta)
+                         equilateral=False, engine=engine, theta=theta, obstacles=obstacles,
+                         obstacle_weight=obstacle_weight)
         self.alpha = float(alpha)
         self.penalty_in_metric = (metric != "l2") if penalty_metric == "auto" else bool(
             penalty_metric)

@@ -129,6 +129,8 @@ class Relaxation(Run):
         theta: float | None = None,
         krylov_rtol: float | None = None,
         exact_backprojection: bool = False,
+        obstacles=None,
+        obstacle_weight: float = 1.0,
     ):
         _check_names(metric, target_lengths)
         armijo, growth = check_line_search(armijo, growth)
@@ -139,7 +141,8 @@ class Relaxation(Run):
                          max_seconds=max_seconds, target_lengths=target_lengths, check=check,
                          equilateral=True, engine=engine, theta=theta, precision=precision,
                          reuse_factorization=reuse_factorization, krylov_rtol=krylov_rtol,
-                         exact_backprojection=exact_backprojection)
+                         exact_backprojection=exact_backprojection, obstacles=obstacles,
+                         obstacle_weight=obstacle_weight)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter
