@@ -118,6 +118,9 @@ class DenseEngine:
             dtype=np.float32 if precision == "single" else np.float64,
         )
         self._gram = None  # the Gram matrix's memory, refilled at every update
+        #: Meshes the curve is repelled from and never crosses (``obstacles.ObstacleField``):
+        #: their energy is added to the curve's, their contacts bound every step.
+        self.obstacles = None
         self._penalty_factorizations = 0
         self._banded_factorizations = 0
 
@@ -135,18 +138,31 @@ class DenseEngine:
     # -- energy, gradient, contact -------------------------------------------------------------
 
     def energy(self, X: np.ndarray) -> float:
-        """Möbius energy of ``X`` (N, 3)."""
-        return energy_x(X, self.layout)
+        """Möbius energy of ``X`` (N, 3) (plus the obstacles' weighted energy, if any)."""
+        return self._plus_obstacles(energy_x(X, self.layout), X)
 
     def energy_gradient(self, X: np.ndarray) -> tuple[float, np.ndarray]:
         """``(E, ∇E)`` at ``X``; ``∇E`` is (N, 3). Its ``E`` may differ from :meth:`energy`
         in the last bits (the two kernels sum in different orders)."""
-        return energy_gradient_x(X, self.layout)
+        return self._plus_obstacle_gradient(*energy_gradient_x(X, self.layout), X)
+
+    def _plus_obstacles(self, E: float, X: np.ndarray) -> float:
+        return E if self.obstacles is None else E + self.obstacles.energy(X, self.layout.nxt)
+
+    def _plus_obstacle_gradient(self, E: float, g: np.ndarray, X: np.ndarray
+                                ) -> tuple[float, np.ndarray]:
+        if self.obstacles is None:
+            return E, g
+        Eo, go = self.obstacles.energy_gradient(X, self.layout.nxt, self.layout.prv)
+        return E + Eo, g + go
 
     def contact_time(self, X: np.ndarray, U: np.ndarray, tau_max: float, eps: float) -> float:
         """Smallest ``τ ≤ tau_max`` at which ``X − τU`` comes within ``eps`` of touching
-        itself (edges not adjacent), or ``tau_max`` when it does not."""
-        return contact_time_x(X, U, self.layout, tau_max, eps)
+        itself (edges not adjacent) or an obstacle, or ``tau_max`` when it does not."""
+        t = contact_time_x(X, U, self.layout, tau_max, eps)
+        if self.obstacles is not None and t > 0.0:
+            t = self.obstacles.contact_time(X, U, self.layout.nxt, t, eps)
+        return t
 
     # -- metric and saddle-point solves at the current iterate ---------------------------------
 
@@ -294,10 +310,10 @@ class TreeEngine(DenseEngine):
         return self._frame[1]
 
     def energy(self, X: np.ndarray) -> float:
-        return self._frame_at(X).energy(X)
+        return self._plus_obstacles(self._frame_at(X).energy(X), X)
 
     def energy_gradient(self, X: np.ndarray) -> tuple[float, np.ndarray]:
-        return self._frame_at(X).energy_gradient(X)
+        return self._plus_obstacle_gradient(*self._frame_at(X).energy_gradient(X), X)
 
 
 #: From this many vertices on, "auto" runs on the tree engine: its whole iteration (energy,

@@ -34,6 +34,7 @@ import numpy as np
 from .._layout import as_unit_layout
 from ..engine import make_engine
 from ..metrics import METRICS
+from ..obstacles import ObstacleField, check_obstacles
 from ..pinned_solve import TREE_MAX_PINS
 from ..pins import check_pins
 from ..polygon import check_polygon
@@ -219,7 +220,8 @@ class Run:
                  energy_target: float | None, ftol: float, max_seconds: float | None,
                  target_lengths: str, check: bool, equilateral: bool, engine: str = "auto",
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
-                 fixed_lengths: bool = True, **engine_options):
+                 fixed_lengths: bool = True, obstacles=None, obstacle_weight: float = 1.0,
+                 **engine_options):
         _check_names(metric, target_lengths)
         self.t0 = time.perf_counter()
         self.max_iter = check_number("max_iter", max_iter, 0, integer=True)
@@ -229,6 +231,8 @@ class Run:
         self.ftol = check_number("ftol", ftol, 0)
         self.max_seconds = None if max_seconds is None else check_number("max_seconds",
                                                                          max_seconds, 0)
+        obstacle_weight = check_number("obstacle_weight", obstacle_weight, 0)
+        meshes = None if obstacles is None else check_obstacles(obstacles)
         X, layout, e2 = as_unit_layout(P)  # exact scaling of curves far from size 1
         self.pinned = check_pins(pinned, layout, X, tangents=bool(pin_tangents),
                                  edge_lengths=fixed_lengths)
@@ -256,6 +260,10 @@ class Run:
         self.lengths0 = ln.copy() if target_lengths == "keep" else self._equal_lengths(
             ln, equilateral)
         self.eps = 1e-3 * float(self.lengths0.mean())  # contact distance
+        if meshes is not None:
+            field = ObstacleField(meshes, self._shift, self._scale, obstacle_weight)
+            field.check_clear(self.X, layout, self.eps)
+            self.engine.obstacles = field
         self.nit = 0
         self.rejected = 0
         self.done = False

@@ -141,6 +141,8 @@ class Relaxation(Run):
         exact_backprojection: bool = False,
         pinned=None,
         pin_tangents: bool = False,
+        obstacles=None,
+        obstacle_weight: float = 1.0,
     ):
         _check_names(metric, target_lengths)
         armijo, growth = check_line_search(armijo, growth)
@@ -152,7 +154,8 @@ class Relaxation(Run):
                          equilateral=True, engine=engine, theta=theta, precision=precision,
                          reuse_factorization=reuse_factorization, krylov_rtol=krylov_rtol,
                          exact_backprojection=exact_backprojection, pinned=pinned,
-                         pin_tangents=pin_tangents, fixed_lengths=bool(edge_lengths))
+                         pin_tangents=pin_tangents, fixed_lengths=bool(edge_lengths),
+                         obstacles=obstacles, obstacle_weight=obstacle_weight)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter

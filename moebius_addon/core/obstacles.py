@@ -1,0 +1,411 @@
+"""Obstacles: triangle meshes a relaxing curve is repelled from and never crosses.
+
+A run given ``obstacles=[(V, F), ...]`` (``V`` an (M, 3) array of vertices, ``F`` a (K, 3)
+array of triangles, per mesh) minimizes the curve's Möbius energy plus ``obstacle_weight``
+times the obstacle energy
+
+    E_obs = Σ_I Σ_T  l_I A_T / d(m_I, T)³,
+
+a quadrature of ``∫_γ ∫_M |γ(s) − y|⁻³ dA(y) ds`` over edges ``I`` (length ``l_I``, midpoint
+``m_I``) and triangles ``T`` (area ``A_T``), with ``d(m_I, T)`` the distance from the midpoint
+to the nearest point of the triangle (not its centroid). Why this kernel: like the curve's own
+energy it is scale invariant (length × area / length³), so one weight means the same for
+curves and scenes of any size; far from the mesh it is the continuous integral; and it grows
+without bound as an edge approaches any point of a triangle (as ``d⁻³`` for a midpoint
+approaching a triangle's interior, where the continuous integral grows as ``d⁻¹`` per unit of
+length: the discrete barrier is steeper, and depends on the triangles' size there). The mesh
+is fixed, so the gradient is with respect to the curve's vertices alone: exact, by the
+envelope theorem ``∇_m d = (m − q) / d`` with ``q`` the nearest point.
+
+The energy keeps the curve away from the mesh; the guarantee that it never crosses it does
+not depend on the energy: every step the flow takes is bounded by the first time any moving
+edge comes within the contact distance ``eps`` of any triangle (:meth:`ObstacleField.
+contact_time`, conservative advancement with the exact segment–triangle distance, as the
+curve's own contact search does for pairs of edges). All pairs of edges and triangles are
+visited (numba, parallel over edges; bitwise the same for any thread count): meant for
+obstacles of up to some thousands of triangles.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ._pairs import SLACK, segment_distance2
+
+_MAX_ADVANCE = 100_000
+
+
+def check_obstacles(obstacles) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``obstacles`` as a list of ``(V, F)`` float64 / int64 arrays, checked.
+
+    Raises
+    ------
+    ValueError
+        Not a list of ``(V, F)`` pairs; a mesh without triangles; ``V`` not (M, 3) finite
+        numbers; ``F`` not (K, 3) integers indexing ``V``; a triangle with a repeated vertex
+        or no area; an edge shared by more than two triangles (non-manifold). Each message
+        names the mesh and the triangle or edge.
+    """
+    if isinstance(obstacles, tuple) and len(obstacles) == 2 and not isinstance(
+            obstacles[0], tuple):
+        obstacles = [obstacles]  # one mesh given as (V, F)
+    try:
+        meshes = list(obstacles)
+    except TypeError:
+        raise ValueError("obstacles must be a list of (V, F) meshes: V an (M, 3) array of "
+                         "vertices, F a (K, 3) array of triangles") from None
+    out = []
+    for m, mesh in enumerate(meshes):
+        try:
+            V, F = mesh
+        except (TypeError, ValueError):
+            raise ValueError(f"obstacle {m} is not a (V, F) pair of vertices and triangles"
+                             ) from None
+        V = np.asarray(V, dtype=np.float64)
+        F_in = np.asarray(F)
+        if V.ndim != 2 or V.shape[1] != 3 or len(V) < 3:
+            raise ValueError(f"obstacle {m}: V must be an (M, 3) array of at least 3 vertices, "
+                             f"got shape {V.shape}")
+        if not np.all(np.isfinite(V)):
+            bad = int(np.flatnonzero(~np.all(np.isfinite(V), axis=1))[0])
+            raise ValueError(f"obstacle {m}: vertex {bad} has a non-finite coordinate "
+                             f"{V[bad].tolist()}")
+        if F_in.size == 0:
+            raise ValueError(f"obstacle {m} is empty: it has no triangles")
+        if F_in.ndim != 2 or F_in.shape[1] != 3:
+            raise ValueError(f"obstacle {m}: F must be a (K, 3) array of triangles (vertex "
+                             f"indices), got shape {F_in.shape}")
+        if not np.issubdtype(F_in.dtype, np.integer):
+            if not np.all(np.isfinite(F_in)) or np.any(F_in != np.round(F_in)):
+                raise ValueError(f"obstacle {m}: F must hold integer vertex indices")
+        F = F_in.astype(np.int64)
+        if F.min() < 0 or F.max() >= len(V):
+            k = int(np.flatnonzero((F < 0).any(axis=1) | (F >= len(V)).any(axis=1))[0])
+            raise ValueError(f"obstacle {m}: triangle {k} {F[k].tolist()} indexes a vertex "
+                             f"outside 0..{len(V) - 1}")
+        rep = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+        if rep.any():
+            k = int(np.flatnonzero(rep)[0])
+            raise ValueError(f"obstacle {m}: triangle {k} {F[k].tolist()} repeats a vertex")
+        a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+        area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        size = float(np.ptp(V, axis=0).max())
+        flat = area <= 1e-12 * size * size
+        if flat.any():
+            k = int(np.flatnonzero(flat)[0])
+            raise ValueError(f"obstacle {m}: triangle {k} {F[k].tolist()} has no area (its "
+                             f"vertices lie on a line)")
+        edges = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+        uniq, counts = np.unique(edges, axis=0, return_counts=True)
+        if counts.max() > 2:
+            e = uniq[int(np.argmax(counts))]
+            raise ValueError(f"obstacle {m} is not a manifold: its edge between vertices "
+                             f"{int(e[0])} and {int(e[1])} belongs to {int(counts.max())} "
+                             f"triangles (at most 2)")
+        out.append((V, F))
+    if not out:
+        raise ValueError("obstacles is empty: give at least one (V, F) mesh, or None")
+    return out
+
+
+# -- geometry (scalar arithmetic: no allocation in the pair loops) -----------------------------
+
+
+@nb.njit(cache=True)
+def _closest_on_triangle(px, py, pz, T, k):
+    """Nearest point of triangle ``k`` (``T[k]``: its three corners) to ``p``, by the region
+    of the triangle's plane ``p`` projects into (corner, edge or face)."""
+    ax, ay, az = T[k, 0, 0], T[k, 0, 1], T[k, 0, 2]
+    bx, by, bz = T[k, 1, 0], T[k, 1, 1], T[k, 1, 2]
+    cx, cy, cz = T[k, 2, 0], T[k, 2, 1], T[k, 2, 2]
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return ax, ay, az
+    bpx, bpy, bpz = px - bx, py - by, pz - bz
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
+    if d3 >= 0.0 and d4 <= d3:
+        return bx, by, bz
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        t = d1 / (d1 - d3)
+        return ax + t * abx, ay + t * aby, az + t * abz
+    cpx, cpy, cpz = px - cx, py - cy, pz - cz
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
+    if d6 >= 0.0 and d5 <= d6:
+        return cx, cy, cz
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        t = d2 / (d2 - d6)
+        return ax + t * acx, ay + t * acy, az + t * acz
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return bx + t * (cx - bx), by + t * (cy - by), bz + t * (cz - bz)
+    s = 1.0 / (va + vb + vc)
+    v = vb * s
+    w = vc * s
+    return ax + v * abx + w * acx, ay + v * aby + w * acy, az + v * abz + w * acz
+
+
+@nb.njit(cache=True)
+def _segment_crosses(p0x, p0y, p0z, p1x, p1y, p1z, T, k):
+    """Whether the segment [p0, p1] meets triangle ``k`` (ends on opposite sides of its
+    plane, or on it, and the meeting point inside the triangle)."""
+    ax, ay, az = T[k, 0, 0], T[k, 0, 1], T[k, 0, 2]
+    e1x, e1y, e1z = T[k, 1, 0] - ax, T[k, 1, 1] - ay, T[k, 1, 2] - az
+    e2x, e2y, e2z = T[k, 2, 0] - ax, T[k, 2, 1] - ay, T[k, 2, 2] - az
+    nx = e1y * e2z - e1z * e2y
+    ny = e1z * e2x - e1x * e2z
+    nz = e1x * e2y - e1y * e2x
+    s0 = nx * (p0x - ax) + ny * (p0y - ay) + nz * (p0z - az)
+    s1 = nx * (p1x - ax) + ny * (p1y - ay) + nz * (p1z - az)
+    if (s0 > 0.0 and s1 > 0.0) or (s0 < 0.0 and s1 < 0.0) or s0 == s1:
+        return False  # one side, or in the plane (then an edge or end is nearest)
+    t = s0 / (s0 - s1)
+    qx = p0x + t * (p1x - p0x) - ax
+    qy = p0y + t * (p1y - p0y) - ay
+    qz = p0z + t * (p1z - p0z) - az
+    # barycentric coordinates of q in the triangle
+    d11 = e1x * e1x + e1y * e1y + e1z * e1z
+    d12 = e1x * e2x + e1y * e2y + e1z * e2z
+    d22 = e2x * e2x + e2y * e2y + e2z * e2z
+    dq1 = qx * e1x + qy * e1y + qz * e1z
+    dq2 = qx * e2x + qy * e2y + qz * e2z
+    den = d11 * d22 - d12 * d12
+    v = (d22 * dq1 - d12 * dq2) / den
+    w = (d11 * dq2 - d12 * dq1) / den
+    return v >= 0.0 and w >= 0.0 and v + w <= 1.0
+
+
+@nb.njit(cache=True)
+def _segment_triangle_distance2(p0x, p0y, p0z, p1x, p1y, p1z, T, k):
+    """Squared distance of the segment [p0, p1] and triangle ``k``: 0 when they meet, else
+    the least of the ends' distances to the triangle and the segment's to its three sides
+    (a segment apart from a triangle has its nearest pair at one of those)."""
+    if _segment_crosses(p0x, p0y, p0z, p1x, p1y, p1z, T, k):
+        return 0.0
+    qx, qy, qz = _closest_on_triangle(p0x, p0y, p0z, T, k)
+    best = (p0x - qx) ** 2 + (p0y - qy) ** 2 + (p0z - qz) ** 2
+    qx, qy, qz = _closest_on_triangle(p1x, p1y, p1z, T, k)
+    best = min(best, (p1x - qx) ** 2 + (p1y - qy) ** 2 + (p1z - qz) ** 2)
+    for s in range(3):
+        a = T[k, s]
+        b = T[k, (s + 1) % 3]
+        d2, _s, _t = segment_distance2(p0x, p0y, p0z, p1x, p1y, p1z,
+                                       a[0], a[1], a[2], b[0], b[1], b[2])
+        best = min(best, d2)
+    return best
+
+
+# -- energy and gradient ----------------------------------------------------------------------
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _edge_terms(X, nxt, T, area, grad):
+    """Per edge: its energy ``Σ_T l A / d³`` and, with ``grad``, the derivatives of that sum
+    with respect to the midpoint (``gm``) and to the length (``gl``)."""
+    n = X.shape[0]
+    e = np.zeros(n)
+    gm = np.zeros((n, 3))
+    gl = np.zeros(n)
+    for i in nb.prange(n):
+        j = nxt[i]
+        mx = 0.5 * (X[i, 0] + X[j, 0])
+        my = 0.5 * (X[i, 1] + X[j, 1])
+        mz = 0.5 * (X[i, 2] + X[j, 2])
+        ln = np.sqrt((X[j, 0] - X[i, 0]) ** 2 + (X[j, 1] - X[i, 1]) ** 2
+                     + (X[j, 2] - X[i, 2]) ** 2)
+        s = 0.0
+        sx = 0.0
+        sy = 0.0
+        sz = 0.0
+        for k in range(T.shape[0]):
+            qx, qy, qz = _closest_on_triangle(mx, my, mz, T, k)
+            rx, ry, rz = mx - qx, my - qy, mz - qz
+            d2 = rx * rx + ry * ry + rz * rz
+            inv3 = area[k] / (d2 * np.sqrt(d2))  # A / d³
+            s += inv3
+            if grad:
+                f = -3.0 * inv3 / d2  # ∂(A d⁻³)/∂m = −3 A d⁻⁵ (m − q)
+                sx += f * rx
+                sy += f * ry
+                sz += f * rz
+        e[i] = ln * s
+        if grad:
+            gm[i, 0] = ln * sx
+            gm[i, 1] = ln * sy
+            gm[i, 2] = ln * sz
+            gl[i] = s
+    return e, gm, gl
+
+
+@nb.njit(cache=True)
+def _gather(X, nxt, prv, gm, gl):
+    """Vertex gradient from the edges' midpoint and length derivatives."""
+    n = X.shape[0]
+    G = np.empty((n, 3))
+    for v in range(n):
+        p = prv[v]
+        j = nxt[v]
+        lv = np.sqrt((X[j, 0] - X[v, 0]) ** 2 + (X[j, 1] - X[v, 1]) ** 2
+                     + (X[j, 2] - X[v, 2]) ** 2)
+        lp = np.sqrt((X[v, 0] - X[p, 0]) ** 2 + (X[v, 1] - X[p, 1]) ** 2
+                     + (X[v, 2] - X[p, 2]) ** 2)
+        for d in range(3):
+            # edge v = (v, nxt v): ∂l/∂x_v = −t_v; edge p = (p, v): ∂l/∂x_v = t_p
+            G[v, d] = (0.5 * (gm[v, d] + gm[p, d]) - gl[v] * (X[j, d] - X[v, d]) / lv
+                       + gl[p] * (X[v, d] - X[p, d]) / lp)
+    return G
+
+
+# -- contact ----------------------------------------------------------------------------------
+
+
+@nb.njit(cache=True, parallel=True)
+def _contact(X, U, nxt, T, centre, radius, tau_max, eps, nchunks):
+    """First τ ≤ tau_max at which an edge of ``X − τU`` comes within ``eps`` of a triangle
+    (conservative: never later than the true time). An edge's points move at most at its
+    larger endpoint speed ``v`` (the triangles do not move), so the distance ``d`` allows
+    ``τ`` to advance by ``(d − eps) / v``; a pair whose bounding spheres cannot meet before
+    the best time so far is skipped."""
+    n = X.shape[0]
+    best = np.full(nchunks, tau_max)
+    for cc in nb.prange(nchunks):
+        tb = tau_max
+        for i in range(cc, n, nchunks):
+            j = nxt[i]
+            v = max(np.sqrt(U[i, 0] ** 2 + U[i, 1] ** 2 + U[i, 2] ** 2),
+                    np.sqrt(U[j, 0] ** 2 + U[j, 1] ** 2 + U[j, 2] ** 2))
+            if v == 0.0:
+                continue
+            mx = 0.5 * (X[i, 0] + X[j, 0])
+            my = 0.5 * (X[i, 1] + X[j, 1])
+            mz = 0.5 * (X[i, 2] + X[j, 2])
+            half = 0.5 * np.sqrt((X[j, 0] - X[i, 0]) ** 2 + (X[j, 1] - X[i, 1]) ** 2
+                                 + (X[j, 2] - X[i, 2]) ** 2)
+            for k in range(T.shape[0]):
+                gap = np.sqrt((mx - centre[k, 0]) ** 2 + (my - centre[k, 1]) ** 2
+                              + (mz - centre[k, 2]) ** 2) - half - radius[k] - eps
+                tau = max(gap / v, 0.0)
+                if tau >= tb:
+                    continue
+                for _ in range(_MAX_ADVANCE):
+                    d2 = _segment_triangle_distance2(
+                        X[i, 0] - tau * U[i, 0], X[i, 1] - tau * U[i, 1],
+                        X[i, 2] - tau * U[i, 2], X[j, 0] - tau * U[j, 0],
+                        X[j, 1] - tau * U[j, 1], X[j, 2] - tau * U[j, 2], T, k)
+                    d = np.sqrt(d2)
+                    if d <= SLACK * eps:
+                        break
+                    tau += (d - eps) / v
+                    if tau >= tb:
+                        break
+                tb = min(tb, tau)
+        best[cc] = tb
+    return best.min()
+
+
+@nb.njit(cache=True, parallel=True)
+def _nearest(X, nxt, T):
+    """Per edge: the nearest triangle and the squared distance to it (0 where they meet)."""
+    n = X.shape[0]
+    which = np.empty(n, np.int64)
+    dist2 = np.empty(n)
+    for i in nb.prange(n):
+        j = nxt[i]
+        b = np.inf
+        w = -1
+        for k in range(T.shape[0]):
+            d2 = _segment_triangle_distance2(X[i, 0], X[i, 1], X[i, 2],
+                                             X[j, 0], X[j, 1], X[j, 2], T, k)
+            if d2 < b:
+                b = d2
+                w = k
+        which[i] = w
+        dist2[i] = b
+    return which, dist2
+
+
+class ObstacleField:
+    """The triangles of all obstacles in a run's coordinates (``(x − shift) / scale``), and
+    what the flow asks of them.
+
+    Parameters
+    ----------
+    meshes : list of (V, F)
+        As :func:`check_obstacles` returns them (in the caller's coordinates).
+    shift, scale
+        The run's map from the caller's coordinates to its own.
+    weight : float
+        Factor of the obstacle energy in the flow's objective.
+    """
+
+    def __init__(self, meshes, shift=0.0, scale: float = 1.0, weight: float = 1.0):
+        tri, owner, local = [], [], []
+        for m, (V, F) in enumerate(meshes):
+            tri.append(((V - shift) / scale)[F])
+            owner.append(np.full(len(F), m))
+            local.append(np.arange(len(F)))
+        self.T = np.ascontiguousarray(np.concatenate(tri))  # (K, 3, 3)
+        self.owner = np.concatenate(owner)
+        self.local = np.concatenate(local)
+        a, b, c = self.T[:, 0], self.T[:, 1], self.T[:, 2]
+        self.area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
+        self.centre = np.ascontiguousarray((a + b + c) / 3.0)
+        self.radius = np.max(np.linalg.norm(self.T - self.centre[:, None, :], axis=2), axis=1)
+        self.weight = float(weight)
+        self.scale = float(scale)
+
+    @property
+    def triangles(self) -> int:
+        return int(self.T.shape[0])
+
+    def energy(self, X: np.ndarray, nxt: np.ndarray) -> float:
+        """``weight × E_obs`` of the polygon(s) ``X`` with successor array ``nxt``."""
+        e, _, _ = _edge_terms(X, nxt, self.T, self.area, False)
+        return self.weight * float(e.sum())
+
+    def energy_gradient(self, X: np.ndarray, nxt: np.ndarray, prv: np.ndarray
+                        ) -> tuple[float, np.ndarray]:
+        """``weight × (E_obs, ∇E_obs)``; the gradient is (N, 3)."""
+        e, gm, gl = _edge_terms(X, nxt, self.T, self.area, True)
+        G = _gather(X, nxt, prv, gm, gl)
+        return self.weight * float(e.sum()), self.weight * G
+
+    def contact_time(self, X: np.ndarray, U: np.ndarray, nxt: np.ndarray, tau_max: float,
+                     eps: float) -> float:
+        """Smallest ``τ ≤ tau_max`` at which ``X − τU`` comes within ``eps`` of a triangle
+        (conservative), or ``tau_max``."""
+        U = np.ascontiguousarray(U, dtype=np.float64)
+        chunks = 4 * nb.get_num_threads()
+        return float(_contact(X, U, nxt, self.T, self.centre, self.radius, float(tau_max),
+                              float(eps), chunks))
+
+    def nearest(self, X: np.ndarray, nxt: np.ndarray) -> tuple[int, int, float]:
+        """``(edge, triangle, distance)`` of the closest edge–triangle pair (0: they meet)."""
+        which, dist2 = _nearest(X, nxt, self.T)
+        i = int(np.argmin(dist2))
+        return i, int(which[i]), float(np.sqrt(dist2[i]))
+
+    def check_clear(self, X: np.ndarray, layout, eps: float) -> None:
+        """Refuse a start that crosses or touches an obstacle (within ``eps``), naming the
+        edge, the obstacle and its triangle, in the caller's units."""
+        i, k, d = self.nearest(X, layout.nxt)
+        if d > eps:
+            return
+        c = int(layout.comp[i])
+        edge = int(i - layout.starts[c])
+        where = f"edge {edge} of component {c}" if layout.is_link else f"edge {edge}"
+        tri = f"triangle {int(self.local[k])} of obstacle {int(self.owner[k])}"
+        if d == 0.0:
+            raise ValueError(f"the curve crosses an obstacle: {where} passes through {tri}; "
+                             "move the curve or the obstacle so that they do not meet")
+        raise ValueError(f"the curve touches an obstacle: {where} is {d * self.scale:.3g} "
+                         f"from {tri}; move it clear first")

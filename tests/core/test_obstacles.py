@@ -1,0 +1,268 @@
+"""Obstacles (issue 18): meshes the curve is repelled from and never crosses."""
+
+import numpy as np
+import pytest
+
+from moebius_addon import core
+from moebius_addon.core import obstacles as ob
+from moebius_addon.core._layout import as_layout
+
+
+def torus(R=1.0, r=0.3, nu=24, nv=10):
+    u = np.linspace(0, 2 * np.pi, nu, endpoint=False)
+    v = np.linspace(0, 2 * np.pi, nv, endpoint=False)
+    U, W = np.meshgrid(u, v, indexing="ij")
+    V = np.stack([(R + r * np.cos(W)) * np.cos(U), (R + r * np.cos(W)) * np.sin(U),
+                  r * np.sin(W)], -1).reshape(-1, 3)
+    F = []
+    for i in range(nu):
+        for j in range(nv):
+            a, b = i * nv + j, (i + 1) % nu * nv + j
+            c, d = (i + 1) % nu * nv + (j + 1) % nv, i * nv + (j + 1) % nv
+            F += [[a, b, c], [a, c, d]]
+    return V, np.array(F)
+
+
+def ring_around_tube(n=120):
+    """A wobbly loop around the torus' tube (linked with its core circle)."""
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    P = np.stack([1.0 + 0.6 * np.cos(t) + 0.1 * np.cos(3 * t), 0.15 * np.sin(5 * t),
+                  0.6 * np.sin(t)], -1)
+    return core.resample(P, n)
+
+
+# -- independent references (numpy, other algorithms than the module's) -----------------------
+
+
+def ref_point_triangle(p, a, b, c):
+    """Distance by the plane projection when it falls inside, else the nearest of the sides."""
+    n = np.cross(b - a, c - a)
+    n = n / np.linalg.norm(n)
+    q = p - np.dot(p - a, n) * n
+    M = np.array([b - a, c - a]).T
+    vw, *_ = np.linalg.lstsq(M, q - a, rcond=None)
+    if vw[0] >= 0 and vw[1] >= 0 and vw.sum() <= 1:
+        return np.linalg.norm(p - q)
+
+    def seg(p, x, y):
+        t = np.clip(np.dot(p - x, y - x) / np.dot(y - x, y - x), 0, 1)
+        return np.linalg.norm(p - (x + t * (y - x)))
+
+    return min(seg(p, a, b), seg(p, b, c), seg(p, c, a))
+
+
+def ref_crosses(p0, p1, a, b, c):
+    """Segment–triangle intersection by Cramer's rule on p0 + t (p1 − p0) = a + v e1 + w e2."""
+    M = np.array([p0 - p1, b - a, c - a]).T
+    if abs(np.linalg.det(M)) < 1e-300:
+        return False
+    t, v, w = np.linalg.solve(M, p0 - a)
+    return 0 <= t <= 1 and v >= 0 and w >= 0 and v + w <= 1
+
+
+def ref_energy(X, tris):
+    E = 0.0
+    n = len(X)
+    for i in range(n):
+        x0, x1 = X[i], X[(i + 1) % n]
+        m, ln = 0.5 * (x0 + x1), np.linalg.norm(x1 - x0)
+        for T in tris:
+            area = 0.5 * np.linalg.norm(np.cross(T[1] - T[0], T[2] - T[0]))
+            E += ln * area / ref_point_triangle(m, *T) ** 3
+    return E
+
+
+def crossings(P, V, F):
+    """(edge, triangle) pairs of the polygon P that meet the mesh (independent test: every
+    pair's 3 × 3 system p0 + t (p1 − p0) = a + v e1 + w e2 solved at once)."""
+    p0, p1 = P, np.roll(P, -1, axis=0)
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    M = np.stack(np.broadcast_arrays((p0 - p1)[:, None], (b - a)[None], (c - a)[None]), -1)
+    rhs = p0[:, None] - a[None]
+    ok = np.abs(np.linalg.det(M)) > 1e-300
+    sol = np.zeros(rhs.shape)
+    sol[ok] = np.linalg.solve(M[ok], rhs[ok][..., None])[..., 0]
+    t, v, w = sol[..., 0], sol[..., 1], sol[..., 2]
+    hit = ok & (t >= 0) & (t <= 1) & (v >= 0) & (w >= 0) & (v + w <= 1)
+    return list(zip(*np.nonzero(hit), strict=True))
+
+
+# -- geometry ---------------------------------------------------------------------------------
+
+
+def test_nearest_point_of_a_triangle_against_a_reference(rng):
+    for _ in range(300):
+        T = rng.normal(size=(1, 3, 3))
+        p = rng.normal(size=3) * 2
+        q = ob._closest_on_triangle(p[0], p[1], p[2], T, 0)
+        assert np.linalg.norm(p - np.array(q)) == pytest.approx(ref_point_triangle(p, *T[0]),
+                                                                rel=1e-9, abs=1e-12)
+
+
+def test_segment_triangle_distance_against_sampling(rng):
+    for _ in range(50):
+        T = rng.normal(size=(1, 3, 3))
+        p0, p1 = rng.normal(size=3) * 1.5, rng.normal(size=3) * 1.5
+        d = np.sqrt(ob._segment_triangle_distance2(*p0, *p1, T, 0))
+        if ref_crosses(p0, p1, *T[0]):
+            assert d == 0.0
+            continue
+        s = np.linspace(0, 1, 1001)
+        sampled = min(ref_point_triangle(p0 + t * (p1 - p0), *T[0]) for t in s)
+        assert d <= sampled + 1e-12  # never above any point's distance
+        assert d == pytest.approx(sampled, abs=2e-3 * np.linalg.norm(p1 - p0))
+
+
+# -- energy and gradient ----------------------------------------------------------------------
+
+
+def test_energy_against_a_slow_reference():
+    V, F = torus(nu=8, nv=6)
+    P = ring_around_tube(40)
+    fld = ob.ObstacleField(ob.check_obstacles([(V, F)]), weight=2.0)
+    X, lay = as_layout(P)
+    assert fld.energy(X, lay.nxt) == pytest.approx(2.0 * ref_energy(X, V[F]), rel=1e-12)
+    E, _ = fld.energy_gradient(X, lay.nxt, lay.prv)
+    assert E == pytest.approx(fld.energy(X, lay.nxt), rel=1e-14)
+
+
+def test_gradient_by_finite_differences(rng):
+    V, F = torus(nu=10, nv=6)
+    P = ring_around_tube(50)
+    fld = ob.ObstacleField(ob.check_obstacles([(V, F)]))
+    X, lay = as_layout(P)
+    _, G = fld.energy_gradient(X, lay.nxt, lay.prv)
+    for _ in range(3):
+        D = rng.normal(size=X.shape)
+        h = 1e-6
+        fd = (fld.energy(X + h * D, lay.nxt) - fld.energy(X - h * D, lay.nxt)) / (2 * h)
+        assert np.sum(G * D) == pytest.approx(fd, rel=1e-6)
+
+
+# -- the flow ---------------------------------------------------------------------------------
+
+
+def plate_across_the_flow(fhw_raw):
+    """FHW at 600 edges, its free flow's first 20 iterates, and a small square plate (two
+    triangles) across the path of the vertex that moves most from iterate 15 to 16."""
+    P = core.resample(fhw_raw, 600)
+    free = [P]
+    core.relax(P, max_iter=20, engine="exact", callback=lambda s: free.append(s.x.copy()))
+    step = np.linalg.norm(free[16] - free[15], axis=1)
+    v = int(np.argmax(step))
+    c = 0.5 * (free[15][v] + free[16][v])
+    n = (free[16][v] - free[15][v]) / step[v]
+    e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    h = 3.0 * np.linalg.norm(P[1] - P[0])
+    V = np.array([c + h * (a * e1 + b * e2) for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+    return P, free, V, np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def crossed_on_the_way(iterates, V, F):
+    """Whether a straight step from one iterate to the next (what the step bound checks)
+    passes through the mesh, at 7 points of each step besides the iterates themselves."""
+    for A, B in zip(iterates[:-1], iterates[1:], strict=True):
+        for s in np.linspace(0, 1, 9):
+            if crossings(A + s * (B - A), V, F):
+                return True
+    return False
+
+
+@pytest.mark.parametrize("weight", [1.0, 0.0])
+def test_the_flow_never_crosses_the_obstacle(weight, fhw_raw):
+    # with weight 0 only the step bound keeps the curve out of the plate, which the free
+    # flow passes through
+    P, free, V, F = plate_across_the_flow(fhw_raw)
+    assert not crossings(P, V, F) and crossed_on_the_way(free, V, F)
+    iterates = [P]
+    r = core.relax(P, max_iter=30, obstacles=[(V, F)], obstacle_weight=weight,
+                   engine="exact", callback=lambda s: iterates.append(s.x.copy()))
+    assert r.nit >= 20 and np.all(np.diff(r.history["energy"]) <= 0)
+    assert not crossed_on_the_way(iterates, V, F)
+
+
+def test_a_ring_around_a_tube_stays_around_it():
+    V, F = torus()
+    P = ring_around_tube()
+    core_circle = np.stack([np.cos(t := np.linspace(0, 2 * np.pi, 200, endpoint=False)),
+                            np.sin(t), 0 * t], -1)
+    r = core.relax(P, max_iter=30, obstacles=(V, F), engine="exact")
+    assert r.fun < r.history["energy"][0] and not crossings(r.x, V, F)
+    # still linked with the tube's core circle: Gauss' integral, summed over edge midpoints
+    def gauss(A, B):
+        dA, dB = np.roll(A, -1, 0) - A, np.roll(B, -1, 0) - B
+        mA, mB = A + dA / 2, B + dB / 2
+        R = mA[:, None] - mB[None]
+        cr = np.cross(dA[:, None], dB[None])
+        return np.sum(np.einsum("ijk,ijk->ij", R, cr) / np.linalg.norm(R, axis=2) ** 3) / (
+            4 * np.pi)
+    assert abs(gauss(P, core_circle)) == pytest.approx(1.0, abs=0.05)
+    assert abs(gauss(r.x, core_circle)) == pytest.approx(1.0, abs=0.05)
+
+
+def test_the_tree_engine_takes_obstacles_too():
+    V, F = torus()
+    P = ring_around_tube(300)
+    r = core.relax(P, max_iter=8, obstacles=[(V, F)], engine="tree")
+    assert r.nit == 8 and r.fun < r.history["energy"][0] and not crossings(r.x, V, F)
+
+
+def test_every_method_takes_obstacles():
+    V, F = torus()
+    P = ring_around_tube(80)
+    for method in core.METHODS:
+        r = core.relax(P, method=method, max_iter=4, obstacles=[(V, F)], engine="exact")
+        assert r.fun < r.history["energy"][0], method
+        assert not crossings(r.x, V, F), method
+
+
+# -- refusals ---------------------------------------------------------------------------------
+
+
+def test_a_start_through_an_obstacle_is_refused_saying_where():
+    V, F = torus()
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    P = np.stack([1.0 + 0.5 * np.cos(t), 0.5 * np.sin(t), 0 * t], -1)  # cuts the tube twice
+    with pytest.raises(ValueError, match=r"crosses an obstacle: edge \d+ passes through "
+                                         r"triangle \d+ of obstacle 0"):
+        core.relax(P, obstacles=[(V, F)], max_iter=1)
+
+
+@pytest.mark.parametrize("mesh, message", [
+    ((np.zeros((0, 3)), np.zeros((0, 3), int)), "at least 3 vertices"),
+    ((np.eye(3), np.zeros((0, 3), int)), "is empty: it has no triangles"),
+    ((np.eye(3), np.array([[0, 1]])), r"\(K, 3\) array of triangles"),
+    ((np.eye(3), np.array([[0, 1, 3]])), r"triangle 0 \[0, 1, 3\] indexes a vertex outside"),
+    ((np.eye(3), np.array([[0, 1, 1]])), "repeats a vertex"),
+    ((np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0.0]]), np.array([[0, 1, 2]])), "has no area"),
+    ((np.array([[0, 0, np.nan], [1, 0, 0], [0, 1, 0.0]]), np.array([[0, 1, 2]])),
+     "vertex 0 has a non-finite coordinate"),
+    ((np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1.0]]),
+      np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4]])),
+     "not a manifold: its edge between vertices 0 and 1 belongs to 3 triangles"),
+    ((np.eye(3), np.array([[0, 1, 2.5]])), "integer vertex indices"),
+])
+def test_bad_meshes_are_refused_by_name(mesh, message):
+    P = ring_around_tube(60)
+    with pytest.raises(ValueError, match=message):
+        core.relax(P + 10.0, obstacles=[mesh], max_iter=1)
+
+
+def test_other_bad_obstacle_arguments():
+    P = ring_around_tube(60)
+    V, F = torus()
+    with pytest.raises(ValueError, match="obstacle 0 is not a"):
+        core.relax(P, obstacles=[V], max_iter=1)
+    with pytest.raises(ValueError, match="obstacles is empty"):
+        core.relax(P, obstacles=[], max_iter=1)
+    with pytest.raises(ValueError, match="obstacle_weight"):
+        core.relax(P, obstacles=[(V, F)], obstacle_weight=-1.0, max_iter=1)
+    # a circle a millionth of its radius above a large triangle's plane
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    C = np.stack([np.cos(t), np.sin(t), 0 * t + 1e-6], -1)
+    plane = (np.array([[-10, -10, 0], [10, -10, 0], [0, 10, 0.0]]), np.array([[0, 1, 2]]))
+    with pytest.raises(ValueError, match=r"touches an obstacle: edge \d+ is 1e-06 from "
+                                         r"triangle 0 of obstacle 0"):
+        core.relax(C, obstacles=[plane], max_iter=1)
