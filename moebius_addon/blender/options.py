@@ -75,6 +75,10 @@ def relax_settings(settings) -> dict:
             edge_lengths=settings.keep_edge_lengths,
             barycenter=settings.keep_barycenter,
         )
+    if getattr(settings, "pin_selected", False):
+        kwargs.update(pin_selected=True, pin_tangents=settings.pin_tangents)
+    if getattr(settings, "obstacles", None) is not None:
+        kwargs.update(obstacles=settings.obstacles, obstacle_weight=settings.obstacle_weight)
     if settings.use_energy_target:
         kwargs["energy_target"] = settings.energy_target
     if settings.max_seconds > 0:

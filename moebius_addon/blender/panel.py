@@ -198,6 +198,18 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
         col.label(text="Constraints")
         col.prop(s, "keep_edge_lengths")
         col.prop(s, "keep_barycenter")
+        col = layout.column(align=True)
+        col.label(text="Pins and Obstacles")
+        sub = col.column(align=True)
+        sub.active = "keep_edge_lengths" in acting  # the penalty methods refuse pins
+        sub.prop(s, "pin_selected")
+        row = sub.row()
+        row.active = s.pin_selected
+        row.prop(s, "pin_tangents")
+        col.prop(s, "obstacles", text="")
+        row = col.row()
+        row.active = s.obstacles is not None
+        row.prop(s, "obstacle_weight")
         layout.operator("moebius.show_gradient", icon="ORIENTATION_NORMAL")
 
 

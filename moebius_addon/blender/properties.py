@@ -8,6 +8,7 @@ from bpy.props import (
     EnumProperty,
     FloatProperty,
     IntProperty,
+    PointerProperty,
     StringProperty,
 )
 
@@ -133,6 +134,27 @@ class MoebiusSettings(bpy.types.PropertyGroup):
         name="Keep Barycenter", default=True,
         description="Constrain the barycenter so the curve does not drift (not with the "
                     "penalty methods)",
+    )
+    # Pins and obstacles (scene_constraints)
+    pin_selected: BoolProperty(
+        name="Pin Selected Points", default=False,
+        description="Keep the points selected in Edit Mode exactly where they are (projected "
+                    "and implicit gradient, trust region; the penalty methods refuse pins)",
+    )
+    pin_tangents: BoolProperty(
+        name="Pin Tangents", default=False,
+        description="Also keep the two neighbours of each pinned point, so that the curve "
+                    "leaves it in the same directions",
+    )
+    obstacles: PointerProperty(
+        type=bpy.types.Collection, name="Obstacles",
+        description="Mesh objects of this collection repel the curve, which never passes "
+                    "through them (as shown: modifiers applied)",
+    )
+    obstacle_weight: FloatProperty(
+        name="Obstacle Weight", default=1.0, min=0.0, soft_max=10.0,
+        description="Weight of the obstacles' repulsion beside the curve's own energy (0: no "
+                    "repulsion, the curve is only stopped at the obstacles)",
     )
     use_energy_target: BoolProperty(
         name="Energy Target", default=False,

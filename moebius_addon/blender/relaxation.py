@@ -10,7 +10,7 @@ import bpy
 import numpy as np
 
 from .. import core
-from . import geometry, keyframes
+from . import geometry, keyframes, scene_constraints
 from .gradients import refresh_gradients
 from .identification import type_kept
 from .labels import (
@@ -110,7 +110,11 @@ class ObjectRelaxation:
         ``backproject_iter``, ``backproject_tol``, ``edge_lengths``, ``barycenter``,
         ``energy_target``, ``ftol``, ``max_seconds``, and the method's own options); the
         penalty methods ignore the options that need hard constraints. ``allow_large=True``
-        lifts :data:`~.options.EDGE_LIMIT` (never the core's own size refusals).
+        lifts :data:`~.options.EDGE_LIMIT` (never the core's own size refusals). Pins and
+        obstacles (:mod:`.scene_constraints`): ``pinned=`` indices (a list per spline for a
+        link) or ``pin_selected=True`` (the points selected in Edit Mode), ``pin_tangents``;
+        ``obstacles=`` a collection, a list of mesh objects or the core's ``(V, F)`` arrays
+        (in the curve's object coordinates), ``obstacle_weight``.
 
     Raises
     ------
@@ -136,6 +140,10 @@ class ObjectRelaxation:
         options.update(extra)
         polygons = geometry.curve_polygons(obj)
         keyframes.check_flow_target(obj)
+        try:  # obstacles as (V, F) arrays, selected points as pins
+            options = scene_constraints.resolve(obj, options)
+        except ValueError as err:
+            raise ValueError(f"'{obj.name}': {err}") from None
         self._shown = [p.copy() for p in polygons]  # the shape at the current frame
         self._cuts = np.cumsum([len(p) for p in polygons])[:-1]
         # the earlier flow keys, continued from their last iterate (read by show() otherwise)

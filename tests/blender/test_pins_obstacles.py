@@ -1,0 +1,157 @@
+"""Pins from the points selected in Edit Mode and obstacles from a collection of meshes
+(issue 18), through the panel's settings and the script functions."""
+
+from importlib import import_module
+
+import bpy
+import numpy as np
+import pytest
+from bpy_helpers import scene_state, spline_points
+
+
+def keyed(mb, obj):
+    """(frames, points per frame) of the flow keyed on ``obj``."""
+    frames, points, _ = import_module(mb.__name__ + ".keyframes").read_flow_keyframes(obj)
+    return frames, points
+
+
+def crossings(P, V, F):
+    """Edges of the closed polygon P (N, 3) that meet a triangle of (V, F): each edge–triangle
+    system p0 + t (p1 − p0) = a + v e1 + w e2 solved (independent of the extension)."""
+    p0, p1 = P, np.roll(P, -1, axis=0)
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    M = np.stack(np.broadcast_arrays((p0 - p1)[:, None], (b - a)[None], (c - a)[None]), -1)
+    rhs = p0[:, None] - a[None]
+    ok = np.abs(np.linalg.det(M)) > 1e-300
+    sol = np.zeros(rhs.shape)
+    sol[ok] = np.linalg.solve(M[ok], rhs[ok][..., None])[..., 0]
+    t, v, w = sol[..., 0], sol[..., 1], sol[..., 2]
+    return np.count_nonzero(ok & (t >= 0) & (t <= 1) & (v >= 0) & (w >= 0) & (v + w <= 1))
+
+
+def world_mesh(obj):
+    """(V, F) of a mesh object in world coordinates, triangulated."""
+    me = obj.data
+    me.calc_loop_triangles()
+    V = np.array([obj.matrix_world @ v.co for v in me.vertices])
+    F = np.array([t.vertices[:] for t in me.loop_triangles])
+    return V, F
+
+
+@pytest.fixture
+def trefoil(scene, mb):
+    bpy.ops.moebius.add_knot(kind="3_1", edges=60)
+    return bpy.context.active_object
+
+
+@pytest.fixture
+def ring_and_torus(scene, mb):
+    """A torus in a collection 'Obstacles' (moved and scaled: world coordinates matter) and a
+    converted ring around its tube (a curve object with its own transform)."""
+    coll = bpy.data.collections.new("Obstacles")
+    scene.collection.children.link(coll)
+    bpy.ops.mesh.primitive_torus_add(major_radius=1.0, minor_radius=0.3, major_segments=24,
+                                     minor_segments=10, location=(0.5, 0.0, 0.0))
+    torus = bpy.context.active_object
+    torus.scale = (1.2, 1.2, 1.2)
+    for c in torus.users_collection:
+        c.objects.unlink(torus)
+    coll.objects.link(torus)
+    t = np.linspace(0, 2 * np.pi, 80, endpoint=False)
+    ring = np.stack([1.7 + 0.65 * np.cos(t) + 0.1 * np.cos(3 * t), 0.15 * np.sin(5 * t),
+                     0.65 * np.sin(t)], -1)
+    # the curve object sits at +1 in x, its points 1 less: the same place in the world
+    mb_core = import_module(mb.__name__.rsplit(".", 1)[0] + ".core")
+    ring = mb_core.resample(ring, 80) - np.array([1.0, 0.0, 0.0])
+    curve = bpy.data.curves.new("Ring", "CURVE")
+    curve.dimensions = "3D"
+    s = curve.splines.new("POLY")
+    s.points.add(len(ring) - 1)
+    s.points.foreach_set("co", np.c_[ring, np.ones(len(ring))].ravel())
+    s.use_cyclic_u = True
+    obj = bpy.data.objects.new("Ring", curve)
+    obj.location = (1.0, 0.0, 0.0)
+    scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    bpy.context.view_layer.update()
+    return obj, torus, coll
+
+
+def test_selected_points_stay_where_they_are(scene, mb, trefoil):
+    pts = trefoil.data.splines[0].points
+    for p in pts:
+        p.select = False
+    for i in (0, 1, 20, 41):
+        pts[i].select = True
+    start = spline_points(trefoil).copy()
+    s = scene.moebius
+    s.pin_selected = True
+    s.method = "projected_gradient"
+    s.max_iterations = 6
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    frames, points = keyed(mb, trefoil)
+    assert len(frames) == 7
+    moved = np.linalg.norm(points[-1] - start, axis=1)
+    assert np.all(moved[[0, 1, 20, 41]] == 0.0)  # exact
+    assert moved.max() > 1e-3  # the rest relaxed
+    assert s.last_energy_end < s.last_energy_start
+
+
+def test_pins_without_a_selection_or_with_a_penalty_method_are_refused(scene, mb, trefoil):
+    for p in trefoil.data.splines[0].points:
+        p.select = False
+    before = scene_state()
+    with pytest.raises(ValueError, match="Pin Selected Points is on, but no point of '.+' is "
+                                         "selected: select the points to pin in Edit Mode"):
+        mb.relax_object(trefoil, max_iterations=2, pin_selected=True)
+    trefoil.data.splines[0].points[3].select = True
+    with pytest.raises(ValueError, match="projected_gradient"):
+        mb.relax_object(trefoil, max_iterations=2, pin_selected=True, method="lbfgs")
+    assert scene_state() == before
+
+
+def test_the_ring_never_enters_the_torus(scene, mb, ring_and_torus):
+    ring, torus, coll = ring_and_torus
+    V, F = world_mesh(torus)
+    M = np.array(ring.matrix_world)
+    world = lambda P: P @ M[:3, :3].T + M[:3, 3]  # noqa: E731
+    # in the ring's own coordinates (1 less in x) the tube would cut it: the obstacle must be
+    # mapped into them, or this start would be refused
+    assert crossings(world(spline_points(ring)), V, F) == 0
+    assert crossings(spline_points(ring), V, F) > 0
+    s = scene.moebius
+    s.obstacles = coll
+    s.method = "projected_gradient"
+    s.max_iterations = 12
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    frames, points = keyed(mb, ring)
+    assert len(frames) == 13
+    for P in points:
+        assert crossings(world(P), V, F) == 0
+    assert s.last_energy_end < s.last_energy_start
+    # the ring still goes around the tube: it meets the plane y = 0 on both sides of the
+    # tube's core point (1.7, 0, 0)
+    P = world(points[-1])
+    Q = np.roll(P, -1, axis=0)
+    cross = (P[:, 1] <= 0) != (Q[:, 1] <= 0)
+    x = P[cross, 0] + (Q[cross, 0] - P[cross, 0]) * (-P[cross, 1]) / (Q[cross, 1] - P[cross, 1])
+    assert np.any(x < 1.7) and np.any(x > 1.7)
+
+
+def test_obstacles_as_objects_and_bad_obstacles(scene, mb, ring_and_torus):
+    ring, torus, coll = ring_and_torus
+    r = mb.relax_object(ring, max_iterations=3, method="projected_gradient", obstacles=[torus])
+    assert r.nit == 3
+    empty = bpy.data.collections.new("Empty")
+    before = scene_state()
+    with pytest.raises(ValueError, match="collection 'Empty' holds no mesh object"):
+        mb.relax_object(ring, max_iterations=2, obstacles=empty)
+    # a torus moved onto the ring: the start crosses it, refused naming where
+    torus.location = (1.7, 0.0, 0.0)
+    torus.scale = (0.65, 0.65, 2.0)
+    bpy.context.view_layer.update()
+    with pytest.raises(ValueError, match=r"crosses an obstacle: edge \d+ passes through "
+                                         r"triangle \d+ of obstacle 0"):
+        mb.relax_object(ring, max_iterations=2, obstacles=coll)
+    after = scene_state()
+    assert after["curves"] == before["curves"] and after["Ring/0"] == before["Ring/0"]
