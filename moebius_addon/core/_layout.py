@@ -1,8 +1,16 @@
 """Knots and links as one vertex array plus index arrays (private).
 
 A knot is an ``(N, 3)`` array, a link a list of them. The kernels see one contiguous ``(N, 3)``
-array ``X`` and index arrays that encode the closed components: edge ``I`` joins vertex ``I`` to
+array ``X`` and index arrays that encode the components: edge ``I`` joins vertex ``I`` to
 ``nxt[I]``, and vertex ``p`` is the end of edge ``prv[p]``.
+
+Open components (``closed=False``, docs/api.md "Open curves") keep the same arrays with one
+change: the last vertex ``v`` of an open component has ``nxt[v] = v``, so its edge slot holds
+a *dummy edge* of length 0 (edge vector 0, midpoint at the vertex), and ``prv`` of the first
+vertex still points at that dummy. Then every per-vertex weight built from the edge lengths
+(``(l_prv + l) / 2``, ``Σ l m``, totals) is already right for the polyline, and the kernels
+that need it skip the dummy edge (``Layout.real``). ``closed`` is None when every component is
+closed: those layouts, and every kernel run on them, are exactly as before open curves.
 """
 
 from __future__ import annotations
@@ -21,6 +29,17 @@ class Layout:
     prv: np.ndarray  # (N,) previous vertex along the component
     comp: np.ndarray  # (N,) component of each vertex
     is_link: bool  # input was a list (results are returned as lists)
+    closed: np.ndarray | None = None  # (K,) bool per component, None: every one closed
+
+    @property
+    def has_open(self) -> bool:
+        """Whether some component is an open polyline."""
+        return self.closed is not None
+
+    @property
+    def real(self) -> np.ndarray:
+        """(N,) bool: edge slots that hold an edge (False: the dummy of an open component)."""
+        return self.nxt != np.arange(self.n)
 
     @property
     def n(self) -> int:
@@ -37,7 +56,8 @@ class Layout:
         return [X[self.starts[c] : self.starts[c + 1]].copy() for c in range(self.k)]
 
 
-def layout_from_sizes(sizes, is_link: bool) -> Layout:
+def layout_from_sizes(sizes, is_link: bool, closed=None) -> Layout:
+    """``closed``: None (every component closed) or one bool per component."""
     sizes = np.asarray(sizes, dtype=np.int64)
     starts = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
     n = int(starts[-1])
@@ -47,13 +67,46 @@ def layout_from_sizes(sizes, is_link: bool) -> Layout:
     prv = idx - 1
     nxt[starts[1:] - 1] = starts[:-1]
     prv[starts[:-1]] = starts[1:] - 1
-    return Layout(starts, nxt, prv, comp, is_link)
+    if closed is not None:
+        closed = np.asarray(closed, dtype=bool)
+        if closed.all():
+            closed = None
+        else:
+            last = starts[1:][~closed] - 1
+            nxt[last] = last  # the dummy edge of an open component (module docstring)
+    return Layout(starts, nxt, prv, comp, is_link, closed)
 
 
-def as_layout(P) -> tuple[np.ndarray, Layout]:
+#: Why the tree engine refuses open curves, and what works instead.
+OPEN_TREE_REFUSAL = ("open curves (closed=False) run on the exact engine only: pass "
+                     "engine='exact' (or 'auto', which takes it for open curves); the tree "
+                     "engine's Barnes-Hut sums and solvers assume closed components")
+
+#: Fewest vertices of an open component (two edges; with fewer there is no curve to relax).
+MIN_OPEN_VERTICES = 3
+
+
+def check_closed(closed, k: int, is_link: bool) -> list[bool]:
+    """``closed`` as one bool per component, or ValueError: a bool for a knot, a bool or one
+    bool per component for a link."""
+    if isinstance(closed, (bool, np.bool_)):
+        return [bool(closed)] * k
+    if is_link and isinstance(closed, (list, tuple, np.ndarray)) and len(closed) == k and all(
+            isinstance(c, (bool, np.bool_)) for c in closed):
+        return [bool(c) for c in closed]
+    if is_link:
+        raise ValueError(f"closed must be a bool or one bool per component of the link "
+                         f"({k} components), got {closed!r}")
+    raise ValueError(f"closed must be a bool (True: a closed polygon, False: an open "
+                     f"polyline), got {closed!r}")
+
+
+def as_layout(P, closed=True) -> tuple[np.ndarray, Layout]:
     """Stack a knot ``(N, 3)`` or a link (list of arrays) into ``(X, layout)``.
 
-    Shapes are checked here; finiteness and geometry in :func:`polygon.check_polygon`.
+    Shapes (and ``closed``: a bool, or one per component of a link; an open component needs
+    ``MIN_OPEN_VERTICES``) are checked here; finiteness and geometry in
+    :func:`polygon.check_polygon`.
     """
     is_link = isinstance(P, (list, tuple))
     parts = list(P) if is_link else [P]
@@ -67,7 +120,16 @@ def as_layout(P) -> tuple[np.ndarray, Layout]:
             raise ValueError(f"{where} must be an (N, 3) array of vertices, got shape {a.shape}")
         arrays.append(a)
     X = np.ascontiguousarray(np.concatenate(arrays, axis=0))
-    return X, layout_from_sizes([len(a) for a in arrays], is_link)
+    sizes = [len(a) for a in arrays]
+    if closed is True:  # the default: no flags, the layout of closed components
+        return X, layout_from_sizes(sizes, is_link)
+    flags = check_closed(closed, len(arrays), is_link)
+    for c, (size, cl) in enumerate(zip(sizes, flags, strict=True)):
+        if not cl and size < MIN_OPEN_VERTICES:
+            where = f"component {c}" if is_link else "the polyline"
+            raise ValueError(f"{where} has {size} vertices; an open polyline (closed=False) "
+                             f"needs at least {MIN_OPEN_VERTICES}")
+    return X, layout_from_sizes(sizes, is_link, flags)
 
 
 # Spans of coordinates inside [2^-_SPAN_BITS, 2^_SPAN_BITS] are used as they are; the kernels'
@@ -93,9 +155,9 @@ def unit_exponent(X: np.ndarray) -> int:
     return e + (e & 1)
 
 
-def as_unit_layout(P) -> tuple[np.ndarray, Layout, int]:
+def as_unit_layout(P, closed=True) -> tuple[np.ndarray, Layout, int]:
     """:func:`as_layout` with the vertices scaled by ``2^-k`` (:func:`unit_exponent`):
     ``(X · 2^-k, layout, k)``."""
-    X, layout = as_layout(P)
+    X, layout = as_layout(P, closed)
     k = unit_exponent(X)
     return (np.ldexp(X, -k) if k else X), layout, k

@@ -57,8 +57,10 @@ def _contact_rows(X, U, nxt, starts, comp, tau_max, eps, nchunks):
 def contact_time_x(X, U, layout: Layout, tau_max: float, eps: float,
                    search: str = "auto") -> float:
     """First contact of ``X − τU`` up to ``tau_max``; ``search`` "pairs" (all pairs), "tree"
-    (the hierarchy: the same value) or "auto" (the tree from ``CONTACT_TREE_FROM`` edges)."""
-    if _use_tree(search, layout.n, CONTACT_TREE_FROM):
+    (the hierarchy: the same value) or "auto" (the tree from ``CONTACT_TREE_FROM`` edges).
+    Open components' dummy edges (._layout) are points at their last vertex, tested as such;
+    open curves always take the all-pairs search."""
+    if _use_tree(search, layout.n, CONTACT_TREE_FROM) and not layout.has_open:
         return tree_contact.contact_time_tree(X, U, layout, tau_max, eps)
     return float(
         _contact_rows(X, np.ascontiguousarray(U), layout.nxt, layout.starts, layout.comp,
@@ -96,10 +98,12 @@ def max_collision_free_step(P, U, tau_max: float, eps: float | None = None) -> f
 
 
 @nb.njit(cache=True, parallel=True)
-def _closest_pairs(X, nxt, starts, comp, min_gap, nchunks):
+def _closest_pairs(X, nxt, starts, comp, closed, min_gap, nchunks):
     """Per chunk: the smallest distance between vertices at least ``min_gap`` apart along a
-    component (any two vertices of different components) and the smallest distance between
-    disjoint edges, with the indices where they occur."""
+    component (any two vertices of different components; around a closed component the
+    shorter way, along an open one without wrapping) and the smallest distance between
+    disjoint edges, with the indices where they occur (an open component's dummy edge, a
+    point at its last vertex, is left out)."""
     n = X.shape[0]
     vbest = np.full(nchunks, np.inf)
     vidx = np.zeros((nchunks, 2), dtype=np.int64)
@@ -115,7 +119,7 @@ def _closest_pairs(X, nxt, starts, comp, min_gap, nchunks):
             for j in range(i + 1, n):
                 same = comp[j] == c
                 gap = j - i
-                if same:
+                if same and closed[c]:
                     gap = min(gap, size - gap)
                 if (not same) or gap >= min_gap:
                     d2 = (X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (
@@ -125,8 +129,8 @@ def _closest_pairs(X, nxt, starts, comp, min_gap, nchunks):
                         vbest[ch] = d2
                         vidx[ch, 0] = i
                         vidx[ch, 1] = j
-                if (not same) or gap >= 2:
-                    j1 = nxt[j]
+                j1 = nxt[j]
+                if ((not same) or gap >= 2) and i1 != i and j1 != j:
                     d2, s, t = segment_distance2(
                         X[i, 0], X[i, 1], X[i, 2], X[i1, 0], X[i1, 1], X[i1, 2],
                         X[j, 0], X[j, 1], X[j, 2], X[j1, 0], X[j1, 1], X[j1, 2],
@@ -146,9 +150,11 @@ def closest_pairs(X: np.ndarray, layout: Layout, min_gap: int = 4, search: str =
     of the closest points on them). ``search`` as in :func:`contact_time_x` (the same
     distances; of pairs at equal distance the tree reports the one with the smallest indices;
     "auto": the tree from ``CLOSEST_TREE_FROM`` edges)."""
-    if _use_tree(search, layout.n, CLOSEST_TREE_FROM):
+    if _use_tree(search, layout.n, CLOSEST_TREE_FROM) and not layout.has_open:
         return tree_contact.closest_pairs_tree(X, layout, min_gap)
-    vb, vi, eb, ei, ep = _closest_pairs(X, layout.nxt, layout.starts, layout.comp, min_gap, 16)
+    closed = np.ones(layout.k, np.bool_) if layout.closed is None else layout.closed
+    vb, vi, eb, ei, ep = _closest_pairs(X, layout.nxt, layout.starts, layout.comp, closed,
+                                        min_gap, 16)
     a = int(np.argmin(vb))
     b = int(np.argmin(eb))
     return (

@@ -50,6 +50,8 @@ class Constraints:
         self.scale = float(self.lengths0.sum()) ** 2
         lay = self.layout
         has_edge = np.full(lay.n, self.edge_lengths)
+        if lay.has_open:
+            has_edge &= lay.real  # an open component's dummy edge (._layout) has no row
         has_bary = np.full(lay.k, self.barycenter)
         if self.pinned is not None:
             pin = np.zeros(lay.n, bool)
@@ -200,7 +202,12 @@ class Jacobian:
     def edge_fields(self) -> tuple[np.ndarray, np.ndarray]:
         """Unit tangents and ``1/l`` of every edge (those with a row: ``con.edge_index``) for
         the structured Schur complement of the edge rows."""
-        return self.T, 1.0 / self.ln
+        lay = self.con.layout
+        if not lay.has_open:
+            return self.T, 1.0 / self.ln
+        inv = np.zeros_like(self.ln)  # 0 at the dummy edges (no row, ._layout)
+        inv[lay.real] = 1.0 / self.ln[lay.real]
+        return self.T, inv
 
     def barycenter_fields(self) -> np.ndarray:
         """The barycenter rows of ``C`` as fields: array (3K', N, 3), K' the components that
@@ -219,9 +226,15 @@ def jacobian(X: np.ndarray, con: Constraints) -> Jacobian:
     layout = con.layout
     E = X[layout.nxt] - X
     ln = np.sqrt(np.einsum("ij,ij->i", E, E))
+    if layout.has_open:  # the dummy edges of open components: tangent 0, not 0/0
+        T = np.zeros_like(E)
+        real = layout.real
+        T[real] = E[real] / ln[real, None]
+    else:
+        T = E / ln[:, None]
     return Jacobian(
         con,
-        E / ln[:, None],
+        T,
         ln,
         0.5 * (X + X[layout.nxt]),
         0.5 * (ln[layout.prv] + ln),

@@ -14,7 +14,7 @@ import numba as nb
 import numpy as np
 
 from . import barnes_hut
-from ._layout import Layout, as_unit_layout
+from ._layout import OPEN_TREE_REFUSAL, Layout, as_unit_layout
 
 # Partial gradients go to a fixed number of buffers, independent of the thread count, so the
 # result is bit-for-bit the same on every machine with the same inputs.
@@ -186,12 +186,18 @@ def _energy_from_rows(rows: np.ndarray, layout: Layout) -> float:
 
 def energy_x(X: np.ndarray, layout: Layout) -> float:
     """Energy of the stacked vertex array (private fast path used by the flow)."""
+    if layout.closed is not None:
+        from .open_energy import open_energy_x  # it builds on this module
+        return open_energy_x(X, layout)
     ed = edge_data(X, layout)
     return _energy_from_rows(_energy_rows(*ed, layout.starts, layout.comp), layout)
 
 
 def energy_gradient_x(X: np.ndarray, layout: Layout) -> tuple[float, np.ndarray]:
     """Energy and exact gradient ``(N, 3)`` of the stacked vertex array."""
+    if layout.closed is not None:
+        from .open_energy import open_energy_gradient_x
+        return open_energy_gradient_x(X, layout)
     ed = edge_data(X, layout)
     rows, buf = _energy_gradient_parts(*ed, layout.starts, layout.comp, _CHUNKS)
     part = buf.sum(axis=0)  # (6, N): ∂/∂e_I then ∂/∂m_I of the unordered sum
@@ -204,14 +210,22 @@ def energy_gradient_x(X: np.ndarray, layout: Layout) -> tuple[float, np.ndarray]
 
 
 def _engine_x(X, layout, engine, theta):
-    """The Barnes–Hut frame for ``engine``/``theta`` at X, or None for the exact sum."""
+    """The Barnes–Hut frame for ``engine``/``theta`` at X, or None for the exact sum (always
+    for open curves: "auto" takes the exact sum, "tree" is refused)."""
     theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
+    if layout.has_open:
+        if engine == "tree":
+            raise ValueError(OPEN_TREE_REFUSAL)
+        if engine not in ("exact", "auto"):
+            barnes_hut.uses_tree(engine, layout.n)  # its message for an unknown name
+        return None
     if not barnes_hut.uses_tree(engine, layout.n):
         return None
     return barnes_hut.Frame(X, layout, theta)
 
 
-def moebius_energy(P, *, engine: str = "auto", theta: float | None = None) -> float:
+def moebius_energy(P, *, engine: str = "auto", theta: float | None = None,
+                   closed=True) -> float:
     """Discrete Möbius energy of a closed polygon or a link.
 
     Parameters
@@ -226,6 +240,10 @@ def moebius_energy(P, *, engine: str = "auto", theta: float | None = None) -> fl
     theta : float, optional
         Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); smaller is more
         accurate and slower.
+    closed : bool or sequence of bool
+        False: ``P`` is an open polyline (for a link: one flag per component, or one for
+        all), whose energy is O'Hara's regularized sum (docs/api.md, "Open curves"; exact
+        engine only).
 
     Returns
     -------
@@ -234,18 +252,18 @@ def moebius_energy(P, *, engine: str = "auto", theta: float | None = None) -> fl
         invariant under similarities and reversal. Scale-free (computed at a size near 1 for
         curves spanning more than 2^64 or less than 2^-64).
     """
-    X, layout, _ = as_unit_layout(P)
+    X, layout, _ = as_unit_layout(P, closed)
     frame = _engine_x(X, layout, engine, theta)
     return energy_x(X, layout) if frame is None else frame.energy(X)
 
 
-def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None):
+def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None, closed=True):
     """Exact derivative of :func:`moebius_energy` with respect to the vertices.
 
     Parameters
     ----------
     P : (N, 3) array or list of (N_k, 3) arrays
-    engine, theta
+    engine, theta, closed
         As in :func:`moebius_energy`; with the tree, the exact derivative of the approximated
         sum.
 
@@ -254,7 +272,7 @@ def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None):
     (N, 3) array or list of arrays
         Same shape as ``P``; units 1/length.
     """
-    X, layout, k = as_unit_layout(P)
+    X, layout, k = as_unit_layout(P, closed)
     frame = _engine_x(X, layout, engine, theta)
     g = (energy_gradient_x(X, layout) if frame is None else frame.energy_gradient(X))[1]
     return layout.split(np.ldexp(g, -k) if k else g)  # ∇E(2^k X) = 2^-k ∇E(X)

@@ -339,7 +339,8 @@ def make_engine(name: str, layout: Layout, metric: str, **options) -> DenseEngin
     ValueError
         For an unknown name (the message lists the valid ones).
     """
-    n = layout.n if name == "auto" else 0  # only "auto" looks at the size
+    # only "auto" looks at the size; open curves run on the exact engine (docs/api.md)
+    n = layout.n if name == "auto" and not layout.has_open else 0
     return engine_class(name, n)(layout, metric, **options)
 
 

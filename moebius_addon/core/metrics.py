@@ -25,6 +25,7 @@ import numba as nb
 import numpy as np
 
 from ._layout import Layout, as_unit_layout
+from .open_metrics import open_hs
 
 # Tiny L² term that keeps the pure W^{3/2,2} matrix definite for 4-gons, where disjoint edge
 # pairs do not connect all edges (docs/design.md: "+ a small L² term if needed").
@@ -200,8 +201,18 @@ def _stiffness_triplets(ln, layout):
     """``Dᵀ diag(l) D``: Σ_I |u[i+1] − u[i]|² / l_I, as triplets."""
     i = np.arange(len(ln))
     j = layout.nxt
-    k = 1.0 / ln
+    k = _inverse_lengths(ln, layout)
     return (i, j, i, j), (i, j, j, i), (k, k, -k, -k)
+
+
+def _inverse_lengths(ln, layout):
+    """``1 / l`` per edge slot; 0 at the dummy edges of open components (:mod:`._layout`)."""
+    if layout.closed is None:
+        return 1.0 / ln
+    real = layout.real
+    inv = np.zeros_like(ln)
+    inv[real] = 1.0 / ln[real]
+    return inv
 
 
 def _bending_triplets(ln, layout):
@@ -212,7 +223,12 @@ def _bending_triplets(ln, layout):
     dual = 0.5 * (ln[q] + ln)
     # (D2 u)_p = c_prev u[prv p] + c_mid u[p] + c_next u[nxt p]
     cols = np.stack([q, p, layout.nxt])
-    coef = np.stack([1.0 / ln[q], -1.0 / ln[q] - 1.0 / ln, 1.0 / ln]) / dual
+    if layout.closed is None:
+        coef = np.stack([1.0 / ln[q], -1.0 / ln[q] - 1.0 / ln, 1.0 / ln]) / dual
+    else:  # open ends: no bending term at a vertex with one edge (the ends bend freely)
+        inv = _inverse_lengths(ln, layout)
+        inner = layout.real & layout.real[q]
+        coef = np.stack([inv[q], -inv[q] - inv, inv]) / dual * inner
     rows, cs, vals = [], [], []
     for a in range(3):
         for b in range(3):
@@ -236,6 +252,11 @@ def _bending(ln, layout):
 
 def _hs_family(X, layout, ln, total, out, low):
     """``A_hs`` with its V part times ``low`` (1: ``hs``, 0: the top-order part alone)."""
+    if layout.closed is not None:
+        # Open components: an affine field along a straight stretch is in the kernel of both
+        # seminorms (v_IJ = 0 where the chord equals the arc), so the L² term of l2 is added
+        # to keep A definite on every polyline; closed curves are never straight.
+        return open_hs(X, layout, ln, low) + _mass(ln, layout) / total**3
     M = 0.5 * (X[layout.nxt] + X)
     arc = np.empty_like(ln)
     clen = np.empty(layout.k)
@@ -310,7 +331,7 @@ def gram_x(metric: str, X: np.ndarray, layout: Layout, out: np.ndarray | None = 
     return A
 
 
-def gram_matrix(metric: str, P) -> np.ndarray:
+def gram_matrix(metric: str, P, closed=True) -> np.ndarray:
     """Gram matrix of one coordinate for the given metric.
 
     Parameters
@@ -320,13 +341,16 @@ def gram_matrix(metric: str, P) -> np.ndarray:
         its top-order part alone; ``l2``, ``h1``, ``h2`` are the classical metrics for comparison.
     P : (N, 3) array or list of arrays
         Closed polygon or link.
+    closed : bool or sequence of bool
+        False for an open polyline (one flag per component of a link, or one for all):
+        docs/api.md, "Open curves".
 
     Returns
     -------
     (N, N) array
         Symmetric positive definite ``A`` with ``G = A ⊗ I₃``; entries scale as 1/length².
     """
-    X, layout, k = as_unit_layout(P)
+    X, layout, k = as_unit_layout(P, closed)
     A = gram_x(metric, X, layout)
     if not k:
         return A

@@ -258,10 +258,15 @@ def _gather(X, nxt, prv, gm, gl):
                      + (X[j, 2] - X[v, 2]) ** 2)
         lp = np.sqrt((X[v, 0] - X[p, 0]) ** 2 + (X[v, 1] - X[p, 1]) ** 2
                      + (X[v, 2] - X[p, 2]) ** 2)
+        # an open component's dummy edge (length 0, ._layout) has no length derivative, and
+        # does not end at its first vertex (prv of that vertex)
+        has_v = lv > 0.0
+        has_p = nxt[p] == v
         for d in range(3):
             # edge v = (v, nxt v): ∂l/∂x_v = −t_v; edge p = (p, v): ∂l/∂x_v = t_p
-            G[v, d] = (0.5 * (gm[v, d] + gm[p, d]) - gl[v] * (X[j, d] - X[v, d]) / lv
-                       + gl[p] * (X[v, d] - X[p, d]) / lp)
+            tv = gl[v] * (X[j, d] - X[v, d]) / lv if has_v else 0.0
+            tp = gl[p] * (X[v, d] - X[p, d]) / lp if has_p else 0.0
+            G[v, d] = 0.5 * (gm[v, d] + gm[p, d]) - tv + tp
     return G
 
 

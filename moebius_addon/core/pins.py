@@ -110,7 +110,11 @@ def check_pins(pinned, layout: Layout, X: np.ndarray, *, tangents: bool = False,
     if idx.size == 0:
         return None
     if tangents:
-        idx = np.unique(np.concatenate([idx, layout.nxt[idx], layout.prv[idx]]))
+        before = layout.prv[idx]
+        if layout.has_open:  # the first vertex of an open polyline has no neighbour before
+            first = ~layout.closed[layout.comp[idx]] & (idx == layout.starts[layout.comp[idx]])
+            before = np.where(first, idx, before)
+        idx = np.unique(np.concatenate([idx, layout.nxt[idx], before]))
     if idx.size == layout.n:
         raise ValueError(f"every vertex is pinned{' (with their neighbours)' if tangents else ''}"
                          f": nothing can move; leave some vertices free")
@@ -133,6 +137,8 @@ def _check_stretches(idx: np.ndarray, layout: Layout, X: np.ndarray, tangents: b
             gap = (b - a - 1) % m  # free vertices from a to b along the component
             if gap == 0 or a == b:  # adjacent pins, or one pin: a loop that can move
                 continue
+            if b < a and layout.has_open and not layout.closed[c]:
+                continue  # round the free ends of an open polyline: they can move
             edges = (np.arange(a, a + gap + 1) - s0) % m + s0
             if np.linalg.norm(X[b] - X[a]) >= _TAUT * ln[edges].sum():
                 where = f" of component {c}" if layout.is_link else ""

@@ -322,16 +322,18 @@ def _split_count(parts, n):
     return [int(c) for c in ns]
 
 
-def contact_ratio(P, min_gap: int = CONTACT_GAP) -> float:
+def contact_ratio(P, min_gap: int = CONTACT_GAP, closed=True) -> float:
     """Closest distance between vertices at least ``min_gap`` edges apart along the curve (or on
-    different components), divided by the mean edge length. The start check wants >= 1."""
-    X, layout, _ = as_unit_layout(P)
+    different components), divided by the mean edge length. The start check wants >= 1.
+    ``closed=False``: open polylines (distances along them do not wrap round the ends)."""
+    X, layout, _ = as_unit_layout(P, closed)
     (dv, _), _ = closest_pairs(X, layout, min_gap)
     return dv / _mean_edge(X, layout)
 
 
 def _mean_edge(X, layout):
-    return float(np.linalg.norm(X[layout.nxt] - X, axis=1).mean())
+    ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
+    return float((ln[layout.real] if layout.has_open else ln).mean())
 
 
 def _where(layout: Layout, v: int) -> str:
@@ -341,27 +343,31 @@ def _where(layout: Layout, v: int) -> str:
     return f"vertex {v - layout.starts[c]} of component {c}"
 
 
-def suggest_edge_count(P, max_edges: int = 20000, start: int | None = None) -> int | None:
+def suggest_edge_count(P, max_edges: int = 20000, start: int | None = None,
+                       closed: bool = True) -> int | None:
     """Smallest edge count (total over a link) whose equilateral resampling of ``P`` passes the
     contact check, searched upward in steps of 10% from ``start`` (default: a guess above
-    ``P``'s own count from its contact ratio); None if none up to ``max_edges``."""
-    X, layout, _ = as_unit_layout(P)
+    ``P``'s own count from its contact ratio); None if none up to ``max_edges``.
+    ``closed=False``: open polylines (vertex counts, as the result counts them)."""
+    closed = bool(closed)
+    X, layout, _ = as_unit_layout(P, closed)
     parts = layout.split(X) if layout.is_link else X
     if start is None:
         n = layout.n
-        ratio = contact_ratio(parts)
+        ratio = contact_ratio(parts, closed=closed)
         # the ratio grows about linearly with the edge count near a true contact
         start = max(n + 1, int(np.ceil(n * CONTACT_RATIO / max(ratio, 1e-9) * 1.05)))
     k = start
     while k <= max_edges:
-        Q = resample(parts, k)
-        if contact_ratio(Q) >= CONTACT_RATIO:
+        Q = resample(parts, k, closed)
+        if contact_ratio(Q, closed=closed) >= CONTACT_RATIO:
             return k
         k = int(np.ceil(k * 1.1))
     return None
 
 
-def check_polygon(P, *, coarseness: bool = True, name: str = "the curve") -> None:
+def check_polygon(P, *, coarseness: bool = True, name: str = "the curve",
+                  closed=True) -> None:
     """Raise ``ValueError`` if ``P`` cannot start a flow; the message says what to do.
 
     Checks, in order: shapes, at least 4 vertices per component, finite coordinates, no
@@ -369,11 +375,13 @@ def check_polygon(P, *, coarseness: bool = True, name: str = "the curve") -> Non
     and (``coarseness``) no near-contact closer than the resolution: vertices at least 4 edges
     apart must be at least one mean edge length apart, else the message names the edge count
     that works. Curves spanning more than 2^64 or less than 2^-64 are checked at a size near 1.
+    ``closed=False``: open polylines (a link: one flag per component, or one for all), with at
+    least 3 vertices, distances along them not wrapping round the ends.
     """
-    X, layout, e2 = as_unit_layout(P)
+    X, layout, e2 = as_unit_layout(P, closed)
     for c in range(layout.k):
         size = int(layout.starts[c + 1] - layout.starts[c])
-        if size < MIN_VERTICES:
+        if size < MIN_VERTICES and (layout.closed is None or layout.closed[c]):
             where = f"component {c} of {name}" if layout.is_link else name
             raise ValueError(
                 f"{where} has {size} vertices; a closed polygon needs at least {MIN_VERTICES}"
@@ -386,8 +394,13 @@ def check_polygon(P, *, coarseness: bool = True, name: str = "the curve") -> Non
             f"{_where(layout, v)}); fix or delete those points"
         )
     edge = np.linalg.norm(X[layout.nxt] - X, axis=1)
+    if layout.has_open:  # the dummy edges (._layout) are no repeated points
+        edge = edge[layout.real]
     scale = float(np.abs(X - X.mean(axis=0)).max()) or 1.0
     rep = edge <= 1e-12 * scale
+    if layout.has_open and rep.any():
+        rep = np.zeros(layout.n, bool)
+        rep[np.flatnonzero(layout.real)] = edge <= 1e-12 * scale
     if rep.any():
         v = int(np.flatnonzero(rep)[0])
         raise ValueError(
@@ -405,7 +418,9 @@ def check_polygon(P, *, coarseness: bool = True, name: str = "the curve") -> Non
             f"move the strands apart before relaxing"
         )
     if coarseness and dv < CONTACT_RATIO * h:
-        k = suggest_edge_count(layout.split(X) if layout.is_link else X)
+        flags = [True] if layout.closed is None else list(layout.closed)
+        k = suggest_edge_count(layout.split(X) if layout.is_link else X,
+                               closed=flags[0]) if len(set(flags)) == 1 else None
         fix = (
             f"resample with at least {k} edges"
             if k is not None

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._layout import as_unit_layout
+from .._layout import OPEN_TREE_REFUSAL, as_unit_layout
 from ..engine import make_engine
 from ..metrics import METRICS
 from ..obstacles import ObstacleField, check_obstacles
@@ -212,6 +212,8 @@ class Run:
     """
 
     _GRADIENT = "projected gradient norm"
+    #: Whether the method relaxes open polylines (``closed=False``): the feasible ones.
+    _OPEN_CURVES = False
     #: Whether the method needs the metric as a dense matrix whatever the engine (the penalty
     #: methods' solver is dense).
     _DENSE_METRIC = False
@@ -221,7 +223,7 @@ class Run:
                  target_lengths: str, check: bool, equilateral: bool, engine: str = "auto",
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
                  fixed_lengths: bool = True, obstacles=None, obstacle_weight: float = 1.0,
-                 **engine_options):
+                 closed=True, **engine_options):
         _check_names(metric, target_lengths)
         self.t0 = time.perf_counter()
         self.max_iter = check_number("max_iter", max_iter, 0, integer=True)
@@ -233,7 +235,9 @@ class Run:
                                                                          max_seconds, 0)
         obstacle_weight = check_number("obstacle_weight", obstacle_weight, 0)
         meshes = None if obstacles is None else check_obstacles(obstacles)
-        X, layout, e2 = as_unit_layout(P)  # exact scaling of curves far from size 1
+        X, layout, e2 = as_unit_layout(P, closed)  # exact scaling of curves far from size 1
+        if layout.has_open:
+            self._check_open(engine)
         self.pinned = check_pins(pinned, layout, X, tangents=bool(pin_tangents),
                                  edge_lengths=fixed_lengths)
         if self.pinned is not None:
@@ -247,7 +251,7 @@ class Run:
         elif self.engine.dense_metric:
             check_dense_size(layout.n)
         if check:
-            check_polygon(P)
+            check_polygon(P, closed=closed)
         self.layout = layout
         self.metric = metric
         ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
@@ -259,7 +263,11 @@ class Run:
         self._scale = float(np.ldexp(scale, e2))
         self.lengths0 = ln.copy() if target_lengths == "keep" else self._equal_lengths(
             ln, equilateral)
-        self.eps = 1e-3 * float(self.lengths0.mean())  # contact distance
+        if layout.has_open:  # the dummy edges (._layout) have no row: any positive target
+            self.lengths0[~layout.real] = 1.0
+            self.eps = 1e-3 * float(self.lengths0[layout.real].mean())
+        else:
+            self.eps = 1e-3 * float(self.lengths0.mean())  # contact distance
         if meshes is not None:
             field = ObstacleField(meshes, self._shift, self._scale, obstacle_weight)
             field.check_clear(self.X, layout, self.eps)
@@ -271,11 +279,25 @@ class Run:
         self.message = ""
         self.status = Status.NOT_FINISHED
 
+    def _check_open(self, engine: str) -> None:
+        """Refuse open polylines where the method or the engine cannot run them."""
+        if not self._OPEN_CURVES:
+            name = getattr(self, "NAME", type(self).__name__)
+            raise ValueError(
+                f"method {name!r} cannot relax open curves (closed=False): use a "
+                f"feasible method, projected_gradient, projected_gradient_implicit or "
+                f"trust_region, on the exact engine")
+        if engine == "tree":
+            raise ValueError(OPEN_TREE_REFUSAL)
+
     def _equal_lengths(self, ln: np.ndarray, equilateral: bool) -> np.ndarray:
         layout = self.layout
         lengths0 = np.empty_like(ln)
+        real = layout.real if layout.has_open else None
         for c in range(layout.k):
             s = slice(layout.starts[c], layout.starts[c + 1])
+            if real is not None and not layout.closed[c]:  # the dummy edge left out
+                s = np.flatnonzero(real[s]) + layout.starts[c]
             mean = ln[s].mean()
             spread = float(np.abs(ln[s] / mean - 1).max())
             if equilateral and spread > 1e-6:

@@ -75,7 +75,7 @@ class _PenaltyRun(Run):
                  max_seconds: float | None = None, initial_step: float = 1.0,
                  target_lengths: str = "equal", check: bool = True, engine: str = "auto",
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
-                 obstacles=None, obstacle_weight: float = 1.0,
+                 obstacles=None, obstacle_weight: float = 1.0, closed=True,
                  **ignored):
         unknown = set(ignored) - _FEASIBLE_ONLY
         if unknown:
@@ -91,7 +91,7 @@ class _PenaltyRun(Run):
         super().__init__(P, metric, max_iter, tol, energy_target=energy_target, ftol=ftol,
                          max_seconds=max_seconds, target_lengths=target_lengths, check=check,
                          equilateral=False, engine=engine, theta=theta, obstacles=obstacles,
-                         obstacle_weight=obstacle_weight)
+                         obstacle_weight=obstacle_weight, closed=closed)
         self.alpha = float(alpha)
         self.penalty_in_metric = (metric != "l2") if penalty_metric == "auto" else bool(
             penalty_metric)

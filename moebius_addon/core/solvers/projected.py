@@ -111,7 +111,13 @@ class Relaxation(Run):
         for the exact engine). See :func:`..pins.check_pins` for what is refused.
     pin_tangents : bool
         Also pin both neighbours of every pinned vertex (fixed tangents at the pins).
+    closed : bool or sequence of bool
+        False: ``P`` is an open polyline (a link: one flag per component, or one for all),
+        relaxed with O'Hara's regularized energy of an open polygon on the exact engine
+        (docs/api.md, "Open curves").
     """
+
+    _OPEN_CURVES = True
 
     def __init__(
         self,
@@ -143,6 +149,7 @@ class Relaxation(Run):
         pin_tangents: bool = False,
         obstacles=None,
         obstacle_weight: float = 1.0,
+        closed=True,
     ):
         _check_names(metric, target_lengths)
         armijo, growth = check_line_search(armijo, growth)
@@ -155,7 +162,7 @@ class Relaxation(Run):
                          reuse_factorization=reuse_factorization, krylov_rtol=krylov_rtol,
                          exact_backprojection=exact_backprojection, pinned=pinned,
                          pin_tangents=pin_tangents, fixed_lengths=bool(edge_lengths),
-                         obstacles=obstacles, obstacle_weight=obstacle_weight)
+                         obstacles=obstacles, obstacle_weight=obstacle_weight, closed=closed)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter
