@@ -22,6 +22,20 @@ _FLOAT_LIMIT = 1e38
 _SOURCE = "moebius_source"
 
 
+class Prepared(list):
+    """The polygons :func:`prepare_conversion` makes (a list of (n_i, 3) arrays) and whether
+    each is closed (``closed``: open splines kept open with ``keep_open``)."""
+
+    def __init__(self, polygons, closed):
+        super().__init__(polygons)
+        self.closed = list(closed)
+
+
+def _closed_arg(flags):
+    """The core's ``closed=`` for these components: a bool for one, a list for a link."""
+    return bool(flags[0]) if len(flags) == 1 else [bool(f) for f in flags]
+
+
 def _dedupe(points: np.ndarray, closed: bool) -> np.ndarray:
     """Drop repeated consecutive points (OBJ files and evaluated curves often repeat them)."""
     scale = max(float(np.ptp(points, axis=0).max()), 1e-300) if len(points) else 1.0
@@ -36,7 +50,7 @@ def _dedupe(points: np.ndarray, closed: bool) -> np.ndarray:
 def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: float | None = None,
                        close_open: bool = False, allow_large: bool = False, *,
                        metric: str = "hs", method: str = DEFAULT_METHOD,
-                       engine: str = DEFAULT_ENGINE) -> list[np.ndarray]:
+                       engine: str = DEFAULT_ENGINE, keep_open: bool = False) -> Prepared:
     """Check ``obj`` and compute its equal-edge polygons without touching the scene.
 
     Parameters
@@ -50,6 +64,10 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
         edges (at least 4).
     close_open : bool
         Join the ends of open splines/chains instead of refusing them.
+    keep_open : bool
+        Keep open splines/chains open, their two ends where they are (Relax takes open poly
+        splines: the core's open curves); ``close_open`` wins when both are set. An open one
+        gets ``edges`` points.
     allow_large : bool
         Accept more than :data:`~.options.EDGE_LIMIT` edges in total on the tree engine (the
         core's own size refusals stand).
@@ -59,8 +77,9 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
 
     Returns
     -------
-    list of (n_i, 3) float64 arrays
-        Equilateral polygons, one per component, in object coordinates.
+    Prepared
+        Equilateral polygons, one per component, in object coordinates (a list; its
+        ``closed`` says which are closed).
 
     Raises
     ------
@@ -70,14 +89,16 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
     """
     polylines = geometry.object_polylines(obj)
     many = len(polylines) > 1
-    cleaned = []
+    cleaned, flags = [], []
     for k, (points, closed) in enumerate(polylines):
         where = f"'{obj.name}'" + (f" (component {k + 1} of {len(polylines)})" if many else "")
-        if not closed and not close_open:
+        if not closed and not (close_open or keep_open):
             raise ValueError(
                 f"{where} is an open curve; close it (Edit Mode: Alt+C, or F on the end "
-                "vertices of a mesh) or enable 'Close open splines'"
+                "vertices of a mesh), enable 'Close open splines', or enable 'Keep open "
+                "splines' to relax it as an open curve"
             )
+        closed = bool(closed or close_open)
         points = np.asarray(points, np.float64)
         # Blender keeps points in single precision and stores an infinity typed in the UI as
         # ±3.4e38 (its float limit): coordinates that large are infinite ones
@@ -88,19 +109,20 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
                 f"{len(points)} points, the first at index {int(np.flatnonzero(bad)[0])}; "
                 "Blender shows an infinite one as ±3.4e38); fix or delete those points"
             )
-        points = _dedupe(points, closed=True)
+        points = _dedupe(points, closed=closed)
         if len(points) < 4:
             raise ValueError(
                 f"{where} has only {len(points)} distinct points; a closed curve to relax needs "
                 "at least 4 (subdivide it or draw more points)"
             )
         try:  # the drawn curve itself must not touch itself (resampling could hide it)
-            core.check_polygon(points, coarseness=False)
+            core.check_polygon(points, coarseness=False, closed=closed)
         except ValueError as err:
             raise ValueError(f"{where}: {err}") from None
         cleaned.append(points)
-    lengths = [float(np.linalg.norm(np.diff(np.vstack([p, p[:1]]), axis=0), axis=1).sum())
-               for p in cleaned]
+        flags.append(closed)
+    lengths = [float(np.linalg.norm(np.diff(np.vstack([p, p[:1]]) if c else p, axis=0),
+                                    axis=1).sum()) for p, c in zip(cleaned, flags, strict=True)]
     if edge_length is not None:
         if not edge_length > 0:
             raise ValueError(f"edge length must be positive, got {edge_length}")
@@ -123,21 +145,23 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
         raise ValueError(f"'{obj.name}': {err}"
                          + (" (or set a longer edge length)" if edge_length is not None else "")
                          ) from None
-    polygons = [core.resample(p, n, closed=True) for p, n in zip(cleaned, counts, strict=True)]
+    polygons = [core.resample(p, n, closed=c)
+                for p, n, c in zip(cleaned, counts, flags, strict=True)]
     try:
-        core.check_polygon(as_input(polygons), coarseness=False)
+        core.check_polygon(as_input(polygons), coarseness=False, closed=_closed_arg(flags))
     except ValueError as err:
         raise ValueError(f"'{obj.name}' after resampling to {counts} edges: {err}") from None
-    if core.contact_ratio(as_input(polygons)) < core.polygon.CONTACT_RATIO:
+    if core.contact_ratio(as_input(polygons), closed=_closed_arg(flags)
+                          ) < core.polygon.CONTACT_RATIO:
         limit = EDGE_LIMIT if allow_large else edge_limit(metric, method, engine)
         raise ValueError(f"'{obj.name}' is too coarse at {counts} edges for its shape: strands "
                          f"far apart along the curve come closer than one edge length, and the "
                          f"energy cannot keep them apart — "
-                         f"{_finer_conversion(cleaned, counts, edge_length, limit)}")
-    return polygons
+                         f"{_finer_conversion(cleaned, counts, edge_length, limit, flags)}")
+    return Prepared(polygons, flags)
 
 
-def _finer_conversion(cleaned, counts, edge_length, limit: int) -> str:
+def _finer_conversion(cleaned, counts, edge_length, limit: int, flags) -> str:
     """The fix for a too coarse conversion, in the unit of the field the user set: the
     smallest count per component (or the largest edge length) in 10% steps that passes the
     contact check, or a plain advice when none does up to ``limit`` edges (what the run
@@ -146,8 +170,10 @@ def _finer_conversion(cleaned, counts, edge_length, limit: int) -> str:
         return [max(4, int(np.ceil(n * factor))) for n in counts]
 
     def passes(trial):
-        polygons = [core.resample(p, n, closed=True) for p, n in zip(cleaned, trial, strict=True)]
-        return core.contact_ratio(as_input(polygons)) >= core.polygon.CONTACT_RATIO
+        polygons = [core.resample(p, n, closed=c)
+                    for p, n, c in zip(cleaned, trial, flags, strict=True)]
+        return (core.contact_ratio(as_input(polygons), closed=_closed_arg(flags))
+                >= core.polygon.CONTACT_RATIO)
 
     # the largest count first: a search in 10% steps up to the limit would take long for
     # nothing when even that fails
@@ -165,7 +191,8 @@ def _finer_conversion(cleaned, counts, edge_length, limit: int) -> str:
 
 def make_curve_object(name: str, polygons: Sequence[np.ndarray],
                       like: bpy.types.Object | None = None,
-                      context: bpy.types.Context | None = None) -> bpy.types.Object:
+                      context: bpy.types.Context | None = None,
+                      closed=None) -> bpy.types.Object:
     """Create and select a curve object with one cyclic poly spline per polygon.
 
     Parameters
@@ -177,13 +204,18 @@ def make_curve_object(name: str, polygons: Sequence[np.ndarray],
         Object whose transform, collections and (for curves) bevel and materials are copied.
     context : bpy.types.Context, optional
         Defaults to ``bpy.context``.
+    closed : bool or sequence of bool, optional
+        Which splines are cyclic (default: ``polygons.closed`` of a :class:`Prepared`, else
+        all).
 
     Returns
     -------
     bpy.types.Object
     """
     context = context or bpy.context
-    curve = geometry.new_curve(name, polygons)
+    if closed is None:
+        closed = getattr(polygons, "closed", True)
+    curve = geometry.new_curve(name, polygons, closed)
     if like is not None and like.type == "CURVE":
         src = like.data
         curve.bevel_depth = src.bevel_depth
@@ -197,7 +229,7 @@ def make_curve_object(name: str, polygons: Sequence[np.ndarray],
     deselect_all(context)
     link_like(obj, like, context)
     set_rest_shape(obj, polygons)
-    obj[ENERGY_PROP] = energy(polygons)
+    obj[ENERGY_PROP] = energy(polygons, closed)
     obj.select_set(True)
     context.view_layer.objects.active = obj
     return obj
@@ -206,15 +238,15 @@ def make_curve_object(name: str, polygons: Sequence[np.ndarray],
 def convert_object(obj: bpy.types.Object, edges: int = 100, edge_length: float | None = None,
                    close_open: bool = False, allow_large: bool = False,
                    context: bpy.types.Context | None = None, *, metric: str = "hs",
-                   method: str = DEFAULT_METHOD,
-                   engine: str = DEFAULT_ENGINE) -> bpy.types.Object:
+                   method: str = DEFAULT_METHOD, engine: str = DEFAULT_ENGINE,
+                   keep_open: bool = False) -> bpy.types.Object:
     """Make an equal-edge poly curve from ``obj``; the original is kept, hidden.
 
     Parameters
     ----------
     obj : bpy.types.Object
         Curve (poly, Bezier, NURBS) or mesh made of closed edge loops.
-    edges, edge_length, close_open, allow_large, metric, method, engine
+    edges, edge_length, close_open, allow_large, metric, method, engine, keep_open
         See :func:`prepare_conversion`.
     context : bpy.types.Context, optional
         Defaults to ``bpy.context``.
@@ -231,7 +263,8 @@ def convert_object(obj: bpy.types.Object, edges: int = 100, edge_length: float |
         See :func:`prepare_conversion`; the scene is unchanged then.
     """
     polygons = prepare_conversion(obj, edges, edge_length, close_open, allow_large,
-                                  metric=metric, method=method, engine=engine)
+                                  metric=metric, method=method, engine=engine,
+                                  keep_open=keep_open)
     return apply_conversion(obj, polygons, context)
 
 

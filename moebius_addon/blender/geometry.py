@@ -162,7 +162,12 @@ def object_polylines(obj: bpy.types.Object) -> list[tuple[np.ndarray, bool]]:
     )
 
 
-def curve_polygons(obj: bpy.types.Object) -> list[np.ndarray]:
+def curve_closed(obj: bpy.types.Object) -> list[bool]:
+    """Whether each spline of ``obj`` is closed (cyclic)."""
+    return [bool(s.use_cyclic_u) for s in obj.data.splines]
+
+
+def curve_polygons(obj: bpy.types.Object, allow_open: bool = False) -> list[np.ndarray]:
     """Polygons of a curve made of cyclic poly splines, as shown at the current frame (for a
     flow keyed as shape keys: their mix, see :func:`.keyframes.flow_shape_at`).
 
@@ -171,6 +176,8 @@ def curve_polygons(obj: bpy.types.Object) -> list[np.ndarray]:
     obj : bpy.types.Object
         A curve object whose splines are all cyclic ``POLY`` splines (what
         :func:`~moebius_addon.blender.convert_object` and ``moebius.add_knot`` make).
+    allow_open : bool
+        Take open ``POLY`` splines too (what Relax takes: :func:`curve_closed` says which).
 
     Returns
     -------
@@ -190,7 +197,7 @@ def curve_polygons(obj: bpy.types.Object) -> list[np.ndarray]:
     if len(splines) == 0:
         raise ValueError(f"curve '{obj.name}' has no splines")
     for s in splines:
-        if s.type != "POLY" or not s.use_cyclic_u:
+        if s.type != "POLY" or not (s.use_cyclic_u or allow_open):
             what = "an open" if s.type == "POLY" else f"a {s.type.title()}"
             raise ValueError(
                 f"curve '{obj.name}' has {what} spline; convert it to equal-edge closed "
@@ -219,14 +226,16 @@ def write_polygons(curve: bpy.types.Curve, polygons: Sequence[np.ndarray]) -> No
     curve.update_tag()
 
 
-def new_curve(name: str, polygons: Sequence[np.ndarray]) -> bpy.types.Curve:
-    """Make curve data with one cyclic ``POLY`` spline per polygon.
+def new_curve(name: str, polygons: Sequence[np.ndarray], closed=True) -> bpy.types.Curve:
+    """Make curve data with one ``POLY`` spline per polygon, cyclic where ``closed``.
 
     Parameters
     ----------
     name : str
     polygons : sequence of (n_i, 3) arrays
         Vertices in object coordinates.
+    closed : bool or sequence of bool
+        Whether each spline is cyclic (an open one keeps its two ends).
 
     Returns
     -------
@@ -235,9 +244,10 @@ def new_curve(name: str, polygons: Sequence[np.ndarray]) -> bpy.types.Curve:
     curve = bpy.data.curves.new(name, "CURVE")
     curve.dimensions = "3D"
     curve.twist_mode = "MINIMUM"
-    for P in polygons:
+    flags = [closed] * len(polygons) if isinstance(closed, bool) else list(closed)
+    for P, cyclic in zip(polygons, flags, strict=True):
         spline = curve.splines.new("POLY")
         spline.points.add(len(P) - 1)
-        spline.use_cyclic_u = True
+        spline.use_cyclic_u = bool(cyclic)
     write_polygons(curve, polygons)
     return curve

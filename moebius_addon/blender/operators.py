@@ -55,7 +55,8 @@ class MOEBIUS_OT_convert(bpy.types.Operator):
             for obj in objs:
                 prepared.append(api.prepare_conversion(
                     obj, edges=s.edges, edge_length=s.edge_length if s.use_edge_length else None,
-                    close_open=s.close_open, metric=s.metric, method=s.method, engine=s.engine))
+                    close_open=s.close_open, metric=s.metric, method=s.method, engine=s.engine,
+                    keep_open=s.keep_open))
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
@@ -129,10 +130,11 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         how = f" ({run.method}: {run.why})" if run.why else f" ({run.method})"
         how += " continued" if run.append else ""
         how += f", {run.engine} engine"
+        hint = api.method_hint(run.method, result, run.start, not run.open)
         self.report({kind}, f"'{run.obj.name}'{how}: {run.nit} iterations, energy "
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
-                            f"({result.message}{api.method_hint(run.method, result, run.start)})"
+                            f"({result.message}{hint})"
                             f"; {run.type_message}{_first_run_note(run)}")
         if run.type_kept is False:  # never expected: the flow passes no strand through another
             self.report({"WARNING"}, run.type_message)

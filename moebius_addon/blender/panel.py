@@ -111,6 +111,9 @@ class VIEW3D_PT_moebius_polygon(_MoebiusPanel, bpy.types.Panel):
         else:
             col.prop(s, "edges")
         layout.prop(s, "close_open")
+        row = layout.row()
+        row.active = not s.close_open
+        row.prop(s, "keep_open")
         layout.operator("moebius.convert", icon="MOD_CURVE")
         layout.operator("moebius.add_knot", text="Add Knot…", icon="ADD")
         col = layout.column(align=True)

@@ -22,17 +22,24 @@ def as_link(x) -> list[np.ndarray]:
     return [np.array(p, dtype=np.float64) for p in x]
 
 
-def energy(polygons: Sequence[np.ndarray]) -> float:
+def energy(polygons: Sequence[np.ndarray], closed=True) -> float:
     """Möbius energy of one polygon, or one total of a link (components and their cross
     energy, as ``core.moebius_energy``).
 
     Parameters
     ----------
     polygons : sequence of (n_i, 3) arrays
+    closed : bool or sequence of bool
+        Whether each is closed (``core.moebius_energy``'s ``closed``).
 
     Returns
     -------
     float
     """
-    e = core.moebius_energy(as_input(polygons))
+    flags = [closed] * len(polygons) if isinstance(closed, bool) else list(closed)
+    if all(flags):  # the closed energy, as before open curves existed
+        e = core.moebius_energy(as_input(polygons))
+    else:
+        e = core.moebius_energy(as_input(polygons),
+                                closed=flags if len(polygons) > 1 else flags[0])
     return float(np.sum(e))

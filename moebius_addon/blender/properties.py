@@ -44,6 +44,11 @@ class MoebiusSettings(bpy.types.PropertyGroup):
         name="Close Open Splines", default=False,
         description="Join the ends of open splines instead of refusing them",
     )
+    keep_open: BoolProperty(
+        name="Keep Open Splines", default=False,
+        description="Keep open splines open, their ends where they are, and relax them as open "
+                    "curves (exact engine; pin the ends with Pin Selected Points to hold them)",
+    )
     # Flow
     metric: EnumProperty(
         name="Metric", default="hs",

@@ -46,13 +46,14 @@ def choose_method(method: str, polygons: Sequence[np.ndarray]) -> tuple[str, str
     return EXPLICIT_METHOD, "no knot detected"
 
 
-def method_hint(method: str, result, polygons: Sequence[np.ndarray]) -> str:
+def method_hint(method: str, result, polygons: Sequence[np.ndarray],
+                closed: bool = True) -> str:
     """Advice appended to the report of an explicit run that hit its iteration limit on a
     knotted curve (``polygons``: its start): the explicit flow's last stretch on a knot is
     slow (docs/benchmarks.md, "Knots of the table"). Decided by ``result.status``, never by
     the words of the message; unknots and links get none (the explicit method is the faster
     one on unknots)."""
-    if method != EXPLICIT_METHOD or result.status != core.Status.MAX_ITER:
+    if method != EXPLICIT_METHOD or result.status != core.Status.MAX_ITER or not closed:
         return ""
     if len(polygons) != 1 or not core.is_knotted(polygons[0]):
         return ""
@@ -138,7 +139,12 @@ class ObjectRelaxation:
             max_iterations, tolerance, keyframe_stride, frame_start, method, penalty, engine,
             theta)
         options.update(extra)
-        polygons = geometry.curve_polygons(obj)
+        polygons = geometry.curve_polygons(obj, allow_open=True)
+        closed = geometry.curve_closed(obj)
+        #: whether a spline is open (an open curve: the core's closed=False, exact engine)
+        self.open = not all(closed)
+        if self.open:
+            options["closed"] = closed if len(closed) > 1 else closed[0]
         keyframes.check_flow_target(obj)
         try:  # obstacles as (V, F) arrays, selected points as pins
             options = scene_constraints.resolve(obj, options)
@@ -160,14 +166,16 @@ class ObjectRelaxation:
         except ValueError as err:
             raise ValueError(f"'{obj.name}': {err}") from None
         try:
-            core.check_polygon(as_input(polygons))
+            core.check_polygon(as_input(polygons), closed=options.get("closed", True))
         except ValueError as err:
             raise ValueError(f"'{obj.name}': {err}") from None
         options.setdefault("target_lengths", "keep")
         self.obj = obj
         #: the method asked for (may be ``"auto"``), the core method run, and why
         self.requested = method
-        self.method, self.why = choose_method(method, polygons)
+        self.method, self.why = (
+            (EXPLICIT_METHOD, "an open curve") if self.open and method == AUTO_METHOD
+            else choose_method(method, polygons))
         if method == AUTO_METHOD and self.method != EXPLICIT_METHOD:
             # the panel's Armijo constant and step growth are the explicit method's; the
             # implicit one keeps its own (core.solvers), but bad values are refused all the same
@@ -282,7 +290,8 @@ class ObjectRelaxation:
         scene.frame_set(frames.stop - 1)
         refresh_gradients(self.obj)  # drawn at the start, they would show a stale field
         # the flow never passes a strand through another: the same invariants at both ends
-        self.type_kept, self.type_message = type_kept(self.start, as_link(result.x))
+        self.type_kept, self.type_message = (None, "an open curve has no knot type") if (
+            self.open) else type_kept(self.start, as_link(result.x))
         stats = getattr(scene, "moebius", None)
         if stats is not None:
             stats.store_run(self.obj.name, self.nit, self.energies[0], self.energies[-1],

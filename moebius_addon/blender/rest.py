@@ -46,7 +46,7 @@ def clear_animation(obj: bpy.types.Object) -> None:
     rest = rest_shape(obj)
     if rest is not None:
         geometry.write_polygons(obj.data, rest)
-        obj[ENERGY_PROP] = energy(rest)
+        obj[ENERGY_PROP] = energy(rest, geometry.curve_closed(obj))
     refresh_gradients(obj)
 
 
@@ -64,11 +64,11 @@ def apply_frame(obj: bpy.types.Object, frame: int | None = None,
     scene = scene or bpy.context.scene
     if frame is not None:
         scene.frame_set(frame)
-    polygons = geometry.curve_polygons(obj)
+    polygons = geometry.curve_polygons(obj, allow_open=True)
     keyframes.remove_flow_keyframes(obj)
     geometry.write_polygons(obj.data, polygons)
     set_rest_shape(obj, polygons)
-    obj[ENERGY_PROP] = energy(polygons)
+    obj[ENERGY_PROP] = energy(polygons, geometry.curve_closed(obj))
     refresh_gradients(obj)
     return polygons
 

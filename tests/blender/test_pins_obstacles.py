@@ -155,3 +155,78 @@ def test_obstacles_as_objects_and_bad_obstacles(scene, mb, ring_and_torus):
         mb.relax_object(ring, max_iterations=2, obstacles=coll)
     after = scene_state()
     assert after["curves"] == before["curves"] and after["Ring/0"] == before["Ring/0"]
+
+
+def test_an_open_spline_relaxes_with_its_ends_pinned(scene, mb):
+    # an open coil of two turns: Relax takes open poly splines (the core's closed=False)
+    t = np.linspace(0, 4 * np.pi, 60)
+    P = np.stack([np.cos(t), np.sin(t), 0.25 * t], -1)
+    curve = bpy.data.curves.new("Cable", "CURVE")
+    curve.dimensions = "3D"
+    s = curve.splines.new("POLY")
+    s.points.add(len(P) - 1)
+    s.points.foreach_set("co", np.c_[P, np.ones(len(P))].ravel())
+    s.use_cyclic_u = False
+    for i, p in enumerate(s.points):
+        p.select = i in (0, len(P) - 1)
+    obj = bpy.data.objects.new("Cable", curve)
+    scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    start = spline_points(obj).copy()
+    settings = scene.moebius
+    settings.pin_selected = True
+    settings.max_iterations = 15
+    before = scene_state()
+    with pytest.raises(RuntimeError, match="lbfgs.* cannot (keep pinned|relax open)"):
+        settings.method = "lbfgs"
+        bpy.ops.moebius.relax()
+    assert scene_state() == before
+    settings.method = "auto"
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    assert settings.last_method == "projected_gradient" and settings.last_engine == "exact"
+    assert "open curve" in settings.last_type
+    frames, points = keyed(mb, obj)
+    assert len(frames) == 16 and not obj.data.splines[0].use_cyclic_u
+    ends = [0, len(P) - 1]
+    assert all(np.array_equal(Q[ends], start[ends]) for Q in points)  # exact
+    assert np.abs(points[-1] - start).max() > 1e-2
+    assert settings.last_energy_end < settings.last_energy_start
+    core = import_module(mb.__name__.rsplit(".", 1)[0] + ".core")
+    for Q in points:  # no frame touches itself (the start check of an open curve)
+        core.check_polygon(Q.astype(np.float64), closed=False, coarseness=False)
+
+
+def test_convert_keeps_an_open_spline_open_with_its_ends(scene, mb):
+    # a drawn open Bezier curve: refused as before unless 'Keep Open Splines' is on; then an
+    # open equal-edge poly spline whose two ends are the drawn ends
+    curve = bpy.data.curves.new("Drawn", "CURVE")
+    curve.dimensions = "3D"
+    s = curve.splines.new("BEZIER")
+    s.bezier_points.add(3)
+    for p, co in zip(s.bezier_points, [(0, 0, 0), (1, 1, 0.3), (2, -1, -0.3), (3, 0, 0)],
+                     strict=True):
+        p.co = co
+        p.handle_left_type = p.handle_right_type = "AUTO"
+    obj = bpy.data.objects.new("Drawn", curve)
+    scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    obj.select_set(True)
+    settings = scene.moebius
+    settings.edges = 40
+    before = scene_state()
+    with pytest.raises(RuntimeError, match="enable 'Keep open splines'"):
+        bpy.ops.moebius.convert()
+    assert scene_state() == before
+    settings.keep_open = True
+    assert bpy.ops.moebius.convert() == {"FINISHED"}
+    new = bpy.context.active_object
+    spline = new.data.splines[0]
+    assert spline.type == "POLY" and not spline.use_cyclic_u and len(spline.points) == 40
+    X = spline_points(new)
+    assert np.allclose(X[0], (0, 0, 0), atol=1e-6) and np.allclose(X[-1], (3, 0, 0), atol=1e-6)
+    lengths = np.linalg.norm(np.diff(X, axis=0), axis=1)
+    assert np.ptp(lengths) < 1e-5 * lengths.mean()  # equal edges, no closing edge
+    energy = new["moebius_energy"]
+    r = mb.relax_object(new, max_iterations=5, pinned=[0, 39])
+    assert r.nit == 5 and r.fun < energy
+    assert np.array_equal(spline_points(new)[[0, 39]], X[[0, 39]])
