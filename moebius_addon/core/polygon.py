@@ -419,8 +419,11 @@ def check_polygon(P, *, coarseness: bool = True, name: str = "the curve",
         )
     if coarseness and dv < CONTACT_RATIO * h:
         flags = [True] if layout.closed is None else list(layout.closed)
-        k = suggest_edge_count(layout.split(X) if layout.is_link else X,
-                               closed=flags[0]) if len(set(flags)) == 1 else None
+        try:
+            k = suggest_edge_count(layout.split(X) if layout.is_link else X,
+                                   closed=flags[0]) if len(set(flags)) == 1 else None
+        except ValueError:  # a resampling on the way failed: no count to suggest, the refusal
+            k = None        # stands (an open cable's 'could not make … equilateral' hid it)
         fix = (
             f"resample with at least {k} edges"
             if k is not None

@@ -279,3 +279,17 @@ def test_check_polygon_open():
     with pytest.raises(ValueError, match="too coarse"):
         core.check_polygon(Q, closed=False)
     core.check_polygon(Q, coarseness=False, closed=False)
+
+
+def test_too_coarse_open_curve_is_refused_as_too_coarse():
+    # coils that double back: no resampling to suggest succeeds (equalize fails on the way);
+    # the refusal must still say what is wrong, not that equalizing failed
+    x = np.linspace(-2.5, 2.5, 4000)
+    coil = np.clip((x + 2.1) / 1.3, 0, 1) * (x < -0.8)
+    w = 0.3 * np.sin(np.pi * coil)
+    phase = 4 * np.pi * coil
+    P = np.stack([x - 0.25 * np.sin(phase) * (coil > 0), w * np.cos(phase) - w,
+                  w * np.sin(phase)], -1)
+    Q = core.resample(P, 240, closed=False)
+    with pytest.raises(ValueError, match="too coarse for its shape"):
+        core.check_polygon(Q, closed=False)
