@@ -52,6 +52,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="edges per component (converts the object; default: keep a converted "
                         "curve as it is, 100 otherwise; the catalogue default for --knot)")
     p.add_argument("--close-open", action="store_true", help="close open splines")
+    p.add_argument("--keep-open", action="store_true",
+                   help="keep open splines open (their ends where they are) and relax them as "
+                        "open curves (exact engine)")
     p.add_argument("--seed", type=int, default=0, help="seed of --knot random")
     p.add_argument("--pq", type=int, nargs=2, default=(2, 3), metavar=("P", "Q"),
                    help="p and q of --knot torus")
@@ -80,9 +83,9 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def _is_converted(obj) -> bool:
+def _is_converted(obj, allow_open: bool = False) -> bool:
     try:
-        geometry.curve_polygons(obj)
+        geometry.curve_polygons(obj, allow_open=allow_open)
     except ValueError:
         return False
     return True
@@ -128,19 +131,27 @@ def main(argv: list[str]) -> int:
             if obj is None:
                 names = ", ".join(o.name for o in bpy.data.objects) or "none"
                 raise ValueError(f"no object '{args.object}' (objects: {names})")
-            if args.edges is not None or not _is_converted(obj):
+            if args.edges is not None or not _is_converted(obj, args.keep_open):
                 obj = api.convert_object(obj, edges=args.edges or 100,
-                                         close_open=args.close_open, **run)
+                                         close_open=args.close_open,
+                                         keep_open=args.keep_open, **run)
+        energy = obj.get(api.ENERGY_PROP)  # a poly curve drawn by hand has none stored
+        if energy is None:
+            energy = api.energy(geometry.curve_polygons(obj, allow_open=True),
+                                geometry.curve_closed(obj))
         print(f"moebius: '{obj.name}', {sum(len(s.points) for s in obj.data.splines)} edges, "
-              f"energy {obj[api.ENERGY_PROP]:.6g}")
+              f"energy {energy:.6g}")
         if args.identify:
             found = api.identify_object(obj)
             print(f"moebius: '{obj.name}' is {found.message}" if found.names else
                   f"moebius: '{obj.name}': {found.message}")
         if not args.no_relax:
             t0 = time.perf_counter()
-            start = geometry.curve_polygons(obj)
-            method, why = api.choose_method(args.method, start)
+            start = geometry.curve_polygons(obj, allow_open=True)
+            is_open = not all(geometry.curve_closed(obj))
+            method, why = ((api.EXPLICIT_METHOD, "an open curve")
+                           if is_open and args.method == api.AUTO_METHOD
+                           else api.choose_method(args.method, start))
             result = api.relax_object(obj, metric=args.metric, method=method,
                                       penalty=args.penalty, engine=args.engine,
                                       theta=args.theta, max_iterations=args.max_iterations,
@@ -152,7 +163,8 @@ def main(argv: list[str]) -> int:
                   f"{time.perf_counter() - t0:.2f} s, energy "
                   f"{result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, "
                   f"frames {scene.frame_start}-{scene.frame_end} ({result.message})")
-            kept, words = api.type_kept(start, api.object_curves(obj))
+            kept, words = ((None, "an open curve has no knot type") if is_open
+                           else api.type_kept(start, api.object_curves(obj)))
             print(f"moebius: {words}", file=sys.stdout if kept is not False else sys.stderr)
         if args.save:
             bpy.ops.wm.save_as_mainfile(filepath=args.save)

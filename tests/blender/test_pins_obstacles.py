@@ -230,3 +230,27 @@ def test_convert_keeps_an_open_spline_open_with_its_ends(scene, mb):
     r = mb.relax_object(new, max_iterations=5, pinned=[0, 39])
     assert r.nit == 5 and r.fun < energy
     assert np.array_equal(spline_points(new)[[0, 39]], X[[0, 39]])
+
+
+def test_cli_keeps_and_relaxes_an_open_curve(scene, mb, tmp_path, capfd):
+    cli = import_module(mb.__name__ + ".cli")
+    t = np.linspace(0, 4 * np.pi, 80)
+    P = np.stack([np.cos(t), np.sin(t), 0.25 * t], -1)
+    curve = bpy.data.curves.new("Coil", "CURVE")
+    curve.dimensions = "3D"
+    s = curve.splines.new("POLY")
+    s.points.add(len(P) - 1)
+    s.points.foreach_set("co", np.c_[P, np.ones(len(P))].ravel())
+    scene.collection.objects.link(bpy.data.objects.new("Coil", curve))
+    blend = tmp_path / "coil.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    capfd.readouterr()
+    assert cli.main(["--open", str(blend), "--object", "Coil", "--max-iterations", "2"]) == 1
+    assert "enable 'Keep open splines'" in capfd.readouterr().err
+    assert cli.main(["--open", str(blend), "--object", "Coil", "--keep-open", "--edges", "60",
+                     "--max-iterations", "4"]) == 0
+    out = capfd.readouterr().out
+    assert "projected_gradient (an open curve), exact engine, 4 iterations" in out
+    assert "an open curve has no knot type" in out
+    new = bpy.context.active_object
+    assert not new.data.splines[0].use_cyclic_u and len(new.data.splines[0].points) == 60
