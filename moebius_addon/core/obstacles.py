@@ -21,9 +21,14 @@ The energy keeps the curve away from the mesh; the guarantee that it never cross
 not depend on the energy: every step the flow takes is bounded by the first time any moving
 edge comes within the contact distance ``eps`` of any triangle (:meth:`ObstacleField.
 contact_time`, conservative advancement with the exact segment–triangle distance, as the
-curve's own contact search does for pairs of edges). All pairs of edges and triangles are
-visited (numba, parallel over edges; bitwise the same for any thread count): meant for
-obstacles of up to some thousands of triangles.
+curve's own contact search does for pairs of edges), searched through a bounding-box
+hierarchy of the triangles (:func:`triangle_tree`; the same value as all pairs, tested): 0.3
+ms against 2.0 s over all pairs for 2 000 edges and 80 000 triangles. The energy and its
+gradient visit every edge–triangle pair (numba, parallel over edges; bitwise the same for any
+thread count): 1.3 s there, 10 ms for 240 edges and 1 536 triangles. A Barnes–Hut far field
+with one term per box (area-weighted centre) was tried and not kept: its centre distances
+differ from the kernel's nearest-point distances to first order in the triangle size, 3–5 %
+error in the energy at θ = 0.1 on a torus of 20 000 triangles.
 """
 
 from __future__ import annotations
@@ -273,48 +278,137 @@ def _gather(X, nxt, prv, gm, gl):
 # -- contact ----------------------------------------------------------------------------------
 
 
+@nb.njit(cache=True)
+def _pair_time(X, U, i, j, v, mx, my, mz, half, T, centre, radius, k, eps, tb):
+    """First τ < tb at which edge (i, j) of ``X − τU`` (speed at most ``v``, midpoint ``m``,
+    half length ``half``) comes within ``eps`` of triangle ``k``, or a τ ≥ tb when it does not
+    before tb: from the first time their bounding spheres could meet, advanced by
+    ``(d − eps) / v`` with the exact distance ``d`` (the triangles do not move)."""
+    gap = np.sqrt((mx - centre[k, 0]) ** 2 + (my - centre[k, 1]) ** 2
+                  + (mz - centre[k, 2]) ** 2) - half - radius[k] - eps
+    tau = max(gap / v, 0.0)
+    if tau >= tb:
+        return tau
+    for _ in range(_MAX_ADVANCE):
+        d2 = _segment_triangle_distance2(
+            X[i, 0] - tau * U[i, 0], X[i, 1] - tau * U[i, 1], X[i, 2] - tau * U[i, 2],
+            X[j, 0] - tau * U[j, 0], X[j, 1] - tau * U[j, 1], X[j, 2] - tau * U[j, 2], T, k)
+        d = np.sqrt(d2)
+        if d <= SLACK * eps:
+            return tau
+        tau += (d - eps) / v
+        if tau >= tb:
+            return tau
+    return tau
+
+
+@nb.njit(cache=True, inline="always")
+def _edge_motion(X, U, i, j):
+    v = max(np.sqrt(U[i, 0] ** 2 + U[i, 1] ** 2 + U[i, 2] ** 2),
+            np.sqrt(U[j, 0] ** 2 + U[j, 1] ** 2 + U[j, 2] ** 2))
+    mx = 0.5 * (X[i, 0] + X[j, 0])
+    my = 0.5 * (X[i, 1] + X[j, 1])
+    mz = 0.5 * (X[i, 2] + X[j, 2])
+    half = 0.5 * np.sqrt((X[j, 0] - X[i, 0]) ** 2 + (X[j, 1] - X[i, 1]) ** 2
+                         + (X[j, 2] - X[i, 2]) ** 2)
+    return v, mx, my, mz, half
+
+
 @nb.njit(cache=True, parallel=True)
-def _contact(X, U, nxt, T, centre, radius, tau_max, eps, nchunks):
+def _contact_pairs(X, U, nxt, T, centre, radius, tau_max, eps, nchunks):
     """First τ ≤ tau_max at which an edge of ``X − τU`` comes within ``eps`` of a triangle
-    (conservative: never later than the true time). An edge's points move at most at its
-    larger endpoint speed ``v`` (the triangles do not move), so the distance ``d`` allows
-    ``τ`` to advance by ``(d − eps) / v``; a pair whose bounding spheres cannot meet before
-    the best time so far is skipped."""
+    (conservative: never later than the true time), over all edge–triangle pairs (the
+    reference of :func:`_contact_tree`)."""
     n = X.shape[0]
     best = np.full(nchunks, tau_max)
     for cc in nb.prange(nchunks):
         tb = tau_max
         for i in range(cc, n, nchunks):
             j = nxt[i]
-            v = max(np.sqrt(U[i, 0] ** 2 + U[i, 1] ** 2 + U[i, 2] ** 2),
-                    np.sqrt(U[j, 0] ** 2 + U[j, 1] ** 2 + U[j, 2] ** 2))
+            v, mx, my, mz, half = _edge_motion(X, U, i, j)
             if v == 0.0:
                 continue
-            mx = 0.5 * (X[i, 0] + X[j, 0])
-            my = 0.5 * (X[i, 1] + X[j, 1])
-            mz = 0.5 * (X[i, 2] + X[j, 2])
-            half = 0.5 * np.sqrt((X[j, 0] - X[i, 0]) ** 2 + (X[j, 1] - X[i, 1]) ** 2
-                                 + (X[j, 2] - X[i, 2]) ** 2)
             for k in range(T.shape[0]):
-                gap = np.sqrt((mx - centre[k, 0]) ** 2 + (my - centre[k, 1]) ** 2
-                              + (mz - centre[k, 2]) ** 2) - half - radius[k] - eps
-                tau = max(gap / v, 0.0)
-                if tau >= tb:
-                    continue
-                for _ in range(_MAX_ADVANCE):
-                    d2 = _segment_triangle_distance2(
-                        X[i, 0] - tau * U[i, 0], X[i, 1] - tau * U[i, 1],
-                        X[i, 2] - tau * U[i, 2], X[j, 0] - tau * U[j, 0],
-                        X[j, 1] - tau * U[j, 1], X[j, 2] - tau * U[j, 2], T, k)
-                    d = np.sqrt(d2)
-                    if d <= SLACK * eps:
-                        break
-                    tau += (d - eps) / v
-                    if tau >= tb:
-                        break
-                tb = min(tb, tau)
+                tb = min(tb, _pair_time(X, U, i, j, v, mx, my, mz, half, T, centre, radius,
+                                        k, eps, tb))
         best[cc] = tb
     return best.min()
+
+
+@nb.njit(cache=True, parallel=True)
+def _contact_tree(X, U, nxt, T, centre, radius, lo, hi, left, right, bmin, bmax, tau_max,
+                  eps, nchunks):
+    """:func:`_contact_pairs` through the triangles' hierarchy: a node is skipped when even
+    its box, less the edge's half length and ``eps``, is farther from the edge's midpoint than
+    the edge can travel before the best time so far (every point of a moving edge stays within
+    ``half + v τ`` of its start midpoint). The pairs it visits are timed as there, and the
+    pairs it skips would have met no sooner: the same value."""
+    n = X.shape[0]
+    best = np.full(nchunks, tau_max)
+    stack = np.empty((nchunks, 128), np.int64)
+    for cc in nb.prange(nchunks):
+        tb = tau_max
+        for i in range(cc, n, nchunks):
+            j = nxt[i]
+            v, mx, my, mz, half = _edge_motion(X, U, i, j)
+            if v == 0.0:
+                continue
+            top = 0
+            stack[cc, 0] = 0
+            top = 1
+            while top > 0:
+                top -= 1
+                node = stack[cc, top]
+                dx = max(bmin[node, 0] - mx, 0.0, mx - bmax[node, 0])
+                dy = max(bmin[node, 1] - my, 0.0, my - bmax[node, 1])
+                dz = max(bmin[node, 2] - mz, 0.0, mz - bmax[node, 2])
+                if (np.sqrt(dx * dx + dy * dy + dz * dz) - half - eps) / v >= tb:
+                    continue
+                if left[node] < 0:
+                    for k in range(lo[node], hi[node]):
+                        tb = min(tb, _pair_time(X, U, i, j, v, mx, my, mz, half, T, centre,
+                                                radius, k, eps, tb))
+                else:
+                    stack[cc, top] = left[node]
+                    stack[cc, top + 1] = right[node]
+                    top += 2
+        best[cc] = tb
+    return best.min()
+
+
+def triangle_tree(T: np.ndarray, leaf: int = 8):
+    """A bounding-box hierarchy over triangles ``T`` (K, 3, 3), split at the median centroid
+    along the longest side of each box: ``(order, lo, hi, left, right, bmin, bmax)``, with the
+    triangles of node ``i`` at ``order[lo[i]:hi[i]]`` and ``left[i] < 0`` at leaves."""
+    K = T.shape[0]
+    centre = T.mean(axis=1)
+    order = np.arange(K)
+    lo, hi, left, right = [0], [K], [-1], [-1]
+    todo = [0]
+    while todo:
+        node = todo.pop()
+        a, b = lo[node], hi[node]
+        if b - a <= leaf:
+            continue
+        idx = order[a:b]
+        c = centre[idx]
+        axis = int(np.argmax(c.max(axis=0) - c.min(axis=0)))
+        m = (b - a) // 2
+        part = np.argpartition(c[:, axis], m)
+        order[a:b] = idx[part]
+        for s, e in ((a, a + m), (a + m, b)):
+            lo.append(s)
+            hi.append(e)
+            left.append(-1)
+            right.append(-1)
+            todo.append(len(lo) - 1)
+        left[node], right[node] = len(lo) - 2, len(lo) - 1
+    lo, hi = np.array(lo, np.int64), np.array(hi, np.int64)
+    pts = T[order]
+    bmin = np.array([pts[s:e].reshape(-1, 3).min(axis=0) for s, e in zip(lo, hi, strict=True)])
+    bmax = np.array([pts[s:e].reshape(-1, 3).max(axis=0) for s, e in zip(lo, hi, strict=True)])
+    return (order, lo, hi, np.array(left, np.int64), np.array(right, np.int64),
+            np.ascontiguousarray(bmin), np.ascontiguousarray(bmax))
 
 
 @nb.njit(cache=True, parallel=True)
@@ -358,9 +452,12 @@ class ObstacleField:
             tri.append(((V - shift) / scale)[F])
             owner.append(np.full(len(F), m))
             local.append(np.arange(len(F)))
-        self.T = np.ascontiguousarray(np.concatenate(tri))  # (K, 3, 3)
-        self.owner = np.concatenate(owner)
-        self.local = np.concatenate(local)
+        T = np.concatenate(tri)  # (K, 3, 3)
+        # the triangles in the order of their hierarchy (the step bound's search)
+        order, *self.tree = triangle_tree(T)
+        self.T = np.ascontiguousarray(T[order])
+        self.owner = np.concatenate(owner)[order]
+        self.local = np.concatenate(local)[order]
         a, b, c = self.T[:, 0], self.T[:, 1], self.T[:, 2]
         self.area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
         self.centre = np.ascontiguousarray((a + b + c) / 3.0)
@@ -374,24 +471,31 @@ class ObstacleField:
 
     def energy(self, X: np.ndarray, nxt: np.ndarray) -> float:
         """``weight × E_obs`` of the polygon(s) ``X`` with successor array ``nxt``."""
-        e, _, _ = _edge_terms(X, nxt, self.T, self.area, False)
+        e, _, _ = self._terms(X, nxt, False)
         return self.weight * float(e.sum())
+
+    def _terms(self, X, nxt, grad):
+        return _edge_terms(X, nxt, self.T, self.area, grad)
 
     def energy_gradient(self, X: np.ndarray, nxt: np.ndarray, prv: np.ndarray
                         ) -> tuple[float, np.ndarray]:
         """``weight × (E_obs, ∇E_obs)``; the gradient is (N, 3)."""
-        e, gm, gl = _edge_terms(X, nxt, self.T, self.area, True)
+        e, gm, gl = self._terms(X, nxt, True)
         G = _gather(X, nxt, prv, gm, gl)
         return self.weight * float(e.sum()), self.weight * G
 
     def contact_time(self, X: np.ndarray, U: np.ndarray, nxt: np.ndarray, tau_max: float,
-                     eps: float) -> float:
+                     eps: float, search: str = "tree") -> float:
         """Smallest ``τ ≤ tau_max`` at which ``X − τU`` comes within ``eps`` of a triangle
-        (conservative), or ``tau_max``."""
+        (conservative), or ``tau_max``; ``search`` "tree" (the triangles' hierarchy) or
+        "pairs" (all pairs): the same value."""
         U = np.ascontiguousarray(U, dtype=np.float64)
         chunks = 4 * nb.get_num_threads()
-        return float(_contact(X, U, nxt, self.T, self.centre, self.radius, float(tau_max),
-                              float(eps), chunks))
+        if search == "pairs":
+            return float(_contact_pairs(X, U, nxt, self.T, self.centre, self.radius,
+                                        float(tau_max), float(eps), chunks))
+        return float(_contact_tree(X, U, nxt, self.T, self.centre, self.radius, *self.tree,
+                                   float(tau_max), float(eps), chunks))
 
     def nearest(self, X: np.ndarray, nxt: np.ndarray) -> tuple[int, int, float]:
         """``(edge, triangle, distance)`` of the closest edge–triangle pair (0: they meet)."""

@@ -266,3 +266,31 @@ def test_other_bad_obstacle_arguments():
     with pytest.raises(ValueError, match=r"touches an obstacle: edge \d+ is 1e-06 from "
                                          r"triangle 0 of obstacle 0"):
         core.relax(C, obstacles=[plane], max_iter=1)
+
+
+def test_the_step_bound_through_the_hierarchy_is_the_all_pairs_one(rng):
+    # a torus and a ring around its tube moved along random fields: the same first contact
+    V, F = torus(nu=40, nv=16)
+    fld = ob.ObstacleField(ob.check_obstacles([(V, F)]))
+    X, lay = as_layout(ring_around_tube(150))
+    hits = 0
+    for scale in (0.05, 0.3, 1.0, 3.0):
+        for _ in range(4):
+            U = scale * rng.normal(size=X.shape)
+            tree = fld.contact_time(X, U, lay.nxt, 1.0, 1e-3)
+            pairs = fld.contact_time(X, U, lay.nxt, 1.0, 1e-3, search="pairs")
+            assert tree == pairs
+            hits += tree < 1.0
+    assert hits >= 4  # most of these fields do reach the torus within τ = 1
+
+
+def test_triangle_tree_holds_every_triangle_once(rng):
+    T = rng.normal(size=(1000, 3, 3))
+    order, lo, hi, left, right, bmin, bmax = ob.triangle_tree(T)
+    assert np.array_equal(np.sort(order), np.arange(1000))
+    leaves = left < 0
+    assert np.all(hi[leaves] - lo[leaves] <= 8) and (hi[leaves] - lo[leaves]).sum() == 1000
+    pts = T[order]
+    for i in range(len(lo)):
+        box = pts[lo[i]:hi[i]].reshape(-1, 3)
+        assert np.all(box >= bmin[i]) and np.all(box <= bmax[i])
