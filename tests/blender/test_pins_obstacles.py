@@ -8,25 +8,13 @@ import numpy as np
 import pytest
 from bpy_helpers import scene_state, spline_points
 
+from tests.mesh_checks import crossings
+
 
 def keyed(mb, obj):
     """(frames, points per frame) of the flow keyed on ``obj``."""
     frames, points, _ = import_module(mb.__name__ + ".keyframes").read_flow_keyframes(obj)
     return frames, points
-
-
-def crossings(P, V, F):
-    """Edges of the closed polygon P (N, 3) that meet a triangle of (V, F): each edge–triangle
-    system p0 + t (p1 − p0) = a + v e1 + w e2 solved (independent of the extension)."""
-    p0, p1 = P, np.roll(P, -1, axis=0)
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    M = np.stack(np.broadcast_arrays((p0 - p1)[:, None], (b - a)[None], (c - a)[None]), -1)
-    rhs = p0[:, None] - a[None]
-    ok = np.abs(np.linalg.det(M)) > 1e-300
-    sol = np.zeros(rhs.shape)
-    sol[ok] = np.linalg.solve(M[ok], rhs[ok][..., None])[..., 0]
-    t, v, w = sol[..., 0], sol[..., 1], sol[..., 2]
-    return np.count_nonzero(ok & (t >= 0) & (t <= 1) & (v >= 0) & (w >= 0) & (v + w <= 1))
 
 
 def world_mesh(obj):

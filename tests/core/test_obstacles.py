@@ -6,6 +6,7 @@ import pytest
 from moebius_addon import core
 from moebius_addon.core import obstacles as ob
 from moebius_addon.core._layout import as_layout
+from tests.mesh_checks import crossings
 
 
 def torus(R=1.0, r=0.3, nu=24, nv=10):
@@ -70,21 +71,6 @@ def ref_energy(X, tris):
             area = 0.5 * np.linalg.norm(np.cross(T[1] - T[0], T[2] - T[0]))
             E += ln * area / ref_point_triangle(m, *T) ** 3
     return E
-
-
-def crossings(P, V, F):
-    """(edge, triangle) pairs of the polygon P that meet the mesh (independent test: every
-    pair's 3 × 3 system p0 + t (p1 − p0) = a + v e1 + w e2 solved at once)."""
-    p0, p1 = P, np.roll(P, -1, axis=0)
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    M = np.stack(np.broadcast_arrays((p0 - p1)[:, None], (b - a)[None], (c - a)[None]), -1)
-    rhs = p0[:, None] - a[None]
-    ok = np.abs(np.linalg.det(M)) > 1e-300
-    sol = np.zeros(rhs.shape)
-    sol[ok] = np.linalg.solve(M[ok], rhs[ok][..., None])[..., 0]
-    t, v, w = sol[..., 0], sol[..., 1], sol[..., 2]
-    hit = ok & (t >= 0) & (t <= 1) & (v >= 0) & (w >= 0) & (v + w <= 1)
-    return list(zip(*np.nonzero(hit), strict=True))
 
 
 # -- geometry ---------------------------------------------------------------------------------
