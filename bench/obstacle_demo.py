@@ -39,21 +39,7 @@ from demo_blender import contact_sheet, frame_camera, render, setup_render  # no
 
 import moebius_addon  # noqa: E402
 from moebius_addon import core  # noqa: E402
-
-
-def crossings(P, V, F, closed: bool = True) -> int:
-    """Edges of the closed polygon P meeting a triangle of (V, F) (each edge–triangle system
-    p0 + t (p1 − p0) = a + v e1 + w e2 solved; independent of the extension)."""
-    p0, p1 = (P, np.roll(P, -1, axis=0)) if closed else (P[:-1], P[1:])
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    M = np.stack(np.broadcast_arrays((p0 - p1)[:, None], (b - a)[None], (c - a)[None]), -1)
-    rhs = p0[:, None] - a[None]
-    ok = np.abs(np.linalg.det(M)) > 1e-300
-    sol = np.zeros(rhs.shape)
-    sol[ok] = np.linalg.solve(M[ok], rhs[ok][..., None])[..., 0]
-    t, v, w = sol[..., 0], sol[..., 1], sol[..., 2]
-    return int(np.count_nonzero(ok & (t >= 0) & (t <= 1) & (v >= 0) & (w >= 0)
-                                & (v + w <= 1)))
+from tests.mesh_checks import crossings  # noqa: E402 - the tests' independent edge-triangle check
 
 
 def main(argv: list[str] | None = None) -> int:
