@@ -6,7 +6,7 @@ from importlib import import_module
 import bpy
 import numpy as np
 import pytest
-from bpy_helpers import scene_state, spline_points
+from bpy_helpers import poly_curve, scene_state, spline_points
 
 from tests.mesh_checks import crossings
 
@@ -51,16 +51,8 @@ def ring_and_torus(scene, mb):
     # the curve object sits at +1 in x, its points 1 less: the same place in the world
     mb_core = import_module(mb.__name__.rsplit(".", 1)[0] + ".core")
     ring = mb_core.resample(ring, 80) - np.array([1.0, 0.0, 0.0])
-    curve = bpy.data.curves.new("Ring", "CURVE")
-    curve.dimensions = "3D"
-    s = curve.splines.new("POLY")
-    s.points.add(len(ring) - 1)
-    s.points.foreach_set("co", np.c_[ring, np.ones(len(ring))].ravel())
-    s.use_cyclic_u = True
-    obj = bpy.data.objects.new("Ring", curve)
+    obj = poly_curve("Ring", [ring])
     obj.location = (1.0, 0.0, 0.0)
-    scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
     bpy.context.view_layer.update()
     return obj, torus, coll
 
@@ -149,17 +141,9 @@ def test_an_open_spline_relaxes_with_its_ends_pinned(scene, mb):
     # an open coil of two turns: Relax takes open poly splines (the core's closed=False)
     t = np.linspace(0, 4 * np.pi, 60)
     P = np.stack([np.cos(t), np.sin(t), 0.25 * t], -1)
-    curve = bpy.data.curves.new("Cable", "CURVE")
-    curve.dimensions = "3D"
-    s = curve.splines.new("POLY")
-    s.points.add(len(P) - 1)
-    s.points.foreach_set("co", np.c_[P, np.ones(len(P))].ravel())
-    s.use_cyclic_u = False
-    for i, p in enumerate(s.points):
+    obj = poly_curve("Cable", [P], cyclic=False)
+    for i, p in enumerate(obj.data.splines[0].points):
         p.select = i in (0, len(P) - 1)
-    obj = bpy.data.objects.new("Cable", curve)
-    scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
     start = spline_points(obj).copy()
     settings = scene.moebius
     settings.pin_selected = True
@@ -224,12 +208,7 @@ def test_cli_keeps_and_relaxes_an_open_curve(scene, mb, tmp_path, capfd):
     cli = import_module(mb.__name__ + ".cli")
     t = np.linspace(0, 4 * np.pi, 80)
     P = np.stack([np.cos(t), np.sin(t), 0.25 * t], -1)
-    curve = bpy.data.curves.new("Coil", "CURVE")
-    curve.dimensions = "3D"
-    s = curve.splines.new("POLY")
-    s.points.add(len(P) - 1)
-    s.points.foreach_set("co", np.c_[P, np.ones(len(P))].ravel())
-    scene.collection.objects.link(bpy.data.objects.new("Coil", curve))
+    poly_curve("Coil", [P], cyclic=False)
     blend = tmp_path / "coil.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     capfd.readouterr()
