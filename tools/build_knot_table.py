@@ -10,12 +10,13 @@ every prime link up to 11 crossings in each orientation LinkInfo lists (L2a1{0} 
 L11n459{1,1,1}: 4 188 entries), each with KnotInfo's or LinkInfo's braid word (σ_i^{±1} written
 ±i, 1-based) and the invariants identification needs: the Alexander polynomial (KnotInfo's for
 knots; for links the one-variable polynomial from LinkInfo's Conway polynomial), the Jones
-polynomial, the determinant, and for links the linking numbers.
+polynomial, the determinant, the signature, and for links the linking numbers.
 
 Every entry is checked here against its source before it is written: the closure of the braid
 word, as a planar diagram (``core.pd.from_braid``), must have KnotInfo's Jones and Alexander
-polynomials (computed by ``core.jones`` and ``core.invariants``) and, for a link, LinkInfo's
-number of components and linking matrix (up to the order of the components). Where a link's
+polynomials (computed by ``core.jones`` and ``core.invariants``), its signature
+(``core.goeritz``), and, for a link, LinkInfo's number of components and linking matrix (up to
+the order of the components). Where a link's
 braid closes to another orientation of the same link (LinkInfo's braid of L10n99{0,0,0} does),
 the components to reverse are found and stored (``reverse``), and the Jones polynomial is
 checked on the reversed diagram. The build stops if any entry fails.
@@ -37,7 +38,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from moebius_addon.core import invariants, jones, pd  # noqa: E402
+from moebius_addon.core import goeritz, invariants, jones, pd  # noqa: E402
 
 OUT = ROOT / "moebius_addon" / "core" / "data" / "knot_table.json.gz"
 MAX_KNOT_CROSSINGS = 12
@@ -189,10 +190,13 @@ def knot_rows(database) -> tuple[list, list[str]]:
         det = _int_or_none(r["determinant"])
         if det != abs(sum(c * (-1) ** k for k, c in enumerate(got_alex))):
             failures.append(f"{name}: determinant {det} is not |Δ(-1)|")
+        sig = goeritz.signature(d)
+        if sig != _int_or_none(r["signature"]):
+            failures.append(f"{name}: signature {sig}, KnotInfo: {r['signature']}")
         rows.append([
             name, word, crossings, r["alternating"] == "Y", _int_or_none(r["braid_index"]),
             _int_or_none(r["unknotting_number"]), _int_or_none(r["three_genus"]), det,
-            r["symmetry_type"], _int_or_none(r["signature"]), got_alex,
+            r["symmetry_type"], sig, got_alex,
             _stored_jones(got_jones),
         ])
     return rows, failures
@@ -231,9 +235,12 @@ def link_rows(database) -> tuple[list, list[str]]:
         det = _int_or_none(r["determinant"])
         if det != abs(sum(c * (-1) ** k for k, c in enumerate(alex))):
             failures.append(f"{name}: determinant {det} is not |Δ(-1)|")
+        sig = goeritz.signature(e)
+        if sig != _int_or_none(r["signature"]):
+            failures.append(f"{name}: signature {sig}, LinkInfo: {r['signature']}")
         rows.append([
             name, strands, word, flip, crossings, K, r["alternating"] == "Y", det,
-            _upper(pd.linking_matrix(e)), alex, _stored_jones(want_jones),
+            _upper(pd.linking_matrix(e)), alex, _stored_jones(want_jones), sig,
         ])
     return rows, failures
 
@@ -279,7 +286,8 @@ def build() -> dict:
                         "unknotting_number", "genus", "determinant", "symmetry", "signature",
                         "alexander", "jones"],
         "link_fields": ["name", "strands", "braid", "reverse", "crossings", "components",
-                        "alternating", "determinant", "linking", "alexander", "jones"],
+                        "alternating", "determinant", "linking", "alexander", "jones",
+                        "signature"],
         "knot_names": KNOT_NAMES,
         "link_names": {base: words for base, (words, _) in LINK_NAMES.items()},
         "aliases": aliases(knots, links),

@@ -7,7 +7,7 @@ For each name (knots and links, or a seeded sample) the default curve is built a
   independent of ours) from the polygon's coordinates equals the table's, which are KnotInfo's
   and LinkInfo's values (tools/build_knot_table.py);
 * ``ours``: the invariants ``core.identify`` reads off a projection of the curve (components,
-  Alexander and Jones polynomials) equal the table's, its linking matrix equals the table's in
+  Alexander and Jones polynomials, signature) equal the table's, its linking matrix equals the table's in
   the component order of the curve, and the name is among those ``identify`` returns.
 
 With ``--pd`` each entry is drawn instead from KnotInfo's or LinkInfo's own PD code
@@ -93,7 +93,7 @@ def verify(name: str, use_topoly: bool = True) -> dict:
     fp = r.fingerprint
     ours_jones = dict(fp.jones) if fp.jones is not None else None
     row["ours"] = bool(fp.components == e.components and list(fp.alexander) == list(e.alexander)
-                       and ours_jones == table_jones(e)
+                       and ours_jones == table_jones(e) and fp.signature == e.signature
                        and r.linking_matrix == (e.linking_matrix() if e.components > 1
                                                 else [[0]])
                        and name in r.names)

@@ -24,6 +24,7 @@ from .invariants import (  # noqa: E402
     jones_polynomial,
     knot_determinant,
     linking_numbers,
+    signature,
 )
 from .metrics import METRICS, gram_matrix  # noqa: E402
 from .objio import read_obj, write_obj  # noqa: E402
@@ -65,6 +66,7 @@ __all__ = [
     "read_obj",
     "relax",
     "resample",
+    "signature",
     "sobolev_gradient",
     "suggest_edge_count",
     "table",

@@ -3,18 +3,22 @@ matched against the shipped table (:mod:`.table`).
 
 The invariants: the number of components, the Alexander polynomial (polynomial time,
 :func:`.invariants.alexander_polynomial`), the Jones polynomial (Kauffman's bracket summed
-tangle by tangle, :mod:`.jones`; it tells most knots from their mirror images) and, for links,
-the linking numbers (compared up to the order of the components). They are computed on the
+tangle by tangle, :mod:`.jones`; it tells most knots from their mirror images), the signature
+(Gordon–Litherland, :mod:`.goeritz`; it tells some chiral knots from their mirror images that
+the Jones polynomial cannot, 9_42 and 10_125 among them) and, for links, the linking numbers
+(compared up to the order of the components). They are computed on the
 projection whose diagram has the fewest crossings after Reidemeister I and II simplification
 (:func:`.invariants.planar_diagram`); that crossing count bounds the crossing number from
 above, so table entries with more crossings are ruled out.
 
 Equal invariants do not prove equal knots: mutants (the Conway and Kinoshita–Terasaka knots,
-11n_34 and 11n_42) share all of them, and of the 5 835 knots up to 12 crossings with their
-mirror images 1 181 share their Alexander and Jones polynomials with another (KnotInfo's values,
-tools/build_knot_table.py). :func:`identify` then names them all, and a curve whose invariants
-match no entry is not in the table (a composite knot, a split link, or more crossings than the
-table holds) or was too tangled for the Jones polynomial.
+11n_34 and 11n_42) share all of them. Of the 5 877 knots up to 12 crossings with their mirror
+images (an amphicheiral knot counted once), 1 260 share their Alexander and Jones polynomials
+with another and 1 180 share the signature too; the chiral knots these tell from their mirror
+images rise from all but 37 to all but 23 (the HOMFLY-PT polynomial would part none of the
+1 180 further: docs/benchmarks.md, "Identification"). :func:`identify` then names them all,
+and a curve whose invariants match no entry is not in the table (a composite knot, a split
+link, or more crossings than the table holds) or was too tangled for the Jones polynomial.
 """
 
 from __future__ import annotations
@@ -27,8 +31,8 @@ from functools import cache
 
 import numpy as np
 
+from . import goeritz, table
 from . import jones as _jones
-from . import table
 from .invariants import alexander_polynomial, linking_numbers, planar_diagram
 from .polygon import check_polygon
 
@@ -48,16 +52,18 @@ class Fingerprint:
     """Invariants of a knot or link that identification compares.
 
     ``jones`` is ``{exponent of t^(1/2): coefficient}`` as a sorted tuple of pairs, or None
-    when it was not computed; ``linking`` the sorted pairwise linking numbers."""
+    when it was not computed; ``linking`` the sorted pairwise linking numbers; ``signature``
+    KnotInfo's convention (3_1: −2)."""
 
     components: int
     alexander: tuple[int, ...]
     jones: tuple[tuple[int, int], ...] | None
     linking: tuple[int, ...]
+    signature: int
 
     def key(self, with_jones: bool = True) -> tuple:
         return (self.components, self.alexander, self.jones if with_jones else None,
-                self.linking)
+                self.linking, self.signature)
 
 
 @dataclass(frozen=True)
@@ -126,7 +132,8 @@ def _laurent(poly: dict[int, int]) -> tuple[float, list[int]]:
 def _entry_fingerprint(e: table.Entry) -> Fingerprint:
     lo, coeffs = e.jones
     poly = tuple((lo + 2 * k, c) for k, c in enumerate(coeffs) if c)
-    return Fingerprint(e.components, tuple(e.alexander), poly, tuple(sorted(e.linking)))
+    return Fingerprint(e.components, tuple(e.alexander), poly, tuple(sorted(e.linking)),
+                       e.signature)
 
 
 @cache
@@ -149,7 +156,7 @@ def _index() -> tuple[dict, dict]:
         full.setdefault(key, []).append(m)
     partial: dict[tuple, list] = {}
     for key, es in full.items():
-        partial.setdefault((key[0], key[1], None, key[3]), []).extend(es)
+        partial.setdefault((key[0], key[1], None, *key[3:]), []).extend(es)
     return full, partial
 
 
@@ -167,7 +174,7 @@ def fingerprint(P, max_states: int = _jones.MAX_STATES) -> tuple[Fingerprint, in
     except _jones.TooComplex:
         jp = None
     upper = tuple(sorted(int(L[a, b]) for a in range(K) for b in range(a + 1, K)))
-    return Fingerprint(K, alexander, jp, upper), d.crossings, L
+    return Fingerprint(K, alexander, jp, upper, goeritz.signature(d)), d.crossings, L
 
 
 def _same_linking(e: table.Entry, L: np.ndarray) -> bool:

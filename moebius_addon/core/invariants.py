@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from . import jones
+from . import goeritz, jones
 from ._layout import as_layout
 from .pd import DisjointSets, PlanarDiagram, from_passages, simplify
 
@@ -186,6 +186,15 @@ def jones_polynomial(P, max_states: int = jones.MAX_STATES) -> tuple[float, list
     :func:`planar_diagram`; a diagram that needs more than ``max_states`` intermediate states
     raises :class:`~.jones.TooComplex` (a ``ValueError``)."""
     return laurent(jones.jones(planar_diagram(P), max_states))
+
+
+def signature(P) -> int:
+    """The signature of the knot or link ``P`` (polygon, list of polygons or a
+    :class:`~.pd.PlanarDiagram`), in KnotInfo's and LinkInfo's convention: 3_1 has −2, its
+    mirror image 2, the figure-eight knot 0, the positive Hopf link −1. Gordon–Litherland's
+    formula on the simplified diagram of :func:`planar_diagram` (:mod:`.goeritz`); the value
+    changes sign with the mirror image and, for a link, depends on the orientations."""
+    return goeritz.signature(planar_diagram(P))
 
 
 def laurent(poly: dict[int, int]) -> tuple[float, list[int]]:

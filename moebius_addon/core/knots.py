@@ -238,9 +238,9 @@ def info(name: str) -> dict:
     ``crossings``, ``components``, ``alternating``, ``determinant``, ``alexander`` (coefficients
     of t⁰, t¹, …), ``jones`` (``(lowest power of t, coefficients)`` as
     ``invariants.jones_polynomial`` returns it), ``linking`` (matrix), ``common`` names, a
-    one-line ``description``, ``mirror_of`` (the table name of a mirror image, else None) and
-    for knots ``braid_index``, ``unknotting_number``, ``genus``, ``symmetry``, ``signature``
-    (KnotInfo's)."""
+    one-line ``description``, ``mirror_of`` (the table name of a mirror image, else None),
+    ``signature`` (KnotInfo's or LinkInfo's, of the orientation named) and for knots
+    ``braid_index``, ``unknotting_number``, ``genus``, ``symmetry`` (KnotInfo's)."""
     e = table.entry(name)
     lo, coeffs = e.jones
     return {
@@ -248,7 +248,7 @@ def info(name: str) -> dict:
         "crossings": e.crossings, "components": e.components, "alternating": e.alternating,
         "determinant": e.determinant, "alexander": list(e.alexander),
         "jones": (lo // 2 if lo % 2 == 0 else lo / 2, list(coeffs)),
-        "linking": e.linking_matrix(), "common": list(e.common),
+        "linking": e.linking_matrix(), "signature": e.signature, "common": list(e.common),
         "description": e.description, "mirror_of": e.mirror_of, **e.extra,
     }
 

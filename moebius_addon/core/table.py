@@ -30,7 +30,8 @@ class Entry:
 
     ``jones`` is ``(lowest exponent of x, coefficients)`` in ``x = t^(1/2)`` with the exponents
     stepping by 2; ``alexander`` the coefficients of ``t^0, t^1, …``; ``linking`` the upper
-    triangle of the linking matrix (row by row) of the curve :func:`knots.named` makes."""
+    triangle of the linking matrix (row by row) of the curve :func:`knots.named` makes;
+    ``signature`` KnotInfo's or LinkInfo's (3_1: −2; a link's for the orientation named)."""
 
     name: str
     kind: str  # "knot" or "link"
@@ -44,6 +45,7 @@ class Entry:
     jones: tuple[int, tuple[int, ...]]
     linking: tuple[int, ...] = ()
     reverse: tuple[int, ...] = ()
+    signature: int | None = None
     common: tuple[str, ...] = ()
     extra: dict = field(default_factory=dict, compare=False)
     mirror_of: str | None = None
@@ -98,10 +100,9 @@ class Entry:
             alternating=self.alternating, determinant=self.determinant,
             alexander=self.alexander, jones=(-hi, tuple(reversed(coeffs))),
             linking=tuple(-v for v in self.linking), reverse=self.reverse,
+            signature=None if self.signature is None else -self.signature,
             common=self.common if self.mirror_of else _mirror_common(self),
-            extra={**self.extra, **({"signature": -self.extra["signature"]}
-                                    if self.extra.get("signature") is not None else {})},
-            mirror_of=None if self.mirror_of else self.name)
+            extra=self.extra, mirror_of=None if self.mirror_of else self.name)
 
 
 def _mirror_common(e: Entry) -> tuple[str, ...]:
@@ -125,9 +126,8 @@ def _load() -> dict:
             strands=max((abs(g) for g in word), default=0) + 1, crossings=r["crossings"],
             components=1, alternating=r["alternating"], determinant=r["determinant"],
             alexander=tuple(r["alexander"]), jones=(r["jones"][0], tuple(r["jones"][1:])),
-            common=tuple(knot_names.get(r["name"], ())),
-            extra={k: r[k] for k in ("braid_index", "unknotting_number", "genus", "symmetry",
-                                     "signature")})
+            signature=r["signature"], common=tuple(knot_names.get(r["name"], ())),
+            extra={k: r[k] for k in ("braid_index", "unknotting_number", "genus", "symmetry")})
     for row in raw["links"]:
         r = dict(zip(raw["link_fields"], row, strict=True))
         table[r["name"]] = Entry(
@@ -136,7 +136,7 @@ def _load() -> dict:
             alternating=r["alternating"], determinant=r["determinant"],
             alexander=tuple(r["alexander"]), jones=(r["jones"][0], tuple(r["jones"][1:])),
             linking=tuple(r["linking"]), reverse=tuple(r["reverse"]),
-            common=tuple(link_names.get(r["name"].split("{")[0], ())))
+            signature=r["signature"], common=tuple(link_names.get(r["name"].split("{")[0], ())))
     aliases = {_normal(a): n for a, n in raw["aliases"].items()}
     default_orientation: dict[str, str] = {}
     for n in table:

@@ -24,11 +24,14 @@ def test_a_seeded_sample_of_the_table_is_identified(name):
     assert r.status == (Match.UNIQUE if len(r.names) == 1 else Match.SEVERAL)
     e = knots.info(name)
     assert r.alexander == e["alexander"] and r.jones == e["jones"]
+    assert r.fingerprint.signature == e["signature"]
     if e["kind"] == "knot" and e["symmetry"] not in ("fully amphicheiral",
                                                      "negative amphicheiral",
                                                      "positive amphicheiral"):
         M = identify(knots.named("m" + name))
-        assert "m" + name in M.names and (name in M.names) == (r.jones == M.jones)
+        assert M.fingerprint.signature == -e["signature"]
+        assert "m" + name in M.names and (name in M.names) == (r.jones == M.jones
+                                                               and e["signature"] == 0)
 
 
 @pytest.mark.parametrize("name, want", [
@@ -51,10 +54,10 @@ def test_mutants_and_orientations_share_their_invariants():
 
 
 def test_entries_with_more_crossings_than_the_diagram_are_ruled_out():
-    # 5_1 and the mirror of 10_132 share Alexander and Jones polynomials; a diagram of 5
-    # crossings rules out a knot of 10
-    r = identify(knots.named("5_1"))
-    assert r.names == ("5_1",) and "m10_132" in r.excluded and r.crossings == 5
+    # 8_8 and the mirror of 10_129 share Alexander and Jones polynomials and signature; a
+    # diagram of fewer than 10 crossings (the braid closure simplifies to 9) rules out a knot of 10
+    r = identify(knots.named("8_8"))
+    assert r.names == ("8_8",) and "m10_129" in r.excluded and r.crossings < 10
 
 
 def test_unknots_and_not_in_the_table():
@@ -70,7 +73,23 @@ def test_unknots_and_not_in_the_table():
 def test_without_the_jones_polynomial():
     r = identify(knots.named("3_1"), max_states=1)
     assert r.jones is None and "not computed" in r.message
-    assert set(r.names) == {"3_1", "m3_1"}  # the Alexander polynomial cannot tell them apart
+    assert r.names == ("3_1",)  # the signature tells it from its mirror image
+    r = identify(knots.named("6_1"), max_states=1)
+    # signature 0: the Alexander polynomial and the signature cannot tell 6_1 from its mirror
+    # image (nor from 9_46, which has more crossings than the diagram)
+    assert set(r.names) == {"6_1", "m6_1"} and "9_46" in r.excluded
+
+
+def test_the_signature_tells_chiral_knots_the_jones_polynomial_cannot():
+    # 9_42 and 10_125 share Alexander and Jones polynomials with their mirror images; their
+    # signatures (KnotInfo: 2 for both) do not
+    for name in ("9_42", "10_125"):
+        e = knots.info(name)
+        assert e["jones"] == knots.info("m" + name)["jones"] and e["signature"] == 2
+        assert identify(knots.named(name)).names == (name,)
+        assert identify(knots.named("m" + name)).names == ("m" + name,)
+    # 10_48's signature is 0: it stays named together with its mirror image
+    assert set(identify(knots.named("10_48")).names) == {"10_48", "m10_48"}
 
 
 @pytest.mark.parametrize("name, method", [("7_4", "projected_gradient_implicit"),

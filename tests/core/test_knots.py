@@ -100,12 +100,14 @@ def test_table_agrees_with_knotinfo():
         v = json.loads(r["jones_polynomial_vector"])
         assert e["jones"] == (v[0], v[2:]), name
         assert e["determinant"] == int(r["determinant"]), name
+        assert e["signature"] == int(r["signature"]), name
     links = {r["name"]: r for r in knotinfo.link_list(proper_links=True)}
     for name in knots.names("link"):
         r, e = links[name], knots.info(name)
         assert e["components"] == int(r["components"]) and e["crossings"] == int(
             r["crossing_number"]), name
         assert e["determinant"] == int(r["determinant"]), name
+        assert e["signature"] == int(r["signature"]), name
 
 
 def test_shipped_table_is_what_the_build_tool_makes():
