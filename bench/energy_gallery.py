@@ -1,8 +1,9 @@
 """Gallery of the relaxed knots of the energy table: Workbench renders, headless, as contact
 sheets by crossing number, and ``docs/gallery.md``.
 
-Reads ``docs/data/energy_table.csv`` and the relaxed polygons ``bench/energy_table.py`` wrote
-to ``out/energy_table/<name>_<n2>.obj``; renders each as a bevelled curve (orthographic camera,
+Reads ``docs/data/energy_table.csv`` and the relaxed polygons at ``n2`` edges packed in
+``docs/data/energy_table_curves.npz`` (``bench/energy_table.py --pack``; else
+``out/energy_table/<name>_<n2>.obj``); renders each as a bevelled curve (orthographic camera,
 the same direction for all) into ``out/gallery/``; composes the sheets into
 ``docs/img/gallery_<group>.png`` and writes ``docs/gallery.md``::
 
@@ -32,6 +33,7 @@ from demo_blender import frame_camera, render, setup_render  # noqa: E402
 from moebius_addon.core import objio  # noqa: E402
 
 CSV = ROOT / "docs" / "data" / "energy_table.csv"
+CURVES = ROOT / "docs" / "data" / "energy_table_curves.npz"
 OBJ = ROOT / "out" / "energy_table"
 TILES = ROOT / "out" / "gallery"
 IMG = ROOT / "docs" / "img"
@@ -42,11 +44,20 @@ GROUPS = [("up to 8 crossings", lambda c: c <= 8, "gallery_0-8.png"),
           ("10 crossings (10_84 … 10_165)", lambda c: c == 10, "gallery_10b.png")]
 
 
+def relaxed_curve(name: str, n: int) -> np.ndarray:
+    """The relaxed polygon of ``name`` at ``n`` edges: packed in the docs, or the run's OBJ."""
+    if CURVES.exists():
+        with np.load(CURVES) as packed:
+            if name in packed.files and len(packed[name]) == n:
+                return packed[name].astype(np.float64)
+    return np.concatenate(objio.read_obj(OBJ / f"{name}_{n}.obj"))
+
+
 def tile(name: str, n: int, path: Path, resolution: int) -> None:
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     setup_render(scene, resolution)
-    P = np.concatenate(objio.read_obj(OBJ / f"{name}_{n}.obj"))
+    P = relaxed_curve(name, n)
     curve = bpy.data.curves.new(name, "CURVE")
     curve.dimensions = "3D"
     spline = curve.splines.new("POLY")

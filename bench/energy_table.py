@@ -14,11 +14,14 @@ trefoil by ``--order-study``) Richardson extrapolation gives
 Rows go to ``docs/data/energy_table.csv`` (name, crossings, n1, E1, iterations, seconds, status,
 n2, E2, iterations, seconds, status, extrapolated, identified); relaxed polygons to
 ``out/energy_table/<name>_<n>.obj``. Knots already in the CSV are skipped, so the run can be
-stopped and started again::
+stopped and started again. ``--pack`` gathers the relaxed polygons at ``n2`` edges of every row
+into ``docs/data/energy_table_curves.npz`` (one float32 array per knot, centred and scaled to
+unit edge length; ``--check-pack`` recomputes their energies against the CSV)::
 
     .venv/bin/python bench/energy_table.py                     # all 250, hours
     .venv/bin/python bench/energy_table.py --names 3_1 4_1     # some
     .venv/bin/python bench/energy_table.py --order-study 3_1   # E(n) at n, 2n, 4n
+    .venv/bin/python bench/energy_table.py --pack              # the curves, for the docs
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from moebius_addon import core  # noqa: E402
 from moebius_addon.core import knots  # noqa: E402
 
 CSV = ROOT / "docs" / "data" / "energy_table.csv"
+CURVES = ROOT / "docs" / "data" / "energy_table_curves.npz"
 OBJ = ROOT / "out" / "energy_table"
 FIELDS = ["name", "crossings", "n1", "energy1", "iterations1", "seconds1", "status1", "n2",
           "energy2", "iterations2", "seconds2", "status2", "extrapolated", "identified"]
@@ -97,6 +101,47 @@ def order_study(name: str, args) -> None:
               f"{energies[2] + d2 / (2 ** p - 1):.4f}")
 
 
+def read_rows(path: Path = CSV) -> list[dict]:
+    with path.open() as f:
+        return list(csv.DictReader(f))
+
+
+def pack(rows: list[dict], path: Path = CURVES) -> None:
+    """The relaxed polygons at ``n2`` edges of ``rows`` into one npz: float32, centred at the
+    barycenter and scaled to edge length 1 (the energy is scale invariant), keyed by name.
+    Curves already in the file and not in ``out/energy_table`` are kept."""
+    curves = dict(np.load(path)) if path.exists() else {}
+    for r in rows:
+        obj = OBJ / f"{r['name']}_{r['n2']}.obj"
+        if not obj.exists():
+            if r["name"] not in curves:
+                print(f"{r['name']}: no {obj.name} and not packed before", flush=True)
+            continue
+        P = core.read_obj(obj)[0]
+        P = P - P.mean(axis=0)
+        P /= np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1).mean()
+        curves[r["name"]] = P.astype(np.float32)
+    names = [r["name"] for r in rows if r["name"] in curves]
+    np.savez_compressed(path, **{n: curves[n] for n in names})
+    print(f"{path}: {len(names)} curves, {sum(len(curves[n]) for n in names)} vertices, "
+          f"{path.stat().st_size} bytes")
+
+
+def check_pack(rows: list[dict], path: Path = CURVES) -> None:
+    """The energy of every packed curve (float32 coordinates) against the CSV's ``energy2``."""
+    curves = np.load(path)
+    worst = 0.0
+    for r in rows:
+        if r["name"] not in curves:
+            continue
+        e = core.moebius_energy(curves[r["name"]].astype(np.float64), engine="exact")
+        rel = abs(e - float(r["energy2"])) / float(r["energy2"])
+        worst = max(worst, rel)
+        if rel > 2e-5:  # float32 coordinates: a few 1e-6 expected
+            print(f"{r['name']}: packed curve has E = {e:.6f}, the table {r['energy2']}")
+    print(f"{len(curves.files)} packed curves; largest relative energy difference {worst:.2e}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--names", nargs="*", default=None)
@@ -107,9 +152,17 @@ def main() -> None:
     ap.add_argument("--order", type=float, default=2.0)
     ap.add_argument("--order-study", metavar="NAME", default=None)
     ap.add_argument("--csv", type=Path, default=CSV)
+    ap.add_argument("--pack", action="store_true", help="gather the relaxed curves (docs)")
+    ap.add_argument("--check-pack", action="store_true")
     args = ap.parse_args()
     if args.order_study:
         order_study(args.order_study, args)
+        return
+    if args.pack or args.check_pack:
+        rows = read_rows(args.csv)
+        if args.pack:
+            pack(rows)
+        check_pack(rows)
         return
     names = args.names or table_names(args.max_crossings)
     done = set()
