@@ -63,15 +63,27 @@ def main() -> None:
             "+ signature (identify)": lambda r: (r[1], r[2], r[3]),
             "+ signature + HOMFLY-PT": lambda r: (r[1], r[2], r[3], r[4]),
             "Alexander + Jones + HOMFLY-PT": lambda r: (r[1], r[2], r[4])}
+    mirrored = {}
     for label, key in keys.items():
         groups: dict = {}
         for r in rows:
             groups.setdefault(key(r), []).append(r[0])
         shared = [g for g in groups.values() if len(g) > 1]
         own = [g for g in shared if len({e.base for e in g}) == 1]
+        mirrored[label] = {g[0].base for g in own}
         print(f"{label:32s} {sum(map(len, shared)):5d} share their key with another entry, "
               f"{len(shared)} groups; {len(own)} chiral knots share it with their mirror image "
               f"alone ({', '.join(sorted(g[0].base for g in own)[:6])}, …)")
+    parted = mirrored["Alexander + Jones"] - mirrored["+ signature (identify)"]
+    order = {n: k for k, n in enumerate(table_names())}
+    print(f"the signature tells {len(parted)} chiral knots from their mirror images: "
+          f"{', '.join(sorted(parted, key=order.get))}")
+
+
+def table_names() -> list[str]:
+    from moebius_addon.core import knots
+
+    return knots.names("knot")
 
 
 if __name__ == "__main__":

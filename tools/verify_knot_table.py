@@ -7,8 +7,9 @@ For each name (knots and links, or a seeded sample) the default curve is built a
   independent of ours) from the polygon's coordinates equals the table's, which are KnotInfo's
   and LinkInfo's values (tools/build_knot_table.py);
 * ``ours``: the invariants ``core.identify`` reads off a projection of the curve (components,
-  Alexander and Jones polynomials, signature) equal the table's, its linking matrix equals the table's in
-  the component order of the curve, and the name is among those ``identify`` returns.
+  Alexander and Jones polynomials, signature) equal the table's, its linking matrix equals the
+  table's in the component order of the curve, and the name is among those ``identify``
+  returns.
 
 With ``--pd`` each entry is drawn instead from KnotInfo's or LinkInfo's own PD code
 (``core.knots.from_pd``; needs ``database_knotinfo``) and checked the same way (start check at
