@@ -57,18 +57,30 @@ def lengths(X, layout):
 
 # -- without pins: the same bits as before pins existed ---------------------------------------
 
+# Each history against the reference, relative to its largest value. The reference was
+# written on main before pins and matched bit for bit on that machine; another CPU rounds
+# differently (vector widths of numba's sums, OpenBLAS kernels), and stopping rules on
+# tolerances (Krylov, back-projection, contact times) turn last bits into differences at their
+# tolerance: on an AMD Zen 4 (2026-11-25) up to 1.8e-7 in energies, 6.4e-7 in gradient norms
+# and 5.1e-6 in steps, every iteration count equal. A change to the method moves them by far
+# more; in one process the runs are compared bit for bit (test_empty_pins_are_no_pins).
+# Constraint residuals: rounding-level for the feasible methods (1e-12 absolute), up to 2e-11 of
+# their size for the penalty methods, whose residuals are large.
+_SCALED_TOL = {"energy": 1e-5, "step": 1e-4, "grad_norm": 1e-4, "constraint_residual": 1e-9}
+
+
 def same_run(got: dict, ref: dict) -> None:
-    """The histories of ``got`` and ``ref`` to 1e-9 (constraint residuals, rounding-level
-    numbers, to 1e-12 absolute). Written on main before pins and compared bit for bit there
-    (same machine); across CPUs numba's vectorized sums may differ in the last bits."""
+    """The histories of ``got`` and ``ref``: the iteration count exactly, the rest to
+    :data:`_SCALED_TOL` of each history's largest value (constraint residuals at least to
+    1e-12 absolute)."""
     assert got["nit"] == ref["nit"]
     for key in ("energy", "step", "grad_norm", "constraint_residual"):
         a = np.array([float.fromhex(v) for v in got[key]])
         b = np.array([float.fromhex(v) for v in ref[key]])
+        atol = _SCALED_TOL[key] * np.abs(b).max()
         if key == "constraint_residual":
-            np.testing.assert_allclose(a, b, rtol=0, atol=1e-12, err_msg=key)
-        else:
-            np.testing.assert_allclose(a, b, rtol=1e-9, atol=0, err_msg=key)
+            atol = max(atol, 1e-12)
+        np.testing.assert_allclose(a, b, rtol=0, atol=atol, err_msg=key)
 
 
 @pytest.mark.parametrize("case", unchanged.CASES, ids=unchanged.case_id)
