@@ -16,7 +16,8 @@ n2, E2, iterations, seconds, status, extrapolated, identified); relaxed polygons
 ``out/energy_table/<name>_<n>.obj``. Knots already in the CSV are skipped, so the run can be
 stopped and started again. ``--pack`` gathers the relaxed polygons at ``n2`` edges of every row
 into ``docs/data/energy_table_curves.npz`` (one float32 array per knot, centred and scaled to
-unit edge length; ``--check-pack`` recomputes their energies against the CSV)::
+unit edge length; ``--check-pack`` recomputes their energies against the CSV);
+``--reidentify`` names every relaxed curve again with the current ``core.identify``::
 
     .venv/bin/python bench/energy_table.py                     # all 250, hours
     .venv/bin/python bench/energy_table.py --names 3_1 4_1     # some
@@ -142,6 +143,33 @@ def check_pack(rows: list[dict], path: Path = CURVES) -> None:
     print(f"{len(curves.files)} packed curves; largest relative energy difference {worst:.2e}")
 
 
+def reidentify(rows: list[dict], path: Path) -> None:
+    """Identify every row's relaxed polygon at ``n2`` edges again with the current
+    ``core.identify`` (the run's OBJ, else the packed curve) and rewrite the CSV's
+    ``identified`` column."""
+    packed = np.load(CURVES) if CURVES.exists() else None
+    changed = 0
+    for r in rows:
+        obj = OBJ / f"{r['name']}_{r['n2']}.obj"
+        if obj.exists():
+            P = core.read_obj(obj)[0]
+        elif packed is not None and r["name"] in packed.files:
+            P = packed[r["name"]].astype(np.float64)
+        else:
+            print(f"{r['name']}: no relaxed curve to identify")
+            continue
+        found = " | ".join(core.identify(P).names)
+        if found != r["identified"]:
+            print(f"{r['name']}: {r['identified']} -> {found}")
+            changed += 1
+        r["identified"] = found
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=FIELDS)
+        w.writeheader()
+        w.writerows(rows)
+    print(f"{len(rows)} rows, {changed} identifications changed")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--names", nargs="*", default=None)
@@ -154,9 +182,14 @@ def main() -> None:
     ap.add_argument("--csv", type=Path, default=CSV)
     ap.add_argument("--pack", action="store_true", help="gather the relaxed curves (docs)")
     ap.add_argument("--check-pack", action="store_true")
+    ap.add_argument("--reidentify", action="store_true",
+                    help="identify the relaxed curves again (the CSV's last column)")
     args = ap.parse_args()
     if args.order_study:
         order_study(args.order_study, args)
+        return
+    if args.reidentify:
+        reidentify(read_rows(args.csv), args.csv)
         return
     if args.pack or args.check_pack:
         rows = read_rows(args.csv)
