@@ -129,14 +129,24 @@ def main() -> None:
 
 
 def write_doc(rows: list[dict], sheets: list) -> None:
+    done = ("Every prime knot up to 10 crossings (all 250 with the unknot)" if len(rows) == 250
+            else "Every prime knot of the table that `bench/energy_table.py` has relaxed so far "
+            f"({len(rows)} of the 250 up to 10 crossings)")
     lines = ["# Gallery: the knots of the energy table, relaxed", "",
-             "Every prime knot of the table that `bench/energy_table.py` has relaxed so far "
-             f"({len(rows)} of the 250 up to 10 crossings), as the implicit projected gradient "
+             f"{done}, as the implicit projected gradient "
              "left it at the finer resolution (`n2` edges), rendered by Workbench headless "
              "(`bench/energy_gallery.py`); each tile is labelled with the extrapolated Möbius "
              "energy (the round circle has 4). Numbers and method: "
              "[data/energy_table.csv](data/energy_table.csv) and "
              "[benchmarks.md](benchmarks.md#the-möbius-energy-table-benchenergy_tablepy-issue-16).",
+             "",
+             "The polygons themselves are in "
+             "[data/energy_table_curves.npz](data/energy_table_curves.npz) (one float32 array "
+             "of vertices per knot, unit edges, centred; each passes the start check, so "
+             "it can be relaxed further): `P = np.load(\"energy_table_curves.npz\")"
+             "[\"10_161\"]`, in Blender `moebius.make_curve_object(\"10_161\", [P])` "
+             "(the extension's `blender` module, docs/blender.md \"Headless use and "
+             "scripting\").",
              ""]
     for title, file, count in sheets:
         lines += [f"## {title}", "", f"![{count} relaxed knots, {title}](img/{file})", ""]
