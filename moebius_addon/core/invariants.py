@@ -61,9 +61,10 @@ class Diagram:
         return np.searchsorted(self.starts, position, side="right") - 1
 
 
-def _projections(P):
+def _projections(P, seed: int = 0):
     """Generic projections of ``P`` in a dozen seeded random directions: ``(layout, rows)``
-    with the rows of :func:`_sweep` of each direction where no crossing is degenerate."""
+    with the rows of :func:`_sweep` of each direction where no crossing is degenerate.
+    ``seed`` picks another dozen."""
     X, layout = as_layout(P)
     if not np.isfinite(X).all():
         raise ValueError("the curve has NaN or infinite coordinates")
@@ -71,7 +72,7 @@ def _projections(P):
         raise ValueError("every component needs at least 3 vertices")
     Q = X - X.mean(axis=0)
     Q /= max(np.abs(Q).max(), np.finfo(float).tiny)  # only the shape matters
-    rng = np.random.default_rng(20261125)
+    rng = np.random.default_rng(20261125 + seed)
     found = []
     for _ in range(_PROJECTIONS):
         q, r = np.linalg.qr(rng.normal(size=(3, 3)))
@@ -99,13 +100,14 @@ def diagram(P) -> Diagram:
     return _as_diagram(min(found, key=len), layout.starts)
 
 
-def planar_diagram(P) -> PlanarDiagram:
+def planar_diagram(P, seed: int = 0) -> PlanarDiagram:
     """A PD code of the knot or link ``P``: of the generic projections of :func:`diagram`'s
     directions, simplified by Reidemeister I and II moves (:func:`pd.simplify`), the one with
-    the fewest crossings left. A ``PlanarDiagram`` is returned as it is."""
+    the fewest crossings left (``seed``: another dozen directions, for another diagram of the
+    same curve). A ``PlanarDiagram`` is returned as it is."""
     if isinstance(P, PlanarDiagram):
         return P
-    layout, found = _projections(P)
+    layout, found = _projections(P, seed)
     found.sort(key=len)
     best = None
     for rows in found[:_SIMPLIFIED]:

@@ -1,6 +1,8 @@
 """core.identify: table entries, mirror images, links, relaxed curves, ambiguities, refusals."""
 
+import importlib
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -59,6 +61,30 @@ def test_entries_with_more_crossings_than_the_diagram_are_ruled_out():
     r = identify(knots.named("8_8"))
     assert r.names == ("8_8",) and "m10_129" in r.excluded and r.crossings < 10
 
+
+
+RELAXED = Path(__file__).resolve().parents[2] / "docs" / "data" / "energy_table_curves.npz"
+
+
+def test_further_directions_find_a_simpler_diagram(monkeypatch):
+    # the relaxed 10_95 of the energy table: every diagram of the first dozen directions keeps
+    # 12 crossings, as many as 12n_595 (the same invariants) needs; another dozen has 10
+    from moebius_addon.core.invariants import planar_diagram
+
+    module = importlib.import_module("moebius_addon.core.identify")  # core.identify: the function
+
+    with np.load(RELAXED) as packed:
+        P, Q = packed["10_95"].astype(np.float64), packed["10_156"].astype(np.float64)
+    assert planar_diagram(P).crossings == 12
+    r = identify(P)
+    assert r.names == ("10_95",) and r.crossings == 10 and "12n_595" in r.excluded
+    monkeypatch.setattr(module, "MORE_DIAGRAMS", 0)
+    assert identify(P).names == ("10_95", "12n_595")
+    monkeypatch.undo()
+    # 8_16 and 10_156 share every invariant: no diagram of 10_156 has 8 crossings, so after
+    # every further dozen both names stay
+    r = identify(Q)
+    assert r.names == ("8_16", "10_156") and r.crossings >= 10
 
 def test_unknots_and_not_in_the_table():
     for P in (knots.freedman_unknot(600), knots.helix_unknot(300), knots.random_unknot(400)):
