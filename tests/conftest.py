@@ -1,5 +1,9 @@
 """Shared fixtures: test curves built from closed formulas (no catalogue needed)."""
 
+import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -8,6 +12,7 @@ import pytest
 DATA = Path(__file__).resolve().parents[1] / "moebius_addon" / "core" / "data"
 # the project's shared folder (beside the checkout, as in CI): more curves for the OBJ tests
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def trefoil(n: int) -> np.ndarray:
@@ -45,3 +50,17 @@ def rng():
 def fhw_raw() -> np.ndarray:
     """The Freedman–He–Wang unknot as published (1184 vertices)."""
     return read_obj_vertices(DATA / "freedman_unknot_1184.obj")
+
+
+def out_here_and_in_one_thread(code: str):
+    """``OUT`` (JSON-able) of ``code`` run in this process, with all its threads and the kernels
+    compiled or loaded here, and in a subprocess with one numba thread that loads them from the
+    cache this process wrote: ``(here, there)``. Two fresh processes would compile every kernel
+    twice (60-110 s in CI)."""
+    here: dict = {}
+    exec(code, here)
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, "-c", code + "\nimport json\nprint(json.dumps(OUT))"],
+                         env=env, cwd=ROOT, capture_output=True, text=True, check=True,
+                         timeout=600)
+    return here["OUT"], json.loads(out.stdout.strip().splitlines()[-1])

@@ -2,12 +2,6 @@
 slow numpy version of the same approximated matrix and against the dense Gram matrix, the
 preconditioned Krylov solves against dense solves, and the flow on the tree path."""
 
-import json
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -16,9 +10,7 @@ from moebius_addon.core import hs_solve, hs_tree
 from moebius_addon.core._layout import as_layout
 from moebius_addon.core.constraints import jacobian, make_constraints, residual
 from moebius_addon.core.metrics import gram_x
-from tests.conftest import ngon, trefoil
-
-ROOT = Path(__file__).resolve().parents[2]
+from tests.conftest import ngon, out_here_and_in_one_thread, trefoil
 
 
 def _unit(P):
@@ -277,13 +269,9 @@ OUT = [r.x.tobytes().hex(), r.stats["krylov_iterations"]]
 def test_tree_flow_bitwise_identical_across_thread_counts():
     # this process relaxes with all its threads (the kernels compiled here or loaded from the
     # cache); a second process with one thread loads them from the cache: the same iterates,
-    # bit for bit. Two fresh processes (one per thread count) cost 110 s of compiling in CI.
-    here: dict = {}
-    exec(CODE, here)
-    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    out = subprocess.run([sys.executable, "-c", CODE + "print(json.dumps(OUT))"], env=env,
-                         cwd=ROOT, capture_output=True, text=True, check=True, timeout=600)
-    assert json.loads(out.stdout.strip().splitlines()[-1]) == here["OUT"]
+    # bit for bit. Two fresh processes (one per thread count) took 112 s, compiling twice.
+    here, there = out_here_and_in_one_thread(CODE)
+    assert there == here
 
 
 def test_bad_krylov_tolerance_refused_by_name():

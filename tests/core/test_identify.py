@@ -62,7 +62,6 @@ def test_entries_with_more_crossings_than_the_diagram_are_ruled_out():
     assert r.names == ("8_8",) and "m10_129" in r.excluded and r.crossings < 10
 
 
-
 RELAXED = Path(__file__).resolve().parents[2] / "docs" / "data" / "energy_table_curves.npz"
 
 
@@ -85,6 +84,7 @@ def test_further_directions_find_a_simpler_diagram(monkeypatch):
     # every further dozen both names stay
     r = identify(Q)
     assert r.names == ("8_16", "10_156") and r.crossings >= 10
+
 
 def test_unknots_and_not_in_the_table():
     for P in (knots.freedman_unknot(600), knots.helix_unknot(300), knots.random_unknot(400)):

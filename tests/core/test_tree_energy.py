@@ -2,12 +2,6 @@
 the same approximated sum, against the exact sum, against its own finite differences, and
 bitwise across thread counts."""
 
-import json
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -15,9 +9,7 @@ from moebius_addon import core
 from moebius_addon.core import barnes_hut as bh
 from moebius_addon.core._layout import as_layout
 from moebius_addon.core.energy import energy_gradient_x
-from tests.conftest import ngon, trefoil
-
-ROOT = Path(__file__).resolve().parents[2]
+from tests.conftest import ngon, out_here_and_in_one_thread, trefoil
 
 
 def _taylor(f, d, u, points=64):
@@ -248,9 +240,5 @@ def test_bitwise_identical_across_thread_counts():
     # one wrote: the same bits for a first run and later runs, for any thread count (with
     # fast-math the far field differed). Compiling into a fresh cache in a subprocess instead
     # cost 60-70 s.
-    here: dict = {}
-    exec(CODE, here)
-    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    out = subprocess.run([sys.executable, "-c", CODE + "print(json.dumps(OUT))"], env=env,
-                         cwd=ROOT, capture_output=True, text=True, check=True, timeout=600)
-    assert json.loads(out.stdout.strip().splitlines()[-1]) == here["OUT"]
+    here, there = out_here_and_in_one_thread(CODE)
+    assert there == here
