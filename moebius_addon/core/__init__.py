@@ -11,7 +11,7 @@ from ._threads import prefer_stable_layer
 
 prefer_stable_layer()  # before any parallel kernel runs: numba settles on a layer then
 
-from . import invariants, knots, pd, table  # noqa: E402
+from . import invariants, knots, pd, table, tangle  # noqa: E402
 from .collision import max_collision_free_step  # noqa: E402
 from .constraints import Constraints  # noqa: E402
 from .energy import moebius_energy, moebius_gradient  # noqa: E402
@@ -28,8 +28,15 @@ from .invariants import (  # noqa: E402
 )
 from .metrics import METRICS, gram_matrix  # noqa: E402
 from .objio import read_obj, write_obj  # noqa: E402
-from .polygon import check_polygon, contact_ratio, resample, suggest_edge_count  # noqa: E402
+from .polygon import (  # noqa: E402
+    check_polygon,
+    contact_ratio,
+    resample,
+    subdivide,
+    suggest_edge_count,
+)
 from .solvers import METHODS, Relaxation, check_size, make_run  # noqa: E402
+from .solvers.adaptive import default_max_edges  # noqa: E402
 from .solvers.base import IterationState, RelaxResult, Status, check_number  # noqa: E402
 from .solvers.penalty import DEFAULT_PENALTY_WEIGHT  # noqa: E402
 
@@ -50,6 +57,7 @@ __all__ = [
     "check_polygon",
     "check_size",
     "contact_ratio",
+    "default_max_edges",
     "gram_matrix",
     "identify",
     "invariants",
@@ -68,7 +76,9 @@ __all__ = [
     "resample",
     "signature",
     "sobolev_gradient",
+    "subdivide",
     "suggest_edge_count",
     "table",
+    "tangle",
     "write_obj",
 ]

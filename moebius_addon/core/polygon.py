@@ -298,6 +298,52 @@ def resample(points, n, closed: bool = True):
     return _resample_one(P, n, closed)
 
 
+def subdivide(P, factor: int = 2, closed=True):
+    """The same polygon with every edge split into ``factor`` equal edges.
+
+    The curve as a point set is unchanged, so the result touches itself exactly where ``P``
+    does and has its knot type; an equilateral polygon stays equilateral (edges ``1/factor`` of
+    the old, to rounding). Vertex ``i`` of ``P`` is vertex ``factor · i`` of the result, with
+    its coordinates' bits. This is how a run refines a jammed curve (``refine=`` of
+    :func:`..flow.relax`), and how earlier iterates of a refined run are brought to its
+    final vertex count.
+
+    Parameters
+    ----------
+    P : (N, 3) array or list of arrays
+        Polygon or link (one array per component).
+    factor : int
+        Edges each edge becomes, at least 1.
+    closed : bool or sequence of bool
+        False: an open polyline (N − 1 edges become ``factor · (N − 1)``, ``factor · (N − 1)
+        + 1`` vertices); a link takes one flag per component, or one for all.
+
+    Returns
+    -------
+    (factor · N, 3) array (closed) or list of arrays, as ``P``.
+    """
+    factor = int(factor)
+    if factor < 1:
+        raise ValueError(f"factor must be a whole number >= 1, got {factor}")
+    if isinstance(P, (list, tuple)):
+        flags = list(closed) if np.ndim(closed) else [bool(closed)] * len(P)
+        if len(flags) != len(P):
+            raise ValueError(f"closed has {len(flags)} flags for {len(P)} components")
+        return [subdivide(p, factor, c) for p, c in zip(P, flags, strict=True)]
+    X = np.asarray(P, dtype=np.float64)
+    if X.ndim != 2 or X.shape[1] != 3:
+        raise ValueError(f"P must be an (N, 3) array, got shape {X.shape}")
+    if factor == 1:
+        return X.copy()
+    ends = np.roll(X, -1, axis=0) if closed else X[1:]
+    starts = X if closed else X[:-1]
+    t = np.arange(factor) / factor
+    out = starts[:, None, :] + t[None, :, None] * (ends - starts)[:, None, :]
+    out[:, 0] = starts  # the old vertices keep their bits
+    out = out.reshape(-1, 3)
+    return out if closed else np.vstack([out, X[-1:]])
+
+
 def _split_count(parts, n):
     """Distribute ``n`` vertices over link components proportionally to their lengths
     (largest remainder, so the counts add up to ``n``; at least 4 each). The lengths are

@@ -6,7 +6,7 @@ import re
 import numpy as np
 import pytest
 
-from moebius_addon.core import METRICS, Relaxation, Status, moebius_energy, relax, resample
+from moebius_addon.core import METRICS, Relaxation, Status, knots, moebius_energy, relax, resample
 from moebius_addon.core.engine import ENGINES, DenseEngine, make_engine
 from moebius_addon.core.solvers import base, projected
 from tests.conftest import ngon, trefoil
@@ -324,3 +324,14 @@ def test_check_size_says_before_any_work_what_a_run_would_refuse():
                       (("hs", "nope", "auto"), "method")):
         with pytest.raises(ValueError, match=f"unknown {word}"):
             check_size(100, *bad)
+
+
+def test_far_apart_link_components_relax_or_are_refused():
+    # a component 1e5 times its size away stalled at once ("strands are probably jammed"):
+    # the back-projection's tolerance is now no finer than the coordinates' rounding; farther
+    # out the steps themselves are lost in it, and the run is refused before any work
+    A, B = knots.named("3_1", 60), knots.circle(40)
+    r = relax([A, B + [1e5, 0, 0]], max_iter=12, refine=False)
+    assert r.status == Status.MAX_ITER and r.nit == 12
+    with pytest.raises(ValueError, match="components are too far apart"):
+        relax([A, B + [1e7, 0, 0]], max_iter=2)

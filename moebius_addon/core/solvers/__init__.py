@@ -21,7 +21,8 @@ from __future__ import annotations
 from ..engine import engine_class
 from ..metrics import METRICS
 from ..pinned_solve import tree_borders
-from .base import Run, check_dense_size
+from .adaptive import RESTART_SCALE, AdaptiveRun
+from .base import Run, check_dense_size, check_number
 from .penalty import LBFGS, Nesterov, NonlinearCG, pinned_refusal
 from .projected import Relaxation
 from .second_order import ImplicitProjectedGradient, TrustRegion
@@ -43,7 +44,9 @@ INFEASIBLE = tuple(m for m in METHODS if m not in FEASIBLE)
 
 
 def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float = 1e-6, *,
-             engine: str = "auto", theta: float | None = None, **options) -> Run:
+             engine: str = "auto", theta: float | None = None, refine: bool = True,
+             max_edges: int | None = None, restarts: int = 0, seed: int = 0,
+             restart_scale: float = RESTART_SCALE, **options) -> Run | AdaptiveRun:
     """A run object of ``method`` (see :data:`METHODS`) with :class:`Relaxation`'s interface.
 
     Parameters
@@ -60,6 +63,22 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
     theta : float, optional
         Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); checked
         for every engine.
+    refine : bool
+        Adaptive resolution (:mod:`.adaptive`): a start too coarse for its shape is split
+        into twice (four times, …) the edges instead of refused, and a run whose strands jam
+        (``Status.STALLED``) goes on from its polygon split in two, up to ``max_edges``
+        edges in all (default: 4 times the start's, at least 2 000). False: the plain run of
+        the method (the start refused, the jam reported).
+    restarts, seed, restart_scale
+        After a run that converged, ``restarts`` times relax a nudged copy of the best
+        polygon (a random smooth field, seeded by ``seed``, moving vertices by at most
+        ``restart_scale`` mean edge lengths) and keep it if it ends lower; feasible methods
+        only.
+
+    Returns
+    -------
+    The method's run class itself when ``refine`` is False and ``restarts`` 0, else an
+    :class:`.adaptive.AdaptiveRun` around it (the same interface; ``result().refinements``).
 
     Raises
     ------
@@ -69,8 +88,26 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
     """
     if method not in METHOD_CLASSES:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    return METHOD_CLASSES[method](P, metric, max_iter, tol, engine=engine, theta=theta,
-                                  **options)
+    cls = METHOD_CLASSES[method]
+    if not isinstance(refine, (bool, int)) or refine not in (0, 1):
+        raise ValueError(f"refine must be True or False, got {refine!r}")
+    restarts = check_number("restarts", restarts, 0, integer=True)
+    if not refine and not restarts:
+        return cls(P, metric, max_iter, tol, engine=engine, theta=theta, **options)
+    if restarts and method not in FEASIBLE:
+        raise ValueError(f"restarts need a feasible method ({', '.join(FEASIBLE)}): a nudge "
+                         f"keeps the constraints, which {method!r} holds by a penalty")
+
+    def make(Q, iterations, seconds, **changes):
+        return cls(Q, metric, iterations, tol, engine=engine, theta=theta,
+                   **{**options, "max_seconds": seconds, **changes})
+
+    return AdaptiveRun(make, P, max_iter, refine=bool(refine), max_edges=max_edges,
+                       restarts=restarts, seed=seed, restart_scale=restart_scale,
+                       max_seconds=options.get("max_seconds"),
+                       closed=options.get("closed", True), pinned=options.get("pinned"),
+                       pin_tangents=options.get("pin_tangents", False),
+                       check=options.get("check", True))
 
 
 def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",

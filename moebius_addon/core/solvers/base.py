@@ -44,6 +44,9 @@ HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
 # A run that stops moving with a projected gradient above this many times tol is jammed, not
 # converged (near the minimum Armijo fails on round-off with sqrt(<g,u>) ≈ 1e-8, docs/design.md).
 _STALL_FACTOR = 1e3
+# Farthest a vertex may lie from the centre, in shortest edge lengths (Run._check_reach): a
+# circle of N edges reaches N/2π, so one curve meets it only beyond 6·10⁶ edges.
+MAX_REACH = 1e6
 # Memory a run holds at its peak, in bytes per vertex pair: the Gram matrix (float64), the
 # inverse from its factorization and the Schur complement, all N × N (measured peak at 3000
 # vertices: 17.4 bytes per pair in single precision, 25.2 in double; with room for more).
@@ -96,6 +99,9 @@ class RelaxResult:
     history: dict = field(default_factory=dict)
     metric: str = "hs"
     stats: dict = field(default_factory=dict)
+    #: refinements of the run (``refine=``): iteration, ``edges_before``, ``edges_after``,
+    #: ``reason`` (and the energies before and after for a jam); empty for a plain run
+    refinements: list = field(default_factory=list)
 
     def __repr__(self) -> str:
         return (
@@ -259,6 +265,7 @@ class Run:
         scale = float(ln.sum())
         self.X = (X - shift) / scale
         ln = ln / scale
+        self._check_reach(ln, layout)
         self._shift = np.ldexp(shift, e2)  # results are mapped back by these
         self._scale = float(np.ldexp(scale, e2))
         self.lengths0 = ln.copy() if target_lengths == "keep" else self._equal_lengths(
@@ -278,6 +285,22 @@ class Run:
         self.success = False
         self.message = ""
         self.status = Status.NOT_FINISHED
+
+    def _check_reach(self, ln: np.ndarray, layout) -> None:
+        """Refuse coordinates too far out for their edges: a step of the flow is a small
+        fraction of an edge, and float64 coordinates ``MAX_REACH`` edges from the centre round
+        it to 1e-10 of an edge and worse (a link of two components 1e5 times their size apart
+        relaxed; 3e5 apart the back-projection stopped contracting and the run stalled)."""
+        short = float((ln[layout.real] if layout.has_open else ln).min())
+        reach = float(np.abs(self.X).max()) / short
+        if reach > MAX_REACH:
+            what = ("its components are too far apart" if layout.k > 1 else
+                    "it has too many edges")
+            raise ValueError(
+                f"vertices lie {reach:.3g} edge lengths from the centre of the curve, more than "
+                f"the {MAX_REACH:.0e} at which float64 coordinates still resolve a step of the "
+                f"flow: {what}. Move the components closer together (components that far "
+                f"apart do not interact: relax them one at a time), or use fewer edges")
 
     def _check_open(self, engine: str) -> None:
         """Refuse open polylines where the method or the engine cannot run them."""

@@ -166,7 +166,14 @@ class Relaxation(Run):
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter
-        self.backproject_tol = backproject_tol
+        # an edge length taken as the difference of coordinates of size |x| is rounded by
+        # about ε|x|/l: no back-projection brings the log lengths closer than that. A link
+        # component 1e5 lengths from another (coordinates of 8e3 against edges of 1e-2 at the
+        # run's scale) stalled at once on 1e-10; curves of one piece stay below it up to 10⁶
+        # edges (4ε · 0.16 · N)
+        real = self.lengths0[self.layout.real] if self.layout.has_open else self.lengths0
+        self.backproject_tol = max(backproject_tol, 4.0 * np.finfo(float).eps * float(
+            np.abs(self.X).max()) / float(real.min()))
         self.interpolate = bool(interpolate)
         if not self.engine.dense_metric:  # the tree's solvers need both rows and few pins
             if self.pinned is not None and not tree_borders(self.pinned.size):
@@ -316,6 +323,34 @@ class Relaxation(Run):
             if tau * gu <= 1e-15 * abs(E):
                 break
         return self._give_up(gu)
+
+    def nudge(self, rng: np.random.Generator, scale: float):
+        """A feasible polygon near the current iterate, for a restart (``restarts=`` of
+        :func:`..flow.relax`): white noise solved in the run's metric and projected onto the
+        constraints (a smooth field, zero at the pins), scaled so that the largest vertex moves
+        ``scale`` mean edge lengths (less where that would reach a contact), back-projected;
+        the straight path from the iterate to it touches nothing (the step is halved until it
+        does not). In the caller's coordinates, as :attr:`x`.
+
+        Raises ValueError when no such step was found (30 halvings)."""
+        X = self.X
+        V = rng.standard_normal(X.shape)
+        u, _ = self.engine.solve(V, np.zeros(self.con.size))
+        ln = self.lengths0[self.layout.real] if self.layout.has_open else self.lengths0
+        size = float(np.abs(u).max())
+        if not size > 0:
+            raise ValueError("no free vertex to nudge")
+        tau = scale * float(ln.mean()) / size
+        tau = min(tau, 2.0 / 3.0 * self.engine.contact_time(X, u, tau, self.eps))
+        for _ in range(30):
+            Q, ok = self._backproject(X - tau * u)
+            if ok and self.engine.contact_time(X, X - Q, 1.0, self.eps) >= 1.0:
+                Y = Q * self._scale + self._shift
+                if self.pinned is not None:
+                    Y[self.pinned] = self._pinned_at
+                return self.layout.split(Y)
+            tau *= 0.5
+        raise ValueError("no nudge of the polygon kept its constraints without contact")
 
     def _stall_message(self, gn: float) -> str:
         return (

@@ -1,0 +1,432 @@
+"""Adaptive resolution and restarts around any run (``refine=``, ``restarts=`` of
+:func:`..flow.relax` and :func:`.make_run`).
+
+A polygon too coarse for its own shape, or a flow whose strands jam against each other, has
+too few edges where strands meet: the discrete energy no longer keeps them apart at that
+resolution, and the steps collapse (``Status.STALLED``). :class:`AdaptiveRun` then *refines*:
+it splits every edge in two (:func:`..polygon.subdivide`) and goes on with a new run of the
+same method from the refined polygon. Splitting leaves the curve as a point set unchanged, so
+the refined polygon crosses nothing the old one did not and keeps its knot type; it is checked
+like a start all the same (:func:`..polygon.check_polygon`). A start that fails only the
+coarseness check is refined the same way before the first iterate, instead of refused.
+
+``restarts=K`` nudges a run that converged: K times, the best polygon so far is moved by a
+random smooth field (a solve in the run's metric of white noise, projected onto the
+constraints and back-projected, its path checked for contact) and relaxed again; a restart
+that ends lower is kept, one that does not is rolled back. Seeded by ``seed``.
+
+What a caller sees is one run: ``nit`` counts the iterates of the path that is kept, the
+history has one entry per iterate (and an ``edges`` column), ``refinements`` and
+``stats["restarts"]`` record what happened. ``x`` changes its vertex count after a
+refinement, and ``nit`` goes *back* when a restart is rolled back (to the iterate it started
+from): a step-by-step caller that records iterates truncates its record then.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .._layout import as_layout
+from ..pins import check_pins
+from ..polygon import CONTACT_RATIO, check_polygon, contact_ratio, subdivide
+from .base import RelaxResult, Status, check_number
+
+#: Edges a refinement makes of every edge (a split in two: the flow doubles its resolution
+#: where it jammed and everywhere else; the examples of docs/benchmarks.md that jammed at
+#: n edges relaxed at 2n).
+FACTOR = 2
+#: Fewest edges ``max_edges`` allows by default, whatever the start (a coarse drawn curve of
+#: 50 points may need several refinements).
+MIN_MAX_EDGES = 2000
+#: Default ``max_edges``: this many times the start's edge count (at least MIN_MAX_EDGES).
+MAX_EDGES_FACTOR = 4
+#: A jammed run goes on, refined, from its last iterate whose strands were at least this many
+#: mean edge lengths apart (vertices 4 edges apart along the curve): where a jam forms, the
+#: flow squeezes two strands from about an edge apart to a thousandth within a few iterates
+#: (5_2 at 180 edges: contact ratio 0.82, 0.73, 0.50 at iterates 44, 46, 48, the edges then
+#: 0.12 edge lengths apart), and a refinement of the squeezed polygon jams again (three
+#: refinements in a row, measured); relaxed shapes of the energy table keep 0.82 or more.
+CHECKPOINT_RATIO = 0.75
+#: Default size of a restart's nudge: the largest vertex move, in mean edge lengths.
+RESTART_SCALE = 0.25
+
+# Counters of result().stats that add up over the runs of a path (the rest are the last run's).
+_SUMMED = ("factorizations", "krylov_iterations", "rejected_steps", "hessian_products",
+           "gradient_evaluations")
+
+
+def default_max_edges(n: int) -> int:
+    """``max_edges`` when none is given: :data:`MAX_EDGES_FACTOR` times ``n``, at least
+    :data:`MIN_MAX_EDGES`."""
+    return max(MAX_EDGES_FACTOR * int(n), MIN_MAX_EDGES)
+
+
+def _pins_after(pinned: np.ndarray, layout, factor: int):
+    """The pins of the refined polygon: every pinned vertex (stacked index, ``pin_tangents``
+    already applied) where it went, and the new vertices on an edge between two pins (they
+    sit on a straight, fixed piece), as ``pinned=`` takes them (a list per component)."""
+    out = []
+    fixed = np.zeros(layout.n, bool)
+    fixed[pinned] = True
+    for c in range(layout.k):
+        a, b = int(layout.starts[c]), int(layout.starts[c + 1])
+        closed = layout.closed is None or bool(layout.closed[c])
+        local = np.flatnonzero(fixed[a:b])
+        new = [factor * int(i) for i in local]
+        m = b - a
+        for i in local:
+            j = int(i) + 1
+            if j == m:
+                if not closed:
+                    continue
+                j = 0
+            if fixed[a + j]:
+                new.extend(factor * int(i) + k for k in range(1, factor))
+        out.append(sorted(new))
+    return out if layout.is_link else out[0]
+
+
+class AdaptiveRun:
+    """A run of any method that refines its polygon when it jams, and restarts from nudged
+    copies of a converged result; the interface of :class:`.base.Run` (``step()``,
+    ``state()``, ``stop()``, ``result()``, ``x``, ``energy``, ``nit``, ``history``, ``done``,
+    ``success``, ``message``, ``status``; anything else is the current run's).
+
+    Parameters
+    ----------
+    make : callable
+        ``make(P, max_iter, max_seconds, **changes)`` builds a run of the method from polygon
+        ``P`` with the caller's options (``changes`` replace some: ``pinned``).
+    P, max_iter : polygon, int
+        The caller's start and iteration limit (per run of the path: the first and every
+        restart; refinements go on counting).
+    refine : bool
+        Refine a too-coarse start and a jammed run (off: the start is refused and the jam
+        reported, as by a plain run).
+    max_edges : int, optional
+        Refine no further than this many edges in all (default :func:`default_max_edges`).
+    restarts : int
+        Restarts after a converged run (0: none); feasible methods only.
+    seed : int
+        Seed of the restarts' nudges.
+    restart_scale : float
+        Largest vertex move of a nudge, in mean edge lengths.
+    max_seconds, closed, pinned, pin_tangents, check
+        The caller's options of these names (the budget is for the whole path).
+    """
+
+    def __init__(self, make, P, max_iter: int, *, refine: bool = True,
+                 max_edges: int | None = None, restarts: int = 0, seed: int = 0,
+                 restart_scale: float = RESTART_SCALE, max_seconds: float | None = None,
+                 closed=True, pinned=None, pin_tangents: bool = False, check: bool = True):
+        self.t0 = time.perf_counter()
+        self._make = make
+        self.refine = bool(refine)
+        self.restarts = check_number("restarts", restarts, 0, integer=True)
+        self.seed = check_number("seed", seed, 0, integer=True)
+        self.restart_scale = check_number("restart_scale", restart_scale, 0, above=True)
+        self.max_iter = check_number("max_iter", max_iter, 0, integer=True)
+        self.max_seconds = None if max_seconds is None else check_number(
+            "max_seconds", max_seconds, 0)
+        self.closed = closed
+        X, layout = as_layout(P, closed)
+        # open components have one edge fewer than vertices
+        self._open = 0 if layout.closed is None else int(np.count_nonzero(~layout.closed))
+        self.max_edges = default_max_edges(self._edges(layout.n)) if max_edges is None else (
+            check_number("max_edges", max_edges, 1, integer=True))
+        #: what was refined: dicts of iteration, edges before and after, why (and energies)
+        self.refinements: list[dict] = []
+        start, changes = P, {}
+        if self.refine and check:
+            start, changes = self._refine_start(P, X, layout, pinned, pin_tangents)
+        self.run = make(start, self.max_iter, self.max_seconds, **changes)
+        self._retired: list[dict] = []  # the counters of every run left behind
+        self.history = {k: list(v) for k, v in self.run.history.items()}
+        self.history["edges"] = [self.run.layout.n] * len(self.history["energy"])
+        self.nit = self.run.nit
+        self._run_nit = self.run.nit  # the current run's count when last looked at
+        self._restart_log: list[dict] = []
+        self._rng = np.random.default_rng(self.seed)
+        self._best = None  # (energy, run, nit, history length, refinements) of the best
+        self._trial = None  # the restart in progress: (index, first iterate)
+        self._why_not = ""
+        self.done = False
+        self._checkpoint = (self.nit, None, len(self.history["energy"]))
+        if self.refine:
+            self._note_checkpoint(self.run)
+        self._after_step()
+
+    def _edges(self, n_vertices: int) -> int:
+        return int(n_vertices) - self._open
+
+    # -- refinement ------------------------------------------------------------------------
+
+    def _refine_start(self, P, X, layout, pinned, pin_tangents):
+        """``(P, {})``, or ``P`` split until it passes the coarseness check and the options
+        that change with it (recorded as the refinement of iteration 0)."""
+        changes = {} if pinned is None else {"pinned": pinned}
+        check_polygon(P, coarseness=False, closed=self.closed)
+        ratio = contact_ratio(P, closed=self.closed)
+        factor, Q, r = 1, P, ratio
+        while r < CONTACT_RATIO and self._edges(layout.n) * factor * FACTOR <= self.max_edges:
+            factor *= FACTOR
+            Q = subdivide(P, factor, self.closed)
+            r = contact_ratio(Q, closed=self.closed)
+        if factor == 1 or r < CONTACT_RATIO:
+            return P, changes  # the run's own check refuses it, naming the count that works
+        if pinned is not None:
+            fixed = check_pins(pinned, layout, X, tangents=bool(pin_tangents))
+            changes = {"pinned": _pins_after(fixed, layout, factor), "pin_tangents": False}
+        self.refinements.append({
+            "iteration": 0, "edges_before": self._edges(layout.n),
+            "edges_after": self._edges(factor * layout.n - (factor - 1) * self._open),
+            "reason": f"start too coarse (contact ratio {ratio:.2f} < {CONTACT_RATIO:g})"})
+        return Q, changes
+
+    def _refine_run(self, reason: str) -> bool:
+        """Go on from the last healthy iterate of the current run (its checkpoint, the last
+        with contact ratio >= :data:`CHECKPOINT_RATIO`; the iterates after it are dropped)
+        with that polygon split in two; False when that is not allowed (``max_edges``, or a
+        size the method refuses: the run's end stands)."""
+        run = self.run
+        layout = run.layout
+        edges_now = self._edges(layout.n)
+        if FACTOR * edges_now > self.max_edges:
+            self._why_not = (f"not refined further: {FACTOR * edges_now} edges would exceed "
+                             f"max_edges={self.max_edges}")
+            return False
+        nit, x, length = self._checkpoint
+        Q = subdivide(x, FACTOR, self.closed)
+        # the same point set: it touches nothing the polygon did not, so the knot type is
+        # kept; checked like a start all the same (coarseness only where the checkpoint is
+        # the current iterate: strands squeezed closer than an edge are why it is refined)
+        check_polygon(Q, coarseness=False, closed=self.closed)
+        changes = {}
+        if getattr(run, "pinned", None) is not None:
+            changes = {"pinned": _pins_after(run.pinned, layout, FACTOR), "pin_tangents": False}
+        energy_at = self.history["energy"][length - 1]
+        nit_now, self.nit = self.nit, nit  # the new run's budget counts from the checkpoint
+        try:
+            new = self._make(Q, self._iterations_left(), self._seconds_left(), check=False,
+                             **changes)
+        except ValueError as err:  # a size the method or engine refuses
+            self.nit = nit_now
+            self._why_not = f"not refined to {FACTOR * edges_now} edges: {err}"
+            return False
+        self._retire(run)
+        dropped = len(self.history["energy"]) - length
+        for v in self.history.values():
+            del v[length:]
+        self.refinements.append({
+            "iteration": nit, "edges_before": edges_now,
+            "edges_after": self._edges(new.layout.n), "reason": reason,
+            "energy_before": float(energy_at), "energy_after": float(new.E),
+            "iterations_dropped": dropped})
+        self.run = new
+        self._run_nit = new.nit
+        # the last entry is the same iterate, refined: it becomes the new run's start
+        for k, v in new.history.items():
+            if k in self.history:
+                self.history[k][-1] = v[0]
+        self.history["edges"][-1] = new.layout.n
+        self.history["seconds"][-1] = time.perf_counter() - self.t0
+        self._checkpoint = (self.nit, None, len(self.history["energy"]))
+        self._note_checkpoint(new)
+        return True
+
+    def _jammed(self, run) -> bool:
+        """Whether a stalled run's strands are closer than the start check allows (contact
+        ratio below 1): a jam a finer polygon resolves. A run stalled against an obstacle, or
+        with its strands apart, is not refined (it would stall the same at any resolution)."""
+        if contact_ratio(run.layout.split(run.X), closed=self.closed) < CONTACT_RATIO:
+            return True
+        self._why_not = "not refined: no two strands are closer than an edge length"
+        return False
+
+    def _note_checkpoint(self, run) -> None:
+        """Make the current iterate the checkpoint if it is healthy: strands at least
+        :data:`CHECKPOINT_RATIO` mean edge lengths apart (vertices 4 edges apart along the
+        curve, as the start check measures)."""
+        # the run's own scaled copy (the ratio is scale-free): no copy in the caller's size
+        ratio = contact_ratio(run.layout.split(run.X), closed=self.closed)
+        if ratio >= CHECKPOINT_RATIO or self._checkpoint[1] is None:
+            self._checkpoint = (self.nit, run.x, len(self.history["energy"]))
+
+    def _iterations_left(self) -> int:
+        first = 0 if self._trial is None else self._trial[1]
+        return max(0, self.max_iter - (self.nit - first))
+
+    def _seconds_left(self):
+        if self.max_seconds is None:
+            return None
+        return max(0.0, self.max_seconds - (time.perf_counter() - self.t0))
+
+    # -- restarts --------------------------------------------------------------------------
+
+    def _start_restart(self) -> bool:
+        """Nudge the best polygon and start relaxing it; False when no nudge was found."""
+        best_run = self._best[1]
+        k = len(self._restart_log) + 1
+        try:
+            Y = best_run.nudge(self._rng, self.restart_scale)
+        except ValueError as err:
+            self._restart_log.append({"restart": k, "kept": False, "message": str(err)})
+            return False
+        changes = {}
+        if getattr(best_run, "pinned", None) is not None:
+            changes = {"pinned": _pins_after(best_run.pinned, best_run.layout, 1),
+                       "pin_tangents": False}
+        new = self._make(Y, self.max_iter, self._seconds_left(), **changes)
+        self._trial = (k, self.nit + 1)
+        self.run = new
+        self._run_nit = new.nit
+        self.nit += 1  # the nudge is a step of the path
+        self._append(new, 0)
+        self._checkpoint = (self.nit, None, len(self.history["energy"]))
+        self._note_checkpoint(new)
+        return True
+
+    def _end_restart(self) -> None:
+        """Keep the restart that just finished if it ended lower, else roll back to the
+        best run."""
+        E_best, best_run, best_nit, best_len, best_ref = self._best
+        run = self.run
+        kept = bool(run.E < E_best) and run.status in (Status.CONVERGED, Status.STOPPED)
+        k, first = self._trial
+        self._restart_log.append({"restart": k, "iteration": first, "energy": float(run.E),
+                                  "iterations": self.nit - first + 1, "kept": kept,
+                                  "message": run.message})
+        if kept:
+            self._retire(best_run)
+            self._best = (float(run.E), run, self.nit, len(self.history["energy"]),
+                          len(self.refinements))
+        else:
+            self._retire(run)
+            self.run = best_run
+            self.nit = best_nit
+            for v in self.history.values():
+                del v[best_len:]
+            del self.refinements[best_ref:]
+        self._trial = None
+
+    # -- stepping --------------------------------------------------------------------------
+
+    def _append(self, run, i: int = -1) -> None:
+        for k, v in run.history.items():
+            if k in self.history:
+                self.history[k].append(v[i])
+        self.history["edges"].append(run.layout.n)
+        self.history["seconds"][-1] = time.perf_counter() - self.t0
+
+    def _after_step(self) -> None:
+        """Bookkeeping after the current run stepped (or was made): record its new iterate,
+        and when it finished, refine, restart, roll back or finish."""
+        while True:
+            run = self.run
+            if run.nit > self._run_nit:
+                self.nit += run.nit - self._run_nit
+                self._run_nit = run.nit
+                self._append(run)
+                if self.refine:
+                    self._note_checkpoint(run)
+            if not run.done:
+                return
+            if run.status == Status.STALLED and self.refine and self._jammed(run) and (
+                    self._refine_run("jammed: " + run.message)):
+                continue
+            if self._trial is not None:
+                self._end_restart()
+            elif run.status == Status.CONVERGED and self.restarts and self._best is None:
+                self._best = (float(run.E), run, self.nit, len(self.history["energy"]),
+                              len(self.refinements))
+            if (self._best is not None and len(self._restart_log) < self.restarts
+                    and self._seconds_left() != 0.0 and self._start_restart()):
+                continue
+            message = self.run.message
+            if self.run.status == Status.MAX_ITER:  # the run's own limit is what was left
+                message = f"maximum number of iterations ({self.max_iter}) reached"
+            self._finish(self.run.success, message, self.run.status)
+            return
+
+    def _finish(self, success: bool, message: str, status: Status) -> None:
+        self.done = True
+        self.success, self.status = success, status
+        notes = []
+        if self.refinements:
+            notes.append("refined " + ", ".join(
+                f"{r['edges_before']} → {r['edges_after']} edges at iteration {r['iteration']}"
+                for r in self.refinements))
+        if status == Status.STALLED and self._why_not:
+            notes.append(self._why_not)
+        if self._restart_log:
+            kept = sum(r["kept"] for r in self._restart_log)
+            notes.append(f"{len(self._restart_log)} restarts, {kept} kept")
+        self.message = message + ("" if not notes else " (" + "; ".join(notes) + ")")
+
+    def step(self) -> bool:
+        """Advance the current run by one accepted iterate (refining, restarting or rolling
+        back when it finishes). Returns False once finished."""
+        if self.done:
+            return False
+        self.run.step()
+        self._after_step()
+        return not self.done
+
+    def stop(self, message: str = "stopped by the caller",
+             status: Status = Status.STOPPED) -> None:
+        """End cleanly after the current iterate. A restart in progress is kept if it is
+        already lower than the best, else rolled back."""
+        if self.done:
+            return
+        self.run.stop(message, status)
+        if self._trial is not None:
+            self._end_restart()
+        self._finish(True, message, status)
+
+    # -- state as the caller sees it -------------------------------------------------------
+
+    @property
+    def x(self):
+        return self.run.x
+
+    @property
+    def energy(self) -> float:
+        return self.run.E
+
+    @property
+    def E(self) -> float:
+        return self.run.E
+
+    def state(self):
+        s = self.run.state()
+        s.nit = self.nit
+        s.seconds = self.history["seconds"][-1]
+        return s
+
+    def __getattr__(self, name):  # engine, layout, metric, X, ... of the current run
+        if name == "run":
+            raise AttributeError(name)
+        return getattr(self.run, name)
+
+    def _retire(self, run) -> None:
+        """Keep the counters of a run that is no longer the current one."""
+        self._retired.append(run._stats())
+
+    def result(self) -> RelaxResult:
+        if not self.done:
+            self.stop("not finished (result taken early)", Status.NOT_FINISHED)
+        res = self.run.result()
+        stats = dict(res.stats)
+        for other in self._retired:
+            for k in _SUMMED:
+                if k in other:
+                    stats[k] = stats.get(k, 0) + other[k]
+        stats["refinements"] = len(self.refinements)
+        if self.restarts:
+            stats["restarts"] = [dict(r) for r in self._restart_log]
+        return RelaxResult(
+            x=res.x, fun=res.fun, nit=self.nit, success=self.success, message=self.message,
+            status=self.status, history={k: list(v) for k, v in self.history.items()},
+            metric=res.metric, stats=stats, refinements=[dict(r) for r in self.refinements])

@@ -1,0 +1,220 @@
+"""Adaptive resolution (``refine=``) and restarts (``restarts=``): core/solvers/adaptive.py."""
+
+import numpy as np
+import pytest
+
+from moebius_addon import core
+from moebius_addon.core import knots
+from moebius_addon.core.solvers import adaptive
+from tests.mesh_checks import segments_closest
+
+
+def _min_gap_distance(P, gap=2):
+    """Closest distance between edges at least ``gap`` apart along a component (any two of
+    different components), by numpy alone: the independent check of these tests. Pairs whose
+    midpoints are farther apart than their half lengths and one mean edge are left out (their
+    distance is larger than a mean edge: the result is capped there)."""
+    parts = P if isinstance(P, list) else [P]
+    A = np.concatenate(parts)
+    B = np.concatenate([np.roll(p, -1, axis=0) for p in parts])
+    comp = np.concatenate([np.full(len(p), c) for c, p in enumerate(parts)])
+    idx = np.concatenate([np.arange(len(p)) for p in parts])
+    size = np.concatenate([np.full(len(p), len(p)) for p in parts])
+    mid, half = 0.5 * (A + B), 0.5 * np.linalg.norm(B - A, axis=1)
+    cap = 2.0 * half.mean()
+    i, j = np.triu_indices(len(A), 1)
+    near = np.linalg.norm(mid[i] - mid[j], axis=1) - half[i] - half[j] < cap
+    i, j = i[near], j[near]
+    d = np.abs(idx[i] - idx[j])
+    d = np.minimum(d, size[i] - d)
+    keep = (comp[i] != comp[j]) | (d >= gap)
+    i, j = i[keep], j[keep]
+    return float(min(cap, segments_closest(A[i], B[i], A[j], B[j]).min(initial=np.inf)))
+
+
+# -- subdivide ---------------------------------------------------------------------------------
+
+def test_subdivide_keeps_the_curve_its_vertices_and_equal_edges():
+    P = knots.named("3_1", 60)
+    Q = core.subdivide(P, 2)
+    assert Q.shape == (120, 3)
+    np.testing.assert_array_equal(Q[::2], P)  # the old vertices, bit for bit
+    np.testing.assert_allclose(Q[1::2], 0.5 * (P + np.roll(P, -1, axis=0)), rtol=0, atol=1e-15)
+    ln = np.linalg.norm(np.roll(Q, -1, axis=0) - Q, axis=1)
+    assert np.ptp(ln) / ln.mean() < 1e-12
+    R = core.subdivide(P, 3)
+    np.testing.assert_array_equal(R[::3], P)
+    np.testing.assert_array_equal(core.subdivide(P, 1), P)
+
+
+def test_subdivide_open_polylines_and_links():
+    L = knots.named("L2a1{1}", 60)
+    S = core.subdivide(L, 2)
+    assert [len(c) for c in S] == [2 * len(c) for c in L]
+    line = np.c_[np.arange(5.0), np.zeros(5), np.zeros(5)]
+    opened = core.subdivide(line, 2, closed=False)
+    np.testing.assert_array_equal(opened[:, 0], np.arange(9) / 2)
+    mixed = core.subdivide([line, knots.circle(8)], 2, closed=[False, True])
+    assert [len(c) for c in mixed] == [9, 16]
+    with pytest.raises(ValueError, match="factor"):
+        core.subdivide(line, 0)
+
+
+def test_pins_after_a_split_keep_the_fixed_pieces():
+    from moebius_addon.core._layout import as_layout
+
+    _, layout = as_layout(knots.circle(10))
+    # 3 alone; 6 and 7 side by side (the edge between them is fixed: its new midpoint too);
+    # 9 and 0 side by side around the closing edge
+    assert adaptive._pins_after(np.array([0, 3, 6, 7, 9]), layout, 2) == [
+        0, 6, 12, 13, 14, 18, 19]
+    _, open_layout = as_layout(np.c_[np.arange(6.0), np.zeros(6), np.zeros(6)], closed=False)
+    assert adaptive._pins_after(np.array([0, 5]), open_layout, 2) == [0, 10]
+
+
+# -- refinement --------------------------------------------------------------------------------
+
+def test_a_too_coarse_start_is_refined_not_refused():
+    P = knots.named("3_1", 24)  # 27 is the least that passes the start check
+    with pytest.raises(ValueError, match="too coarse"):
+        core.relax(P, max_iter=2, refine=False)
+    r = core.relax(P, max_iter=2)
+    assert len(r.x) == 48 and r.nit == 2
+    assert r.refinements[0]["iteration"] == 0
+    assert (r.refinements[0]["edges_before"], r.refinements[0]["edges_after"]) == (24, 48)
+    assert "start too coarse" in r.refinements[0]["reason"]
+    assert "refined 24 → 48 edges at iteration 0" in r.message
+    assert r.history["edges"] == [48, 48, 48]
+    assert r.stats["refinements"] == 1
+    # a start too coarse for max_edges is refused as before, naming the count that works
+    with pytest.raises(ValueError, match="too coarse.*at least"):
+        core.relax(P, max_iter=2, max_edges=40)
+
+
+@pytest.fixture(scope="module")
+def jammed_run():
+    # 5_2 at 180 edges (the old default count): the explicit flow squeezes two strands from
+    # 0.73 to 0.50 edge lengths in two iterates (the edges 0.12 apart) and stalls at 60
+    seen = []
+
+    def record(state):
+        seen.append(state.x.copy())
+
+    P = knots.named("5_2", 180)
+    plain = core.relax(P, max_iter=100, tol=1e-4, refine=False)
+    r = core.relax(P, max_iter=100, tol=1e-4, callback=record)
+    return P, plain, r, seen
+
+
+def test_a_jammed_run_is_refined_and_goes_on_lower(jammed_run):
+    P, plain, r, _ = jammed_run
+    assert plain.status == core.Status.STALLED and "jammed" in plain.message
+    assert len(r.refinements) == 1
+    ref = r.refinements[0]
+    assert (ref["edges_before"], ref["edges_after"]) == (180, 360)
+    assert ref["reason"].startswith("jammed")
+    # it goes on from its last healthy iterate, before the squeeze, and the iterates after it
+    # are dropped
+    assert 0 < ref["iteration"] < plain.nit and ref["iterations_dropped"] > 0
+    assert r.status != core.Status.STALLED and r.nit == 100
+    assert len(r.x) == 360 and r.history["edges"][ref["iteration"]:] == [360] * (
+        101 - ref["iteration"])
+    assert r.fun < ref["energy_after"] - 1.0
+    # energy falls at every iterate at one resolution (the refined start is the same iterate)
+    E = np.array(r.history["energy"])
+    assert np.all(np.diff(E[: ref["iteration"]]) < 0)
+    assert np.all(np.diff(E[ref["iteration"]:]) <= 0)
+    assert core.identify(r.x).names == ("5_2",)
+
+
+def test_a_refined_run_never_crosses(jammed_run):
+    # independent of the core's contact search: all pairs of edges of every iterate the
+    # callback saw, and of the midpoint of the straight path between two iterates of one resolution
+    P, _, r, seen = jammed_run
+    h = np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1).mean()
+    prev = P
+    for x in seen:
+        scale = np.linalg.norm(np.roll(x, -1, axis=0) - x, axis=1).mean()
+        assert _min_gap_distance(x) > 1e-4 * scale
+        if len(prev) == len(x):
+            assert _min_gap_distance(0.5 * (prev + x)) > 1e-4 * scale
+        prev = x
+    assert h > 0
+
+
+def test_a_run_that_needs_no_refinement_is_unchanged(trefoil_table):
+    a = core.relax(trefoil_table, max_iter=8, refine=False)
+    b = core.relax(trefoil_table, max_iter=8)
+    np.testing.assert_array_equal(a.x, b.x)
+    assert a.history["energy"] == b.history["energy"] and b.refinements == []
+
+
+@pytest.fixture(scope="module")
+def trefoil_table():
+    return knots.named("3_1", 60)
+
+
+def test_refinement_keeps_pins_and_link_components():
+    # a too-coarse link with pins on both components: the pinned vertices keep their bits
+    L = knots.named("L2a1{1}", 20)
+    assert core.contact_ratio(L) < 1
+    pins = [[0, 5], [3]]
+    r = core.relax(L, max_iter=3, pinned=pins)
+    assert r.refinements and [len(c) for c in r.x] == [2 * len(c) for c in L]
+    f = r.refinements[0]["edges_after"] // r.refinements[0]["edges_before"]
+    for c, idx in enumerate(pins):
+        for i in idx:
+            np.testing.assert_array_equal(r.x[c][f * i], L[c][i])
+    assert core.identify(r.x).names[0].startswith("L2a1")
+
+
+def test_refinement_of_an_open_curve_keeps_its_ends():
+    t = np.linspace(0, 4 * np.pi, 400)  # two turns of a helix, 0.9 edges apart at 14 vertices
+    Q = core.resample(np.c_[np.cos(t), np.sin(t), 0.12 * t], 14, closed=False)
+    with pytest.raises(ValueError, match="too coarse"):
+        core.relax(Q, closed=False, max_iter=2, refine=False, engine="exact")
+    r = core.relax(Q, closed=False, max_iter=2, pinned=[0, 13], engine="exact")
+    assert len(r.x) == 2 * 14 - 1 and r.refinements[0]["edges_after"] == 26
+    np.testing.assert_array_equal(r.x[0], Q[0])
+    np.testing.assert_array_equal(r.x[-1], Q[-1])
+
+
+def test_refinement_on_the_tree_engine():
+    P = knots.named("3_1", 24)
+    r = core.relax(P, max_iter=1, engine="tree")
+    assert len(r.x) == 48 and r.stats["engine"] == "tree"
+
+
+def test_refine_options_are_checked():
+    P = knots.named("3_1", 60)
+    with pytest.raises(ValueError, match="refine must be True or False"):
+        core.relax(P, refine="yes")
+    with pytest.raises(ValueError, match="max_edges must be"):
+        core.relax(P, max_edges=-1)
+    with pytest.raises(ValueError, match="restarts need a feasible method"):
+        core.relax(P, method="lbfgs", restarts=1)
+    with pytest.raises(ValueError, match="restarts must be"):
+        core.relax(P, restarts=-2)
+
+
+# -- restarts ----------------------------------------------------------------------------------
+
+def test_restarts_are_seeded_and_keep_the_lowest():
+    P = knots.named("3_1", 60)
+    opts = {"method": "projected_gradient_implicit", "tol": 1e-3, "max_iter": 60}
+    plain = core.relax(P, **opts)
+    a = core.relax(P, restarts=2, seed=7, **opts)
+    b = core.relax(P, restarts=2, seed=7, **opts)
+    c = core.relax(P, restarts=2, seed=8, **opts)
+    np.testing.assert_array_equal(a.x, b.x)
+    assert a.history["energy"] == b.history["energy"] and a.nit == b.nit
+    assert len(a.stats["restarts"]) == 2
+    assert a.fun <= plain.fun
+    # each restart starts from a nudge: a different seed, different nudges
+    assert [r["energy"] for r in a.stats["restarts"]] != [r["energy"] for r in c.stats["restarts"]]
+    # the kept path: energy falls at every iterate but at the nudges of kept restarts
+    E = np.array(a.history["energy"])
+    rises = set(np.flatnonzero(np.diff(E) > 0) + 1)
+    kept = {r["iteration"] for r in a.stats["restarts"] if r["kept"]}
+    assert rises <= kept
+    assert len(E) == a.nit + 1
