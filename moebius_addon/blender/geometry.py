@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import bpy
 import numpy as np
 
+from .. import core
 from . import keyframes
 
 #: Samples per Bezier segment (or per NURBS control point) when reading a smooth curve; the
@@ -223,6 +224,37 @@ def write_polygons(curve: bpy.types.Curve, polygons: Sequence[np.ndarray]) -> No
         co = np.ones((len(P), 4))
         co[:, :3] = P
         spline.points.foreach_set("co", co.ravel())
+    curve.update_tag()
+
+
+def grow_splines(curve: bpy.types.Curve, sizes: Sequence[int]) -> None:
+    """Give spline ``s`` of ``curve`` ``sizes[s]`` points, a whole multiple of its edges (a
+    refined run's count, ``core.subdivide``): the new points are placed on its edges, and their
+    radius, tilt and soft-body weight are interpolated between the old points'.
+
+    Blender's spline points can be added, not removed: a curve is only ever grown."""
+    for spline, size in zip(curve.splines, sizes, strict=True):
+        n = len(spline.points)
+        if size == n:
+            continue
+        closed = spline.use_cyclic_u
+        edges = n if closed else n - 1
+        factor, rest = divmod(size if closed else size - 1, edges)
+        if rest or factor < 1:
+            raise ValueError(f"a spline of {n} points cannot grow to {size} by splitting edges")
+        co = np.empty(4 * n)
+        spline.points.foreach_get("co", co)
+        attrs = np.empty((n, 3))
+        for k, name in enumerate(("radius", "tilt", "weight_softbody")):
+            spline.points.foreach_get(name, attrs[:, k])
+        new_co = core.subdivide(co.reshape(n, 4)[:, :3], factor, closed)
+        new_attrs = core.subdivide(attrs, factor, closed)
+        spline.points.add(size - n)
+        full = np.ones((size, 4))
+        full[:, :3] = new_co
+        spline.points.foreach_set("co", full.ravel())
+        for k, name in enumerate(("radius", "tilt", "weight_softbody")):
+            spline.points.foreach_set(name, np.ascontiguousarray(new_attrs[:, k]))
     curve.update_tag()
 
 

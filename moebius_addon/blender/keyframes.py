@@ -111,6 +111,11 @@ def _flow_key(curve: bpy.types.Curve) -> bpy.types.Key | None:
     return key if key is not None and key.get(_FLOW_KEY) else None
 
 
+def is_flow_key(curve: bpy.types.Curve) -> bool:
+    """Whether the shape keys of ``curve`` are a flow's (:func:`write_flow_keyframes`)."""
+    return _flow_key(curve) is not None
+
+
 def check_flow_target(obj: bpy.types.Object) -> None:
     """ValueError, before a run, when the flow of ``obj`` could not be keyed: a curve above
     :data:`PER_POINT_MAX` points keys its flow as shape keys, so it must have none of its own

@@ -79,6 +79,11 @@ def relax_settings(settings) -> dict:
         kwargs.update(pin_selected=True, pin_tangents=settings.pin_tangents)
     if getattr(settings, "obstacles", None) is not None:
         kwargs.update(obstacles=settings.obstacles, obstacle_weight=settings.obstacle_weight)
+    kwargs["refine"] = bool(getattr(settings, "refine", True))
+    if kwargs["refine"] and getattr(settings, "max_edges", 0):
+        kwargs["max_edges"] = settings.max_edges
+    if getattr(settings, "restarts", 0) and "backproject_iter" in acting:  # feasible methods
+        kwargs.update(restarts=settings.restarts, seed=settings.seed)
     if settings.use_energy_target:
         kwargs["energy_target"] = settings.energy_target
     if settings.max_seconds > 0:

@@ -93,6 +93,8 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
                 split.label(text=name)
                 split.label(text=value)
             _wrapped_label(box.column(align=True), context, s.last_message)
+            if s.last_refined:
+                _wrapped_label(box.column(align=True), context, f"Refined: {s.last_refined}")
             if s.last_type:
                 _wrapped_label(box.column(align=True), context, s.last_type)
 
@@ -142,6 +144,11 @@ class VIEW3D_PT_moebius_flow(_MoebiusPanel, bpy.types.Panel):
         sub.active = s.use_energy_target
         sub.prop(s, "energy_target", text="Energy Target")
         layout.prop(s, "max_seconds")
+        col = layout.column(align=True)
+        col.prop(s, "refine")
+        row = col.row()
+        row.active = s.refine
+        row.prop(s, "max_edges")
 
 
 class VIEW3D_PT_moebius_keyframes(_MoebiusPanel, bpy.types.Panel):
@@ -213,6 +220,12 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
         row = col.row()
         row.active = s.obstacles is not None
         row.prop(s, "obstacle_weight")
+        col = layout.column(align=True)
+        col.active = "backproject_iter" in acting  # a nudge keeps the constraints
+        col.label(text="Restarts")
+        row = col.row(align=True)
+        row.prop(s, "restarts", text="Count")
+        row.prop(s, "seed")
         layout.operator("moebius.show_gradient", icon="ORIENTATION_NORMAL")
 
 

@@ -64,6 +64,18 @@ class MoebiusSettings(bpy.types.PropertyGroup):
         description="Stop once the gradient norm in the metric (projected onto the "
                     "constraints for the exact-constraint methods) is smaller than this",
     )
+    refine: BoolProperty(
+        name="Refine When Jammed", default=True,
+        description="Split every edge in two (the same curve, twice the points) when the curve "
+                    "is too coarse for its shape or its strands jam during the run, and go on; "
+                    "the whole animation is keyed at the final point count. Off: such a curve "
+                    "is refused or the run stops",
+    )
+    max_edges: IntProperty(
+        name="Max Edges", default=0, min=0, soft_max=20000,
+        description="Refine no further than this many edges (0: four times the start's, at "
+                    "least 2000, within what a run here takes)",
+    )
     # Keyframes
     frame_start: IntProperty(
         name="Start Frame", default=1,
@@ -75,6 +87,16 @@ class MoebiusSettings(bpy.types.PropertyGroup):
                     "guarantee that in-between frames never pass the curve through itself",
     )
     # Advanced
+    restarts: IntProperty(
+        name="Restarts", default=0, min=0, soft_max=10,
+        description="After the flow converged, relax this many nudged copies of the result "
+                    "(a small random smooth push) and keep the lowest energy: a way off a "
+                    "symmetric shape the flow settled on. Each costs about a run",
+    )
+    seed: IntProperty(
+        name="Seed", default=0, min=0,
+        description="Seed of the restarts' nudges (the same seed, the same result)",
+    )
     method: EnumProperty(
         name="Method", default=labels.DEFAULT_METHOD,
         items=[(key, label, desc) for key, label, desc in labels.METHODS],
@@ -190,6 +212,7 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     last_method: StringProperty(name="Method", get=_stat("method", ""))
     last_engine: StringProperty(name="Engine", get=_stat("engine", ""))
     last_type: StringProperty(name="Knot Type", get=_stat("type", ""))
+    last_refined: StringProperty(name="Refined", get=_stat("refined", ""))
     # Notation typed for Add from Notation (braid word or PD code)
     notation: StringProperty(
         name="Notation", default="1 -2 1 -2",
@@ -201,13 +224,13 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     def store_run(self, obj_name: str, iterations: int, energy_start: float, energy_end: float,
                   seconds: float, message: str, keyed: int,
                   method: str = labels.DEFAULT_METHOD, engine: str = "",
-                  knot_type: str = "") -> None:
+                  knot_type: str = "", refined: str = "") -> None:
         """Record the statistics of a finished run (shown read-only in the panel)."""
         self["_stats"] = {
             "object": obj_name, "iterations": int(iterations),
             "energy_start": float(energy_start), "energy_end": float(energy_end),
             "seconds": float(seconds), "message": message, "keyframes": int(keyed),
-            "method": method, "engine": engine, "type": knot_type,
+            "method": method, "engine": engine, "type": knot_type, "refined": refined,
         }
 
 

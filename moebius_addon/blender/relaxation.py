@@ -21,7 +21,7 @@ from .labels import (
     KNOT_METHOD,
     method_label,
 )
-from .options import check_edge_count, check_relax_options
+from .options import check_edge_count, check_relax_options, edge_limit
 from .polygons import as_input, as_link
 from .rest import rest_shape, set_rest_shape
 
@@ -68,6 +68,24 @@ def solver_warm() -> bool:
     return _SESSION["warm"]
 
 
+def at_count(link: Sequence[np.ndarray], sizes: Sequence[int],
+             closed: Sequence[bool]) -> list[np.ndarray]:
+    """``link`` with component ``c`` at ``sizes[c]`` points: split edges (``core.subdivide``,
+    the same curve) to more, or every k-th point to fewer — the counts of a refined run are
+    whole multiples of each other's edges."""
+    out = []
+    for P, size, cl in zip(link, sizes, closed, strict=True):
+        n = len(P)
+        edges, target = (n, size) if cl else (n - 1, size - 1)
+        if size > n:
+            out.append(core.subdivide(P, target // edges, cl))
+        elif size < n:
+            out.append(np.ascontiguousarray(P[:: edges // target]))
+        else:
+            out.append(P)
+    return out
+
+
 class ObjectRelaxation:
     """A relaxation of one curve object, stepped by a caller that may stop it at any time.
 
@@ -106,6 +124,19 @@ class ObjectRelaxation:
         ``"tree"`` (``core.make_run``); the attribute ``engine`` says which one runs.
     theta : float, optional
         Admissibility θ of the tree in (0, 2) (None: the core's ``barnes_hut.THETA``).
+    refine : bool
+        Adaptive resolution (``core.make_run``): a curve too coarse for its shape, or whose
+        strands jam during the run, is split into twice the points (the same curve) and the
+        run goes on; the whole animation is keyed at the final count (earlier frames split
+        the same way, so nothing jumps) and the curve keeps it. False: refused or stopped
+        as before.
+    max_edges : int, optional
+        Refine no further than this many edges (None or 0: the core's default, four times
+        the start's, at least 2 000; never above what :func:`~.options.check_edge_count`
+        takes). A curve with shape keys of its own is not refined (its keys would not fit).
+    restarts, seed : int
+        Restarts after a converged run from nudged copies of the result, kept if lower
+        (``core.make_run``; the feasible methods).
     **options
         Passed on to the core's run (``initial_step``, ``armijo``, ``growth``,
         ``backproject_iter``, ``backproject_tol``, ``edge_lengths``, ``barycenter``,
@@ -129,7 +160,8 @@ class ObjectRelaxation:
                  tolerance: float = 1e-6, frame_start: int = 1, keyframe_stride: int = 1,
                  method: str = DEFAULT_METHOD, penalty: float | None = None,
                  append: bool = False, engine: str = DEFAULT_ENGINE,
-                 theta: float | None = None, **options) -> None:
+                 theta: float | None = None, refine: bool = True, max_edges: int | None = None,
+                 restarts: int = 0, seed: int = 0, **options) -> None:
         self.t0 = time.perf_counter()
         #: the first run of the session: it prepares the solver before its first iterate
         self.first_run = not _SESSION["warm"]
@@ -141,6 +173,7 @@ class ObjectRelaxation:
         options.update(extra)
         polygons = geometry.curve_polygons(obj, allow_open=True)
         closed = geometry.curve_closed(obj)
+        self._closed = closed
         #: whether a spline is open (an open curve: the core's closed=False, exact engine)
         self.open = not all(closed)
         if self.open:
@@ -158,17 +191,23 @@ class ObjectRelaxation:
             frames, points, _ = self._prior
             polygons = np.split(points[-1], self._cuts)
             frame_start = int(frames[-1])
+        allow_large = options.pop("allow_large", False)
         try:  # before any work: no size may crash the process
             check_edge_count(sum(len(p) for p in polygons), metric, method, engine,
-                             options.pop("allow_large", False),
-                             edge_lengths=options.get("edge_lengths", True),
+                             allow_large, edge_lengths=options.get("edge_lengths", True),
                              barycenter=options.get("barycenter", True))
+            if not isinstance(refine, bool):
+                raise ValueError(f"refine must be True or False, got {refine!r}")
+            # a curve too coarse for its shape is refined by the core when refine is on
+            core.check_polygon(as_input(polygons), closed=options.get("closed", True),
+                               coarseness=not refine)
         except ValueError as err:
             raise ValueError(f"'{obj.name}': {err}") from None
-        try:
-            core.check_polygon(as_input(polygons), closed=options.get("closed", True))
-        except ValueError as err:
-            raise ValueError(f"'{obj.name}': {err}") from None
+        #: the notes of the refinement settings (e.g. why a curve is not refined)
+        self.refine_note = ""
+        if refine:
+            max_edges = self._max_edges(obj, polygons, closed, max_edges, metric, method,
+                                        engine, allow_large)
         options.setdefault("target_lengths", "keep")
         self.obj = obj
         #: the method asked for (may be ``"auto"``), the core method run, and why
@@ -187,7 +226,8 @@ class ObjectRelaxation:
         # make_run("projected_gradient", ...) is core.Relaxation itself: the default is the
         # same run as before methods existed
         self.run = core.make_run(self.method, as_input(polygons), metric=metric,
-                                 max_iter=max_iterations, tol=tolerance, **options)
+                                 max_iter=max_iterations, tol=tolerance, refine=refine,
+                                 max_edges=max_edges, restarts=restarts, seed=seed, **options)
         #: the engine that runs ("exact" or "tree": "auto" resolved by the curve's size)
         self.engine = self.run.engine.name
         self.start = [p.copy() for p in polygons]
@@ -196,6 +236,7 @@ class ObjectRelaxation:
         self.nit = 0
         self.iterates = [self.start]
         self.energies = [self.energy]
+        self._nits = [0]  # the run's iteration of each record (a rollback drops later ones)
         self._pending = None
         # the earlier run's keys stay until this run's are written (finish), so that a run
         # that fails before its first iterate leaves them; live display removes them first
@@ -205,27 +246,56 @@ class ObjectRelaxation:
         self.type_kept: bool | None = None
         self.type_message = ""
 
+    def _max_edges(self, obj, polygons, closed, max_edges, metric, method, engine,
+                   allow_large) -> int:
+        """``max_edges`` of the core's run: as asked (default the core's), no more than a run
+        here takes, and no growth at all for a curve with shape keys of its own."""
+        n = sum(len(p) - (0 if c else 1) for p, c in zip(polygons, closed, strict=True))
+        asked = core.check_number("max_edges", max_edges or 0, 0, integer=True)
+        wanted = asked or core.default_max_edges(n)
+        if obj.data.shape_keys is not None and not keyframes.is_flow_key(obj.data):
+            self.refine_note = "not refined: the curve has shape keys of its own"
+            return n
+        if allow_large:
+            return wanted
+        return min(wanted, max(n, edge_limit(metric, method, engine)))
+
     def step(self) -> bool:
-        """Advance by one accepted iterate; False once the run has finished."""
-        before = self.run.nit
+        """Advance by one accepted iterate; False once the run has finished.
+
+        The run may also go back (a refinement goes on from an earlier iterate, a restart that
+        did not pay is dropped): the records after that iterate are dropped with it."""
+        last = self.nit
         more = self.run.step()
-        if self.run.nit > before:  # an accepted iterate (the last one may come with False)
-            if self.seconds_to_first is None:
-                self.seconds_to_first = time.perf_counter() - self.t0
-                _SESSION["warm"] = True
-            self.nit += 1
+        nit = self.run.nit
+        if nit < last:
+            while self._nits[-1] > nit:
+                self._nits.pop()
+                self.iterates.pop()
+                self.energies.pop()
+            if self._pending is not None and self._pending[2] > nit:
+                self._pending = None
+        if nit != last or len(self.run.x) != len(self.x):
             x = as_link(self.run.x)
             self.x = x
             self.energy = float(np.sum(self.run.energy))
+        if nit > last:  # an accepted iterate (the last one may come with False)
+            if self.seconds_to_first is None:
+                self.seconds_to_first = time.perf_counter() - self.t0
+                _SESSION["warm"] = True
             # recorded as Blender keys them, in single precision (half the memory of the
             # record of a large run)
-            keyed = [p.astype(np.float32) for p in x]
-            if self.nit % self.stride == 0:
+            keyed = [p.astype(np.float32) for p in self.x]
+            if nit % self.stride == 0:
                 self.iterates.append(keyed)
                 self.energies.append(self.energy)
+                self._nits.append(nit)
                 self._pending = None
             else:
-                self._pending = (keyed, self.energy)
+                self._pending = (keyed, self.energy, nit)
+        elif nit < last and self._nits[-1] != nit:  # back at an iterate that was not kept
+            self._pending = ([p.astype(np.float32) for p in self.x], self.energy, nit)
+        self.nit = nit
         return more
 
     def stop(self, message: str) -> None:
@@ -243,7 +313,10 @@ class ObjectRelaxation:
                     pass
             keyframes.remove_flow_keyframes(self.obj)
             self._live = True
-        geometry.write_polygons(self.obj.data, self.x)
+        # a refined iterate has more points than the curve: every k-th is the same shape to
+        # the eye (the curve grows to the refined count when the run is keyed)
+        sizes = [len(p) for p in self._shown]
+        geometry.write_polygons(self.obj.data, at_count(self.x, sizes, self._closed))
 
     def restore(self) -> None:
         """Undo :meth:`show` after a failure: the earlier flow keys (removed for the live
@@ -253,6 +326,14 @@ class ObjectRelaxation:
             keyframes.write_flow_keyframes(self.obj, [np.split(X, self._cuts) for X in points],
                                            list(energies), int(frames[0]))
         geometry.write_polygons(self.obj.data, self._shown)
+
+    def refinement_text(self, result) -> str:
+        """What the run refined, in a line: "100 → 200 edges at iteration 0 (start too
+        coarse)", several joined by "; "; or why it did not refine ("" when nothing to say)."""
+        lines = [_refinement_line(r) for r in getattr(result, "refinements", [])]
+        if not lines and self.refine_note:
+            return self.refine_note
+        return "; ".join(lines)
 
     def finish(self, scene: bpy.types.Scene | None = None):
         """Keyframe the recorded iterates and return the core's result.
@@ -273,14 +354,24 @@ class ObjectRelaxation:
             self.iterates.append(self._pending[0])
             self.energies.append(self._pending[1])
             self._pending = None
-        iterates, energies, first = self.iterates, self.energies, self.frame_start
+        # a refined run ends with more points than it started with: every record, the earlier
+        # keys and the rest shape are split the same way (the same curves), the curve grown
+        sizes = [len(p) for p in as_link(result.x)]
+        rest_before = rest_shape(self.obj)
+        iterates = [at_count(link, sizes, self._closed) for link in self.iterates]
+        energies, first = self.energies, self.frame_start
         if self.append:  # the earlier keys, then this run's from the last of them on
             frames0, points, energies0 = self._prior
-            iterates = [np.split(X, self._cuts) for X in points[:-1]] + iterates
+            iterates = [at_count(np.split(X, self._cuts), sizes, self._closed)
+                        for X in points[:-1]] + iterates
             energies = list(energies0[:-1]) + energies
             first = int(frames0[0])
-        else:
-            set_rest_shape(self.obj, self.start)
+        if sizes != [len(s.points) for s in self.obj.data.splines]:
+            geometry.grow_splines(self.obj.data, sizes)
+            if self.append and rest_before is not None:
+                set_rest_shape(self.obj, at_count(rest_before, sizes, self._closed))
+        if not self.append:
+            set_rest_shape(self.obj, at_count(self.start, sizes, self._closed))
         # the curve's own (unanimated) shape: the rest shape Clear Flow goes back to
         rest = rest_shape(self.obj)
         geometry.write_polygons(self.obj.data, iterates[0] if rest is None else rest)
@@ -296,8 +387,15 @@ class ObjectRelaxation:
         if stats is not None:
             stats.store_run(self.obj.name, self.nit, self.energies[0], self.energies[-1],
                             time.perf_counter() - self.t0, str(result.message), len(frames),
-                            self.method, self.engine, self.type_message)
+                            self.method, self.engine, self.type_message,
+                            refined=self.refinement_text(result))
         return result
+
+
+def _refinement_line(r: dict) -> str:
+    why = "start too coarse" if r["iteration"] == 0 and r["reason"].startswith(
+        "start") else "jammed"
+    return f"{r['edges_before']} → {r['edges_after']} edges at iteration {r['iteration']} ({why})"
 
 
 def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: int = 200,

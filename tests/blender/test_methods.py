@@ -40,7 +40,16 @@ def test_settings_pass_each_method_only_its_options(scene, mb):
     legacy = {"metric", "max_iterations", "tolerance", "frame_start", "keyframe_stride",
               "initial_step", "armijo", "growth", "backproject_iter", "backproject_tol",
               "edge_lengths", "barycenter"}
-    assert set(mb.relax_settings(s)) == legacy | {"method", "engine", "theta"}
+    assert set(mb.relax_settings(s)) == legacy | {"method", "engine", "theta", "refine"}
+    # refinement on by default, Max Edges 0 (the core's default) not passed; restarts only
+    # when asked, and to the methods that keep the constraints
+    assert mb.relax_settings(s)["refine"] is True
+    s.max_edges, s.restarts, s.seed = 3000, 2, 5
+    kwargs = mb.relax_settings(s)
+    assert (kwargs["max_edges"], kwargs["restarts"], kwargs["seed"]) == (3000, 2, 5)
+    s.refine = False
+    assert mb.relax_settings(s)["refine"] is False and "max_edges" not in mb.relax_settings(s)
+    s.refine, s.max_edges, s.restarts = True, 0, 0
     # the default run is the core's: θ is a float32 property, passed on as typed
     assert mb.relax_settings(s)["engine"] == "auto"
     assert mb.relax_settings(s)["theta"] == barnes_hut.THETA
@@ -58,6 +67,8 @@ def test_settings_pass_each_method_only_its_options(scene, mb):
     kwargs = mb.relax_settings(s)
     assert kwargs["penalty"] == 2e4 and kwargs["method"] == "lbfgs"
     assert not {"armijo", "growth", "backproject_iter", "edge_lengths", "barycenter"} & set(kwargs)
+    s.restarts = 2
+    assert "restarts" not in mb.relax_settings(s)
 
 
 @pytest.mark.parametrize("method", METHODS)
