@@ -50,6 +50,7 @@ from tests.mesh_checks import segments_closest  # noqa: E402 - the tests' indepe
 OUT = ROOT / "out" / "untangle"
 RESULTS = OUT / "results.jsonl"
 CSV_OUT = ROOT / "docs" / "data" / "untangle.csv"
+COMMIT = os.popen(f"git -C {ROOT} rev-parse --short HEAD").read().strip()
 TABLE = ROOT / "docs" / "data" / "energy_table.csv"
 LINKS = ["L2a1{1}", "L4a1{1}", "L5a1{0}", "L6a1{0}", "L6a4{0,0}", "L6n1{0,0}", "L7a1{0}",
          "L7a6{0}", "L8a1{0}", "L9a1{0}"]
@@ -174,7 +175,7 @@ def run_task(task: dict, max_iter: int) -> dict:
         "ratio": None if ref is None else float(r.fun) / ref,
         "identified": list(found.names), "kept": task["name"] in found.names or (
             core.knots.info(task["name"])["name"] in found.names),
-        "closest_edges": worst[0], "cpu_seconds": cpu, "seconds": wall,
+        "closest_edges": worst[0], "cpu_seconds": cpu, "seconds": wall, "commit": COMMIT,
     }
 
 
