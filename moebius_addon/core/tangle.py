@@ -87,6 +87,11 @@ def _smooth_field(rng: np.random.Generator, X: np.ndarray, radius: float,
     return V - V.mean(axis=0)
 
 
+def _mean_edge(parts) -> float:
+    return float(np.mean(np.concatenate([np.linalg.norm(np.roll(p, -1, 0) - p, axis=1)
+                                         for p in parts])))
+
+
 def crumple(P, seed: int = 0, steps: int = 100, move: float = 0.5):
     """``P`` moved by ``steps`` random smooth fields without ever touching itself.
 
@@ -113,7 +118,7 @@ def crumple(P, seed: int = 0, steps: int = 100, move: float = 0.5):
     rng = np.random.default_rng(seed)
     X = np.concatenate(parts)
     cuts = np.cumsum([len(p) for p in parts])[:-1]
-    h = float(np.mean([np.linalg.norm(np.roll(p, -1, 0) - p, axis=1).mean() for p in parts]))
+    h = _mean_edge(parts)
     for _ in range(int(steps)):
         radius = float(np.linalg.norm(X - X.mean(axis=0), axis=1).max())
         V = _smooth_field(rng, X, radius)
@@ -123,6 +128,10 @@ def crumple(P, seed: int = 0, steps: int = 100, move: float = 0.5):
             split if is_link else X, np.split(V, cuts) if is_link else V, tau, 0.5 * h))
         for _ in range(20):
             Y = np.concatenate([equalize(q) for q in np.split(X - tau * V, cuts)])
+            # equalize makes the edges their mean, which creeps up step by step (2 % in 60):
+            # scaled back, "half an edge length" keeps meaning the same length
+            c = Y.mean(axis=0)
+            Y = c + (Y - c) * (h / _mean_edge(np.split(Y, cuts)))
             D = X - Y
             path = max_collision_free_step(split if is_link else X,
                                            np.split(D, cuts) if is_link else D, 1.0, 0.5 * h)
@@ -134,13 +143,33 @@ def crumple(P, seed: int = 0, steps: int = 100, move: float = 0.5):
     return out if is_link else out[0]
 
 
+def _faithful_closure(word, strands, n, name):
+    """The closure of the braid at ``n`` vertices, or at the fewest above (10 % steps) whose
+    polygon is ``name``: the invariants of ``identify`` name it and it touches nothing."""
+    from .identify import identify
+
+    curves = knots._braid_curves(word, strands)  # the smooth curve, resampled below as is
+    while True:
+        P = knots._finish(curves, n)  # no coarseness refusal: a coarse start is the point
+        try:
+            if name in identify(P).names:
+                return P
+        except ValueError:  # touches itself at this count, or too tangled to read
+            pass
+        n = int(np.ceil(1.1 * n))
+
+
 def tangled(name: str, n: int | None = None, seed: int = 0, how: str = "braid", **moves):
     """A knot or link of the table (by name, alias or mirror: :func:`.table.lookup`) drawn
     tangled: its braid word tangled by :func:`tangle_braid` and closed with ``n`` vertices
     (``how="braid"``), or its usual curve crumpled by :func:`crumple` (``how="crumple"``), or
     both (``how="both"``); ``moves`` go to those functions. ``n``: the default of
-    :func:`.knots.named` for that knot (the tangled closure is longer, so it is coarser at
-    the same count: ``relax`` refines it where it must)."""
+    :func:`.knots.named` for that knot. The tangled closure is longer, so it is coarser at
+    the same count — often too coarse for the start check, which ``relax`` refines — and a
+    polygon that coarse need not be the knot of the smooth curve it is drawn from (a chord can
+    cut across another strand): it is drawn at the fewest vertices from ``n`` on, in steps of
+    10 %, at which :func:`.identify.identify` names the entry (the length of the result says
+    how many)."""
     if how not in ("braid", "crumple", "both"):
         raise ValueError(f"how must be 'braid', 'crumple' or 'both', got {how!r}")
     e = table.entry(name)
@@ -157,7 +186,7 @@ def tangled(name: str, n: int | None = None, seed: int = 0, how: str = "braid", 
         P = knots.named(name, n)
     else:
         word, strands = tangle_braid(e.braid, e.strands, seed, **moves)
-        P = knots.braid_closure(word, n, strands=strands)
+        P = _faithful_closure(word, strands, n, e.name)
     if how != "braid":
         P = crumple(P, seed, **crumple_moves)
     return P

@@ -131,12 +131,13 @@ SAMPLE = sorted(set(
     + [knots.names("link")[i] for i in _RNG.choice(4188, 8, replace=False)]))
 
 
-def topoly_jones(P) -> dict[int, int]:
-    """topoly's Jones polynomial of a polygon or link, ``{exponent of t^(1/2): coefficient}``."""
+def topoly_jones(P, seed: int = 2024) -> dict[int, int]:
+    """topoly's Jones polynomial of a polygon or link, ``{exponent of t^(1/2): coefficient}``
+    (in the direction of a random rotation of ``seed``)."""
     spec = importlib.util.spec_from_file_location("vkt", ROOT / "tools" / "verify_knot_table.py")
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)
-    return tool.topoly_jones(P)
+    return tool.topoly_jones(P, seed)
 
 
 def table_jones(name) -> dict[int, int]:
