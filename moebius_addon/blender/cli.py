@@ -2,13 +2,17 @@
 
 Examples::
 
-    blender -c moebius --knot fhw --edges 150 --save out/fhw.blend --export out/fhw.abc
+    blender -c moebius --knot fhw --edges 600 --save out/fhw.blend --export out/fhw.abc
     blender -c moebius --open scene.blend --object Knot --edges 200 --save relaxed.blend
     blender -c moebius --knot 7_2 --method lbfgs --penalty 1e5 --save out/7_2.blend
     blender -c moebius --knot "Borromean rings" --identify --save out/borromean.blend
     blender -c moebius --braid "1 -2 1 -2" --save out/4_1.blend
 
-The same function is callable from Python as :func:`main` (it returns the exit status).
+Without ``--open`` the command starts from an empty scene (Blender's startup file would add its
+Cube, Camera and Light to what is saved). It prints when numba compiles the kernels (the first
+run after installing or updating), a line per iterate with ``--verbose``, and nothing but
+errors with ``--quiet``. The same function is callable from Python as :func:`main` (it returns
+the exit status).
 """
 
 from __future__ import annotations
@@ -19,8 +23,10 @@ import time
 
 import bpy
 
+from ..core.compiling import compiling
 from ..core.engine import AUTO_TREE_FROM
-from . import api, geometry
+from . import api, geometry, keyframes
+from .labels import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -47,7 +53,9 @@ def _parser() -> argparse.ArgumentParser:
                           "PD[X[...]] or Knoodle's rows of five)")
     p.add_argument("--identify", action="store_true",
                    help="print which knot or link the curve is (before relaxing)")
-    p.add_argument("--open", metavar="FILE.blend", help="open this file first")
+    p.add_argument("--open", metavar="FILE.blend",
+                   help="open this file first (without it: a new empty scene, not Blender's "
+                        "startup file with its Cube, Camera and Light)")
     p.add_argument("--edges", type=int, default=None,
                    help="edges per component (converts the object; default: keep a converted "
                         "curve as it is, 100 otherwise; the catalogue default for --knot)")
@@ -72,14 +80,26 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--penalty", type=float, default=None, metavar="ALPHA",
                    help="penalty weight of ncg, lbfgs and nesterov (default "
                         f"{api.DEFAULT_PENALTY:g}; larger keeps edge lengths closer)")
-    p.add_argument("--max-iterations", type=int, default=200)
-    p.add_argument("--tolerance", type=float, default=1e-6)
-    p.add_argument("--frame-start", type=int, default=1)
-    p.add_argument("--stride", type=int, default=1, help="keyframe every STRIDE-th iterate")
+    p.add_argument("--max-iterations", "--max-iter", dest="max_iterations", type=int,
+                   default=DEFAULT_MAX_ITERATIONS, metavar="N",
+                   help="stop after N accepted iterates (default %(default)s)")
+    p.add_argument("--tolerance", "--tol", dest="tolerance", type=float,
+                   default=DEFAULT_TOLERANCE, metavar="TOL",
+                   help="stop once the gradient norm in the metric is below TOL (default "
+                        "%(default)g)")
+    p.add_argument("--frame-start", type=int, default=1,
+                   help="frame of the start shape (default %(default)s)")
+    p.add_argument("--stride", type=int, default=1,
+                   help="keyframe every STRIDE-th iterate (default %(default)s)")
     p.add_argument("--no-relax", action="store_true", help="only convert / add")
     p.add_argument("--save", metavar="OUT.blend", help="save the result here")
     p.add_argument("--export", metavar="OUT.abc|OUT.usd", action="append", default=[],
                    help="export the keyframed curve (Alembic or USD; may repeat)")
+    talk = p.add_mutually_exclusive_group()
+    talk.add_argument("-v", "--verbose", action="store_true",
+                      help="print a line per iterate (iteration, energy, seconds)")
+    talk.add_argument("-q", "--quiet", action="store_true",
+                      help="print nothing but errors and warnings")
     return p
 
 
@@ -89,6 +109,76 @@ def _is_converted(obj, allow_open: bool = False) -> bool:
     except ValueError:
         return False
     return True
+
+
+def _say(line: str) -> None:
+    print(f"moebius: {line}", flush=True)
+
+
+def _run(args, run: dict, notation: str | None):
+    """Open or empty the scene, add or convert, identify, relax, save and export (the options
+    were checked by :func:`main`); returns the curve object."""
+    say = (lambda line: None) if args.quiet else _say
+    if args.open:
+        bpy.ops.wm.open_mainfile(filepath=args.open)
+    else:  # not Blender's startup file: its Cube, Camera and Light would be saved too
+        bpy.ops.wm.read_homefile(use_empty=True)
+    if args.knot:
+        obj = api.add_knot(args.knot, args.edges, p=args.pq[0], q=args.pq[1],
+                           seed=args.seed, **run)
+    elif notation:
+        obj = api.add_notation(notation, args.edges, **run)
+    else:
+        obj = bpy.data.objects.get(args.object)
+        if obj is None:
+            names = ", ".join(o.name for o in bpy.data.objects) or "none"
+            raise ValueError(f"no object '{args.object}' (objects: {names})")
+        if args.edges is not None or not _is_converted(obj, args.keep_open):
+            obj = api.convert_object(obj, edges=args.edges or 100,
+                                     close_open=args.close_open,
+                                     keep_open=args.keep_open, **run)
+    energy = obj.get(api.ENERGY_PROP)  # a poly curve drawn by hand has none stored
+    if energy is None:
+        energy = api.energy(geometry.curve_polygons(obj, allow_open=True),
+                            geometry.curve_closed(obj))
+    say(f"'{obj.name}', {sum(len(s.points) for s in obj.data.splines)} edges, "
+        f"energy {energy:.6g}")
+    if args.identify:
+        found = api.identify_object(obj)
+        say(f"'{obj.name}' is {found.message}" if found.names else
+            f"'{obj.name}': {found.message}")
+    if not args.no_relax:
+        t0 = time.perf_counter()
+        start = geometry.curve_polygons(obj, allow_open=True)
+        is_open = not all(geometry.curve_closed(obj))
+        method, why = ((api.EXPLICIT_METHOD, "an open curve")
+                       if is_open and args.method == api.AUTO_METHOD
+                       else api.choose_method(args.method, start))
+        result = api.relax_object(obj, metric=args.metric, method=method,
+                                  penalty=args.penalty, engine=args.engine,
+                                  theta=args.theta, max_iterations=args.max_iterations,
+                                  tolerance=args.tolerance, frame_start=args.frame_start,
+                                  keyframe_stride=args.stride,
+                                  progress=_say if args.verbose else False)
+        frames = keyframes.keyed_frames(obj)
+        say(f"{method}{f' ({why})' if why else ''}, "
+            f"{result.stats['engine']} engine, {result.nit} iterations in "
+            f"{time.perf_counter() - t0:.2f} s, energy "
+            f"{result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, keyed frames "
+            f"{frames[0]:g}-{frames[-1]:g} ({result.message})")
+        kept, words = ((None, "an open curve has no knot type") if is_open
+                       else api.type_kept(start, api.object_curves(obj)))
+        if kept is False:
+            print(f"moebius: {words}", file=sys.stderr)
+        else:
+            say(words)
+    if args.save:
+        bpy.ops.wm.save_as_mainfile(filepath=args.save)
+        say(f"saved {args.save}")
+    for path in args.export:
+        api.export_flow(obj, path)
+        say(f"exported {path}")
+    return obj
 
 
 def main(argv: list[str]) -> int:
@@ -119,59 +209,8 @@ def main(argv: list[str]) -> int:
                 api.check_edge_count(args.edges, **run)
         for path in args.export:
             api.export_suffix(path)
-        if args.open:
-            bpy.ops.wm.open_mainfile(filepath=args.open)
-        if args.knot:
-            obj = api.add_knot(args.knot, args.edges, p=args.pq[0], q=args.pq[1],
-                               seed=args.seed, **run)
-        elif notation:
-            obj = api.add_notation(notation, args.edges, **run)
-        else:
-            obj = bpy.data.objects.get(args.object)
-            if obj is None:
-                names = ", ".join(o.name for o in bpy.data.objects) or "none"
-                raise ValueError(f"no object '{args.object}' (objects: {names})")
-            if args.edges is not None or not _is_converted(obj, args.keep_open):
-                obj = api.convert_object(obj, edges=args.edges or 100,
-                                         close_open=args.close_open,
-                                         keep_open=args.keep_open, **run)
-        energy = obj.get(api.ENERGY_PROP)  # a poly curve drawn by hand has none stored
-        if energy is None:
-            energy = api.energy(geometry.curve_polygons(obj, allow_open=True),
-                                geometry.curve_closed(obj))
-        print(f"moebius: '{obj.name}', {sum(len(s.points) for s in obj.data.splines)} edges, "
-              f"energy {energy:.6g}")
-        if args.identify:
-            found = api.identify_object(obj)
-            print(f"moebius: '{obj.name}' is {found.message}" if found.names else
-                  f"moebius: '{obj.name}': {found.message}")
-        if not args.no_relax:
-            t0 = time.perf_counter()
-            start = geometry.curve_polygons(obj, allow_open=True)
-            is_open = not all(geometry.curve_closed(obj))
-            method, why = ((api.EXPLICIT_METHOD, "an open curve")
-                           if is_open and args.method == api.AUTO_METHOD
-                           else api.choose_method(args.method, start))
-            result = api.relax_object(obj, metric=args.metric, method=method,
-                                      penalty=args.penalty, engine=args.engine,
-                                      theta=args.theta, max_iterations=args.max_iterations,
-                                      tolerance=args.tolerance, frame_start=args.frame_start,
-                                      keyframe_stride=args.stride)
-            scene = bpy.context.scene
-            print(f"moebius: {method}{f' ({why})' if why else ''}, "
-                  f"{result.stats['engine']} engine, {result.nit} iterations in "
-                  f"{time.perf_counter() - t0:.2f} s, energy "
-                  f"{result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, "
-                  f"frames {scene.frame_start}-{scene.frame_end} ({result.message})")
-            kept, words = ((None, "an open curve has no knot type") if is_open
-                           else api.type_kept(start, api.object_curves(obj)))
-            print(f"moebius: {words}", file=sys.stdout if kept is not False else sys.stderr)
-        if args.save:
-            bpy.ops.wm.save_as_mainfile(filepath=args.save)
-            print(f"moebius: saved {args.save}")
-        for path in args.export:
-            api.export_flow(obj, path)
-            print(f"moebius: exported {path}")
+        with compiling(None if args.quiet else _say):
+            _run(args, run, notation)
     except (ValueError, RuntimeError, OSError) as err:
         print(f"moebius: error: {err}", file=sys.stderr)
         return 1

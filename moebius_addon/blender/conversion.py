@@ -9,12 +9,14 @@ import bpy
 import numpy as np
 
 from .. import core
+from ..core.compiling import compiling
 from . import geometry
 from .keyframes import ENERGY_PROP
 from .labels import DEFAULT_ENGINE, DEFAULT_METHOD
 from .objects import copy_transform, deselect_all, link_like
 from .options import EDGE_LIMIT, check_edge_count, edge_limit
 from .polygons import as_input, energy
+from .progress import Progress, reporter
 from .rest import set_rest_shape
 
 # Coordinates at or beyond this are Blender's clamped infinities (single precision: ±3.4e38).
@@ -239,7 +241,7 @@ def convert_object(obj: bpy.types.Object, edges: int = 100, edge_length: float |
                    close_open: bool = False, allow_large: bool = False,
                    context: bpy.types.Context | None = None, *, metric: str = "hs",
                    method: str = DEFAULT_METHOD, engine: str = DEFAULT_ENGINE,
-                   keep_open: bool = False) -> bpy.types.Object:
+                   keep_open: bool = False, progress: Progress = False) -> bpy.types.Object:
     """Make an equal-edge poly curve from ``obj``; the original is kept, hidden.
 
     Parameters
@@ -250,6 +252,9 @@ def convert_object(obj: bpy.types.Object, edges: int = 100, edge_length: float |
         See :func:`prepare_conversion`.
     context : bpy.types.Context, optional
         Defaults to ``bpy.context``.
+    progress : bool or callable
+        True: print a line when numba compiles the kernels (the first use after installing
+        or updating) and one when done; a callable receives those lines; False: silent.
 
     Returns
     -------
@@ -262,10 +267,16 @@ def convert_object(obj: bpy.types.Object, edges: int = 100, edge_length: float |
     ValueError
         See :func:`prepare_conversion`; the scene is unchanged then.
     """
-    polygons = prepare_conversion(obj, edges, edge_length, close_open, allow_large,
-                                  metric=metric, method=method, engine=engine,
-                                  keep_open=keep_open)
-    return apply_conversion(obj, polygons, context)
+    say = reporter(progress)
+    with compiling(say):
+        polygons = prepare_conversion(obj, edges, edge_length, close_open, allow_large,
+                                      metric=metric, method=method, engine=engine,
+                                      keep_open=keep_open)
+        new = apply_conversion(obj, polygons, context)
+    if say is not None:
+        say(f"converted '{obj.name}' to '{new.name}', "
+            f"{' + '.join(str(len(p)) for p in polygons)} edges")
+    return new
 
 
 def apply_conversion(obj: bpy.types.Object, polygons: Sequence[np.ndarray],

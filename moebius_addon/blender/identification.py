@@ -9,8 +9,10 @@ import bpy
 import numpy as np
 
 from .. import core
+from ..core.compiling import compiling
 from . import geometry
 from .polygons import as_input
+from .progress import Progress, reporter
 
 #: Custom property holding the knot or link type found by :func:`identify_object` (or given by
 #: *Add Knot*): a table name ("3_1", "m3_1", "L6a4{0,0}"), a link without its orientation when
@@ -62,18 +64,25 @@ def type_label(result: core.Identification) -> str:
     return " | ".join(result.names)
 
 
-def identify_object(obj: bpy.types.Object) -> core.Identification:
+def identify_object(obj: bpy.types.Object, progress: Progress = False) -> core.Identification:
     """Identify the knot or link a curve or edge-loop mesh object shows (``core.identify``) and
-    store it on the object (:data:`KNOT_TYPE_PROP`).
+    store it on the object (:data:`KNOT_TYPE_PROP`). ``progress``: True prints a line when
+    numba compiles the kernels (the first use after installing or updating) and the result; a
+    callable receives those lines; False (default): silent.
 
     Raises ``ValueError`` saying what to fix: not a curve, an open curve, fewer than 4 points,
     a curve that touches itself, or one too tangled to read (relax it first)."""
+    say = reporter(progress)
     curves = object_curves(obj)
     try:
-        result = core.identify(as_input(curves))
+        with compiling(say):
+            result = core.identify(as_input(curves))
     except ValueError as err:
         raise ValueError(f"'{obj.name}': {err}") from None
     obj[KNOT_TYPE_PROP] = type_label(result)
+    if say is not None:
+        say(f"'{obj.name}' is {result.message}" if result.names else
+            f"'{obj.name}': {result.message}")
     return result
 
 

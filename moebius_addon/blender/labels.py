@@ -32,6 +32,9 @@ DEFAULT_METHOD = AUTO_METHOD
 
 #: Default weight α of the edge-stretch penalty of the penalty methods (the core's default).
 DEFAULT_PENALTY = core.DEFAULT_PENALTY_WEIGHT
+#: defaults of Max Iterations and Tolerance (the panel, the scripting API, the command line)
+DEFAULT_MAX_ITERATIONS = 200
+DEFAULT_TOLERANCE = 1e-6
 
 _METHOD_TEXT = {
     AUTO_METHOD: (

@@ -11,6 +11,7 @@ import time
 import bpy
 from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
 
+from .. import core
 from . import api, keyframes
 
 _CONVERTIBLE = {"CURVE", "MESH"}
@@ -126,7 +127,10 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
 
     def _report_result(self, result):
         run = self._run
-        kind = "WARNING" if not result.success else "INFO"
+        # a limit the user set (Max Iterations, Time Limit) or Esc is an ordinary end of a run;
+        # a warning only when the flow could not go on (decided by the status, not the words)
+        kind = "WARNING" if result.status in (core.Status.STALLED,
+                                              core.Status.NOT_FINISHED) else "INFO"
         how = f" ({run.method}: {run.why})" if run.why else f" ({run.method})"
         how += " continued" if run.append else ""
         how += f", {run.engine} engine"

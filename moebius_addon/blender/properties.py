@@ -56,11 +56,11 @@ class MoebiusSettings(bpy.types.PropertyGroup):
         description="Inner product that turns the energy's derivative into a gradient",
     )
     max_iterations: IntProperty(
-        name="Max Iterations", default=200, min=1, soft_max=5000,
+        name="Max Iterations", default=labels.DEFAULT_MAX_ITERATIONS, min=1, soft_max=5000,
         description="Stop after this many accepted steps",
     )
     tolerance: FloatProperty(
-        name="Tolerance", default=1e-6, min=0.0, precision=8,
+        name="Tolerance", default=labels.DEFAULT_TOLERANCE, min=0.0, precision=8,
         description="Stop once the gradient norm in the metric (projected onto the "
                     "constraints for the exact-constraint methods) is smaller than this",
     )

@@ -10,6 +10,8 @@ import bpy
 import numpy as np
 
 from .. import core
+from ..core.compiling import compiling
+from ..core.spelling import take_spelling
 from . import geometry, keyframes, scene_constraints
 from .gradients import refresh_gradients
 from .identification import type_kept
@@ -23,6 +25,7 @@ from .labels import (
 )
 from .options import check_edge_count, check_relax_options, edge_limit
 from .polygons import as_input, as_link
+from .progress import Progress, reporter
 from .rest import rest_shape, set_rest_shape
 
 # Whether a run reached its first iterate in this Blender session: the first one pays for the
@@ -101,9 +104,12 @@ class ObjectRelaxation:
     metric : str
         ``"hs"``, ``"hs_pure"``, ``"h2"``, ``"h1"`` or ``"l2"``.
     max_iterations : int
+        Stop after this many accepted iterates (``max_iter`` of ``core.relax``, also accepted
+        under that name).
     tolerance : float
-        Stop once the gradient norm in the metric is this small (``tol`` of ``core.relax``;
-        projected onto the constraints for the feasible methods).
+        Stop once the gradient norm in the metric is this small (``tol`` of ``core.relax``,
+        also accepted under that name; projected onto the constraints for the feasible
+        methods).
     frame_start : int
         Frame of the start shape.
     keyframe_stride : int
@@ -162,6 +168,8 @@ class ObjectRelaxation:
                  append: bool = False, engine: str = DEFAULT_ENGINE,
                  theta: float | None = None, refine: bool = True, max_edges: int | None = None,
                  restarts: int = 0, seed: int = 0, **options) -> None:
+        max_iterations = take_spelling(options, "max_iterations", max_iterations, 200)
+        tolerance = take_spelling(options, "tolerance", tolerance, 1e-6)
         self.t0 = time.perf_counter()
         #: the first run of the session: it prepares the solver before its first iterate
         self.first_run = not _SESSION["warm"]
@@ -403,7 +411,7 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
                  method: str = DEFAULT_METHOD, penalty: float | None = None,
                  append: bool = False, engine: str = DEFAULT_ENGINE, theta: float | None = None,
                  callback: Callable | None = None, scene: bpy.types.Scene | None = None,
-                 **options):
+                 progress: Progress = False, **options):
     """Relax a converted curve by the Möbius-energy flow and keyframe its iterates (every
     ``keyframe_stride``-th and the last).
 
@@ -428,6 +436,10 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
         the run cleanly.
     scene : bpy.types.Scene, optional
         Scene whose frame range grows to include the flow; defaults to ``bpy.context.scene``.
+    progress : bool or callable
+        True: print a line when numba compiles the kernels (the first run after installing or
+        updating) and one per iterate ("moebius: 'Knot' iteration 3/200, energy 74.5, 1.2 s");
+        a callable receives those lines instead; False (default): silent.
 
     Returns
     -------
@@ -445,15 +457,28 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
         iterates computed so far are keyed (or, before the first one, the earlier animation is
         left as it was); a note on the exception says which.
     """
+    say = reporter(progress)
+    with compiling(say):
+        return _relax_object(obj, metric, max_iterations, tolerance, frame_start,
+                             keyframe_stride, method, penalty, append, engine, theta, callback,
+                             scene, say, options)
+
+
+def _relax_object(obj, metric, max_iterations, tolerance, frame_start, keyframe_stride, method,
+                  penalty, append, engine, theta, callback, scene, say, options):
     run = ObjectRelaxation(obj, metric=metric, max_iterations=max_iterations, tolerance=tolerance,
                            frame_start=frame_start, keyframe_stride=keyframe_stride,
                            method=method, penalty=penalty, append=append, engine=engine,
                            theta=theta, **options)
+    limit = run.run.max_iter
     more = True
     try:
         while more:
             before = run.nit
             more = run.step()
+            if run.nit > before and say is not None:
+                say(f"'{obj.name}' iteration {run.nit}/{limit}, energy {run.energy:.6g}, "
+                    f"{time.perf_counter() - run.t0:.1f} s")
             # every accepted iterate reaches the callback, the last one of the run included (as
             # in core.relax); a True returned for the last one changes nothing
             if run.nit > before and callback is not None and callback(run):

@@ -41,7 +41,9 @@ def relax(
     metric : {"hs", "hs_pure", "h2", "h1", "l2"}
         Gradient metric; ``hs`` (geometric W^{3/2,2}) is the paper's and the fastest.
     max_iter, tol : int, float
-        Iteration limit and tolerance on the projected gradient norm ``sqrt(<g, u>)``.
+        Iteration limit and tolerance on the projected gradient norm ``sqrt(<g, u>)``; also
+        accepted as ``max_iterations=`` and ``tolerance=`` (the Blender layer's spelling,
+        ``core.spelling``).
     callback : callable, optional
         ``callback(state)`` after every accepted iterate; returning True stops the run cleanly.
     method : str

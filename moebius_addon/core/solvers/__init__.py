@@ -21,6 +21,7 @@ from __future__ import annotations
 from ..engine import engine_class
 from ..metrics import METRICS
 from ..pinned_solve import tree_borders
+from ..spelling import take_spelling
 from .adaptive import RESTART_SCALE, AdaptiveRun
 from .base import Run, check_dense_size, check_number
 from .penalty import LBFGS, Nesterov, NonlinearCG, pinned_refusal
@@ -54,7 +55,8 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
     method : str
         One of :data:`METHODS`.
     P, metric, max_iter, tol, **options
-        As in :class:`Relaxation` and the method's own class.
+        As in :class:`Relaxation` and the method's own class; ``max_iterations`` and
+        ``tolerance`` (the Blender layer's spelling) are taken for ``max_iter`` and ``tol``.
     engine : str
         "exact", "tree" or "auto" (the tree from ``engine.AUTO_TREE_FROM`` vertices on;
         ``core.engine``): the tree evaluates energy and gradient by Barnes–Hut and holds
@@ -88,6 +90,8 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
     """
     if method not in METHOD_CLASSES:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    max_iter = take_spelling(options, "max_iter", max_iter, 200)
+    tol = take_spelling(options, "tol", tol, 1e-6)
     cls = METHOD_CLASSES[method]
     if not isinstance(refine, (bool, int)) or refine not in (0, 1):
         raise ValueError(f"refine must be True or False, got {refine!r}")
