@@ -11,6 +11,13 @@ lists one version per platform) and ``blender_ext.py server-generate`` writes it
 ``index.json`` (and an ``index.html`` to browse it); users add the URL of ``index.json`` as a
 *Remote Repository* in Blender (docs/blender.md, "A repository users can add").
 
+The linux-x64 zip also carries numba's cache of the kernels, compiled for a generic x86-64 CPU
+(``moebius_addon/core/kernel_cache``; ``core/_shipped_cache.py`` says how it is found): the
+staged package runs ``core.warmup`` under each Python of ``--kernel-cache`` (by default this
+one; ``make`` adds the 3.13 of the Blender 5.2 venv) with the numba and llvmlite wheels it
+ships, so that the first session after installing loads the kernels instead of compiling them.
+The zips of the other platforms carry none (they compile on first use, saying so).
+
 Usage::
 
     python mk/build_extension.py                      # every platform in the manifest
@@ -21,11 +28,14 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import hashlib
+import os
 import re
 import shutil
 import subprocess
 import sys
 import tomllib
+import zipfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -119,35 +129,105 @@ def stage(dest: Path, platforms: list[str], pythons: list[str] | None = None,
     return wheels
 
 
+# The generic CPU the shipped kernels are compiled for (core/_shipped_cache.py: GENERIC_CPU).
+GENERIC_CPU = "x86-64-v3"
+# The platform whose zip carries the kernel cache: the one this build machine can run.
+CACHE_PLATFORM = "linux-x64"
+
+
+def _numba_for(python: str, stage_dir: Path) -> Path:
+    """A directory with the numba and llvmlite wheels of ``python`` (``"3.11"``) the zip ships
+    unpacked (a wheel is a zip of what goes into site-packages)."""
+    tag = "cp" + python.replace(".", "")
+    wheels = sorted(WHEELS.glob(f"*-{tag}-{tag}-manylinux*.whl"))
+    target = stage_dir.parent / f"numba-{python}"
+    stamp = target / ".wheels"
+    names = "\n".join(w.name for w in wheels)
+    if not (stamp.exists() and stamp.read_text() == names):
+        shutil.rmtree(target, ignore_errors=True)
+        for wheel in wheels:
+            with zipfile.ZipFile(wheel) as z:
+                z.extractall(target)
+        stamp.write_text(names)
+    return target
+
+
+def build_kernel_cache(stage_dir: Path, pythons: dict[str, str]) -> None:
+    """Run ``core.warmup`` of the staged package under each interpreter of ``pythons``
+    (version -> executable; each needs numpy) with the shipped numba, compiling for
+    :data:`GENERIC_CPU`, and put the cache into ``core/kernel_cache`` of the staged package.
+    The interpreters run side by side (one process each)."""
+    if not pythons:
+        return
+    work = stage_dir.parent / "kernel-cache"
+    shutil.rmtree(work, ignore_errors=True)
+    paths = {version: _numba_for(version, stage_dir) for version in pythons}
+    procs = []
+    for version, exe in pythons.items():
+        env = dict(os.environ, NUMBA_CACHE_DIR=str(work), NUMBA_CPU_NAME=GENERIC_CPU,
+                   NUMBA_CPU_FEATURES="", PYTHONPATH=os.pathsep.join(
+                       [str(paths[version]), str(stage_dir.parent)]))
+        code = (f"import sys; assert sys.version_info[:2] == {tuple(map(int, version.split('.')))}"
+                f", sys.version; from {stage_dir.name}.core import warmup; sys.exit(warmup.main())")
+        print(f"kernel cache: compiling for {GENERIC_CPU} with Python {version} ({exe})",
+              flush=True)
+        procs.append((version, subprocess.Popen([exe, "-c", code], env=env)))
+    for version, proc in procs:
+        if proc.wait():
+            sys.exit(f"the kernel cache could not be built with Python {version}")
+    # numba names each source directory's cache <dir>_<sha1 of its absolute path>
+    shipped = stage_dir / "core" / "kernel_cache"
+    for source in sorted({p.parent for p in stage_dir.rglob("*.py")}):
+        name = f"{source.name}_{hashlib.sha1(os.path.abspath(source).encode()).hexdigest()}"
+        if (work / name).is_dir():
+            shutil.copytree(work / name, shipped / source.relative_to(stage_dir),
+                            dirs_exist_ok=True)
+    size = sum(f.stat().st_size for f in shipped.rglob("*") if f.is_file())
+    print(f"kernel cache: {len(list(shipped.rglob('*.nbc')))} kernels, {size / 1e6:.1f} MB",
+          flush=True)
+
+
 def blender_ext() -> Path:
     """``blender_ext.py`` of the installed ``bpy`` wheel (build, validate, server-generate)."""
     return bpy_scripts() / "addons_core" / "bl_pkg" / "cli" / "blender_ext.py"
 
 
 def build(out: Path, platforms: list[str], pythons: list[str] | None = None,
-          version: str | None = None) -> list[Path]:
+          version: str | None = None, kernel_cache: dict[str, str] | None = None) -> list[Path]:
     """Stage, build with ``blender_ext.py --split-platforms`` and validate; return the zips.
 
     ``pythons`` (e.g. ``["3.11"]``) limits the wheels to those Python versions (the tests use
     this to build a smaller zip); by default every wheel of the manifest is shipped.
     ``version`` overrides the manifest's (the repository test builds a newer version).
+    ``kernel_cache`` (Python version -> interpreter) builds the kernel cache the linux-x64 zip
+    carries (:func:`build_kernel_cache`; versions whose wheels are not shipped are skipped);
+    None or empty: no cache.
     """
     scripts = bpy_scripts()
     tool = blender_ext()
     tags = scripts / "modules" / "_bpy_internal" / "extensions" / "tags.py"
-    src = ROOT / "build" / "extension"
-    stage(src, platforms, pythons, version)
     out.mkdir(parents=True, exist_ok=True)
     manifest = tomllib.loads(MANIFEST.read_text())
     version = version or manifest["version"]
     zips = [out / f"{manifest['id']}-{version}-{p.replace('-', '_')}.zip" for p in platforms]
     for z in zips:
         z.unlink(missing_ok=True)
-    subprocess.run(
-        [sys.executable, str(tool), "build", "--source-dir", str(src), "--output-dir", str(out),
-         "--split-platforms", "--valid-tags", str(tags)],
-        check=True,
-    )
+    cached = {v: exe for v, exe in (kernel_cache or {}).items() if pythons is None or v in pythons}
+    # the zip of the platform with a cache is built from a staging of its own
+    groups = [[p for p in platforms if p != CACHE_PLATFORM or not cached],
+              [p for p in platforms if p == CACHE_PLATFORM and cached]]
+    for group in groups:
+        if not group:
+            continue
+        src = ROOT / "build" / "extension"
+        stage(src, group, pythons, version)
+        if CACHE_PLATFORM in group:
+            build_kernel_cache(src, cached)
+        subprocess.run(
+            [sys.executable, str(tool), "build", "--source-dir", str(src), "--output-dir",
+             str(out), "--split-platforms", "--valid-tags", str(tags)],
+            check=True,
+        )
     for z in zips:
         subprocess.run(
             [sys.executable, str(tool), "validate", "--valid-tags", str(tags), str(z)], check=True
@@ -156,7 +236,7 @@ def build(out: Path, platforms: list[str], pythons: list[str] | None = None,
 
 
 def build_repo(out: Path, platforms: list[str], pythons: list[str] | None = None,
-               version: str | None = None) -> Path:
+               version: str | None = None, kernel_cache: dict[str, str] | None = None) -> Path:
     """Build the zips into ``out`` as a static repository and write its ``index.json``.
 
     Earlier zips of this extension in ``out`` are removed first: ``server-generate`` refuses
@@ -168,7 +248,7 @@ def build_repo(out: Path, platforms: list[str], pythons: list[str] | None = None
     out.mkdir(parents=True, exist_ok=True)
     for old in out.glob(f"{manifest['id']}-*.zip"):
         old.unlink()
-    build(out, platforms, pythons, version)
+    build(out, platforms, pythons, version, kernel_cache)
     subprocess.run(
         [sys.executable, str(blender_ext()), "server-generate", "--repo-dir", str(out), "--html"],
         check=True,
@@ -186,12 +266,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=ROOT / "dist")
     parser.add_argument("--repo", action="store_true",
                         help="make --out a static repository: the zips and index.json")
+    parser.add_argument("--kernel-cache", action="append", default=[], metavar="VERSION=PYTHON",
+                        help="also build the linux-x64 kernel cache for Python VERSION with "
+                             "this interpreter (numpy installed; may repeat; this Python is "
+                             "always used for its own version)")
+    parser.add_argument("--no-kernel-cache", action="store_true",
+                        help="ship no kernel cache (the first use compiles the kernels)")
     args = parser.parse_args(argv)
+    cache = {} if args.no_kernel_cache else {
+        f"{sys.version_info.major}.{sys.version_info.minor}": sys.executable,
+        **dict(item.split("=", 1) for item in args.kernel_cache)}
     if args.repo:
-        index = build_repo(args.out, args.platforms, args.pythons)
+        index = build_repo(args.out, args.platforms, args.pythons, kernel_cache=cache)
         zips = sorted(args.out.glob("*.zip"))
     else:
-        zips = build(args.out, args.platforms, args.pythons)
+        zips = build(args.out, args.platforms, args.pythons, kernel_cache=cache)
     for z in zips:
         print(f"{z}  {z.stat().st_size / 1e6:.1f} MB")
     if args.repo:

@@ -59,9 +59,11 @@ venv-lines: $(LINE_STAMPS)
 	.venv-blender-$*/bin/python -m pip install -q bpy==$(BPY_$*) numpy==$(NUMPY_$*) 'pytest>=8'
 	touch $@
 
-# The repository the tests install from, built by the main venv as `make repo` builds dist/repo.
-$(TEST_REPO)/index.json: $(STAMP) $(EXT_SOURCES)
-	$(PY) mk/build_extension.py --repo --platforms linux-x64 --out $(TEST_REPO)
+# The repository the tests install from, built by the main venv as `make repo` builds dist/repo,
+# its zip with the kernel cache of both Pythons (3.13: the Blender 5.2 venv's, mk/build_extension.py).
+$(TEST_REPO)/index.json: $(STAMP) $(EXT_SOURCES) .venv-blender-5.2/.installed
+	$(PY) mk/build_extension.py --repo --platforms linux-x64 --out $(TEST_REPO) \
+	  --kernel-cache 3.13=.venv-blender-5.2/bin/python
 
 # The `lines` tests on one line's venv ($(1): the venv).
 LINE_PYTEST = MOEBIUS_TEST_REPO=$(TEST_REPO) $(1)/bin/python -m pytest -q -m "lines and not slow" \

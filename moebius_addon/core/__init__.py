@@ -11,7 +11,8 @@ from ._threads import prefer_stable_layer
 
 prefer_stable_layer()  # before any parallel kernel runs: numba settles on a layer then
 
-from . import invariants, knots, pd, table, tangle  # noqa: E402
+from . import invariants, knots, open_energy, pd, table, tangle  # noqa: E402, F401
+from ._shipped_cache import use_shipped_cache  # noqa: E402
 from .collision import max_collision_free_step  # noqa: E402
 from .constraints import Constraints  # noqa: E402
 from .energy import moebius_energy, moebius_gradient  # noqa: E402
@@ -39,6 +40,11 @@ from .solvers import METHODS, Relaxation, check_size, make_run  # noqa: E402
 from .solvers.adaptive import default_max_edges  # noqa: E402
 from .solvers.base import IterationState, RelaxResult, Status, check_number  # noqa: E402
 from .solvers.penalty import DEFAULT_PENALTY_WEIGHT  # noqa: E402
+from .warmup import warm  # noqa: E402
+
+# every kernel module is imported now (open_energy too, which energy imports when first
+# needed): their kernels look in the cache shipped with the package as well
+use_shipped_cache(__name__)
 
 __all__ = [
     "DEFAULT_PENALTY_WEIGHT",
@@ -80,5 +86,6 @@ __all__ = [
     "suggest_edge_count",
     "table",
     "tangle",
+    "warm",
     "write_obj",
 ]

@@ -1,0 +1,94 @@
+"""Kernels compiled at build time and shipped with the package (the linux-x64 extension zip).
+
+numba's cache (``cache=True``) keys a compiled kernel on the content of its source file, its
+signature, the Python version and the CPU it was compiled for (LLVM's name of the host CPU and
+its feature list), so a cache built on one machine is found only on an identical one.
+``make extension`` therefore compiles the kernels for a generic CPU, :data:`GENERIC_CPU`
+(``NUMBA_CPU_NAME=x86-64-v3``, ``NUMBA_CPU_FEATURES=""``: AVX2 and FMA, every x86-64 CPU since
+2013-2015), runs :mod:`.warmup`, and ships the cache in :data:`SHIPPED`
+(mk/build_extension.py). Here each kernel's cache is given a second place to look: when the
+user's cache (numba's own lookup, for this CPU) has no entry, the shipped one for the generic
+CPU, if this CPU can run that code. Kernels compiled here (signatures the warm-up did not
+meet, another CPU) go to the user's cache as before; nothing is written to :data:`SHIPPED`.
+
+Kernels loaded from it are the generic CPU's code, which may differ in the last bits from
+code compiled for this CPU where a kernel allows fast-math reassociation (vector widths
+differ); docs/benchmarks.md ("Compile time") has the speed measured.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from numba.core import caching
+
+#: where the shipped cache lives, one directory per source directory of the package
+#: (``kernel_cache/core`` for ``core/*.py``)
+SHIPPED = Path(__file__).resolve().parent / "kernel_cache"
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+#: LLVM's name of the CPU the shipped kernels were compiled for
+GENERIC_CPU = "x86-64-v3"
+#: the x86-64-v3 feature set (x86-64 psABI levels v2 and v3) in LLVM's names
+_V3_FEATURES = ("cx16", "sahf", "popcnt", "sse3", "sse4.1", "sse4.2", "ssse3", "avx", "avx2",
+                "bmi", "bmi2", "f16c", "fma", "lzcnt", "movbe", "xsave")
+
+
+def host_runs_generic() -> bool:
+    """Whether this CPU runs code compiled for :data:`GENERIC_CPU`."""
+    import llvmlite.binding as ll
+
+    try:
+        features = ll.get_host_cpu_features()
+    except RuntimeError:  # LLVM cannot tell on this host
+        return False
+    return all(features.get(name, False) for name in _V3_FEATURES)
+
+
+class ShippedFunctionCache(caching.FunctionCache):
+    """numba's cache of one kernel, falling back to the shipped generic-CPU entry."""
+
+    def __init__(self, py_func, shipped: Path) -> None:
+        super().__init__(py_func)
+        self._shipped = caching.IndexDataCacheFile(
+            cache_path=str(shipped), filename_base=self._impl.filename_base,
+            source_stamp=self._impl.locator.get_source_stamp())
+
+    def _load_overload(self, sig, target_context):
+        data = super()._load_overload(sig, target_context)
+        if data is not None or not self._enabled:
+            return data
+        codegen = target_context.codegen()
+        triple = codegen.magic_tuple()[0]
+        key = self._index_key(sig, codegen)
+        data = self._shipped.load((key[0], (triple, GENERIC_CPU, ""), key[2]))
+        if data is None:
+            return None
+        return self._impl.rebuild(target_context, data)
+
+
+def use_shipped_cache(package: str) -> int:
+    """Give every cached kernel of the modules of ``package`` (``moebius_addon.core``, under
+    whatever name it was imported) already imported the shipped cache as a second place to look;
+    returns how many. Nothing when there is no shipped cache (a source checkout, the zips of
+    other platforms) or when this CPU cannot run its code."""
+    if not SHIPPED.is_dir() or not host_runs_generic():
+        return 0
+    from numba.core.dispatcher import Dispatcher
+
+    count = 0
+    for name, module in list(sys.modules.items()):
+        if module is None or not (name == package or name.startswith(package + ".")):
+            continue
+        for value in list(vars(module).values()):
+            if (not isinstance(value, Dispatcher) or value.py_func.__module__ != name
+                    or type(value._cache) is not caching.FunctionCache):
+                continue
+            source = Path(value.py_func.__code__.co_filename).resolve()
+            try:
+                shipped = SHIPPED / source.parent.relative_to(PACKAGE_ROOT)
+            except ValueError:  # not a file of this package
+                continue
+            value._cache = ShippedFunctionCache(value.py_func, shipped)
+            count += 1
+    return count

@@ -1,0 +1,114 @@
+"""Run the paths of a first session on small curves, so that numba compiles (or loads) their
+kernels: what ``make extension`` runs to build the cache it ships with the linux-x64 zip
+(mk/build_extension.py, docs/blender.md "Install"), and what ``python -m
+moebius_addon.core.warmup`` runs to fill numba's cache ahead of use.
+
+Each path does what the Blender layer does on that first contact: *Add Knot* (resample, start
+check, energy), the method *Automatic* chooses (the knot determinant), a few iterates, and the
+invariants compared at the end of a run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from . import knots
+from .energy import moebius_energy
+from .identify import identify
+from .invariants import knot_determinant
+from .polygon import check_polygon, contact_ratio, resample
+from .solvers import make_run
+
+
+def _relax(P, method: str, steps: int = 2, **options) -> None:
+    run = make_run(method, P, metric="hs", max_iter=steps, tol=0.0, target_lengths="keep",
+                   **options)
+    while run.step():
+        pass
+    run.result()
+
+
+def _knot(name: str, n: int, method: str = "projected_gradient_implicit") -> None:
+    """Add Knot + Relax of a knot: *Automatic* takes the implicit method (determinant > 1);
+    the explicit one for unknots and links."""
+    P = knots.named(name, n)
+    check_polygon(P)
+    moebius_energy(P)
+    knot_determinant(P)
+    _relax(P, method)
+    identify(P)
+
+
+def _exact() -> None:
+    _knot("3_1", 100)
+    _relax(knots.named("3_1", 100), "projected_gradient")  # unknots, links, and as chosen
+
+
+def _tree() -> None:
+    # from engine.AUTO_TREE_FROM edges on Automatic takes the tree; from barnes_hut.TREE_FROM
+    # (3 000) the energy shown by Add Knot and Convert is the tree's too
+    _knot("3_1", 3000)
+    _relax(knots.named("3_1", 3000), "projected_gradient")
+
+
+def _convert() -> None:
+    t = np.linspace(0.0, 2.0 * np.pi, 400, endpoint=False)
+    drawn = np.c_[np.sin(t) + 2 * np.sin(2 * t), np.cos(t) - 2 * np.cos(2 * t), -np.sin(3 * t)]
+    P = resample(drawn, 200)
+    check_polygon(P, coarseness=False)
+    contact_ratio(P)
+
+
+def _identify() -> None:
+    identify(knots.named("8_19", 200))
+
+
+def _open() -> None:
+    t = np.linspace(0.0, 1.0, 80)
+    P = resample(np.c_[np.cos(6 * t), np.sin(6 * t), 3 * t], 80, closed=False)
+    check_polygon(P, closed=False)
+    moebius_energy(P, closed=False)
+    _relax(P, "projected_gradient", closed=False)
+
+
+#: The paths, in the order a first session meets them.
+PATHS: dict[str, Callable[[], None]] = {
+    "exact": _exact,
+    "convert": _convert,
+    "identify": _identify,
+    "open": _open,
+    "tree": _tree,
+}
+
+
+def warm(paths=tuple(PATHS), say: Callable[[str], None] | None = print) -> dict[str, float]:
+    """Run ``paths`` (names of :data:`PATHS`); return the CPU seconds of each."""
+    seconds = {}
+    for name in paths:
+        t = time.process_time()
+        PATHS[name]()
+        seconds[name] = time.process_time() - t
+        if say is not None:
+            say(f"{name}: {seconds[name]:.1f} s CPU")
+    return seconds
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("paths", nargs="*", default=list(PATHS),
+                    help=f"which paths (default: all of {', '.join(PATHS)})")
+    args = ap.parse_args(argv)
+    unknown = [p for p in args.paths if p not in PATHS]
+    if unknown:
+        ap.error(f"unknown path(s) {', '.join(unknown)}; choose from {', '.join(PATHS)}")
+    warm(args.paths, lambda line: print(line, flush=True))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
