@@ -64,9 +64,11 @@ from .options import (
 from .polygons import energy
 from .relaxation import (
     ObjectRelaxation,
+    Preparation,
     choose_method,
     method_hint,
     relax_object,
+    solver_paths,
     solver_warm,
 )
 from .rest import apply_frame, clear_animation
@@ -81,5 +83,5 @@ __all__ = [
     "choose_method", "clear_animation", "convert_object", "edge_limit", "energy", "export_flow",
     "export_suffix", "knot_names", "knot_polygons", "make_curve_object", "method_hint",
     "prepare_conversion", "refresh_gradients", "relax_object", "relax_settings", "show_gradients",
-    "solver_warm",
+    "solver_warm", "Preparation", "solver_paths",
 ]

@@ -75,12 +75,14 @@ class MOEBIUS_OT_convert(bpy.types.Operator):
 PREPARE_NOTE_FROM = 1.0
 
 
-def _first_run_note(run) -> str:
-    if (not run.first_run or run.seconds_to_first is None
-            or run.seconds_to_first < PREPARE_NOTE_FROM):
+def _first_run_note(run, prep=None) -> str:
+    if not run.first_run or run.seconds_to_first is None:
         return ""
-    return (f"; first run in this session: {run.seconds_to_first:.1f} s to the first iterate, "
-            f"preparing the solver (later runs start at once)")
+    waited = run.seconds_to_first + (prep.seconds if prep is not None else 0.0)
+    if waited < PREPARE_NOTE_FROM:
+        return ""
+    return (f"; first run in this session: {waited:.1f} s to the first iterate, preparing the "
+            f"solver (later runs start at once)")
 
 
 #: Status bar text while the first run of a session prepares the solver (nothing moves then).
@@ -139,7 +141,8 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
                             f"({result.message}{hint})"
-                            f"; {run.type_message}{_first_run_note(run)}")
+                            f"; {run.type_message}"
+                            f"{_first_run_note(run, getattr(self, '_prep', None))}")
         if run.type_kept is False:  # never expected: the flow passes no strand through another
             self.report({"WARNING"}, run.type_message)
 
@@ -171,9 +174,12 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
                 return {"CANCELLED"}
             settings.live_energy = self._run.energy
         else:
-            # seconds without a visible change follow: the status bar says why first, and the
-            # run is set up at the first timer tick, after that text is drawn
+            # numba compiles (or loads) the kernels first: in a background thread, so that the
+            # window stays responsive and the status bar counts the seconds; the run is set up
+            # once that is done (a compile on the main thread froze the window for minutes)
             self._run = None
+            self._prep = api.Preparation(api.solver_paths(_active_curve(context),
+                                                          settings.engine))
             context.workspace.status_text_set(PREPARING)
         settings.running = True
         settings.progress = 0.0
@@ -210,7 +216,13 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
             return self._finish(context)
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
-        if self._run is None and not self._start(context):  # set up at the first tick
+        prep = getattr(self, "_prep", None)
+        if self._run is None and prep is not None and not prep.done:
+            compiled = f", {prep.kernels} kernels compiled" if prep.kernels else ""
+            context.workspace.status_text_set(
+                f"{PREPARING[:-2]}: {prep.seconds:.0f} s{compiled} — Esc cancels")
+            return {"RUNNING_MODAL"}
+        if self._run is None and not self._start(context):  # set up once prepared
             self._cleanup(context)
             return {"CANCELLED"}
         t0 = time.perf_counter()

@@ -64,6 +64,63 @@ def method_hint(method: str, result, polygons: Sequence[np.ndarray],
     return f"; knots settle in fewer iterations with Advanced ▸ Method: {label}"
 
 
+class Preparation:
+    """The kernels of a run prepared in a background thread (``core.warmup`` on small curves:
+    numba compiles them, or loads them from its cache), so that a window stays responsive
+    while a first run waits (the modal *Relax*). ``done``, ``seconds``, ``kernels`` (compiled
+    so far), ``error`` (an exception of the warm-up: the run itself will meet and report it)."""
+
+    def __init__(self, paths: Sequence[str]) -> None:
+        import threading
+
+        self.paths = tuple(paths)
+        self.t0 = time.perf_counter()
+        self.error: BaseException | None = None
+        self._watch = None
+        self._end: float | None = None
+        self._thread = threading.Thread(target=self._warm, name="moebius-prepare", daemon=True)
+        self._thread.start()
+
+    def _warm(self) -> None:
+        try:
+            with compiling() as self._watch:
+                core.warm(self.paths, say=None)
+        except Exception as err:  # noqa: BLE001 - reported by the run, which meets it again
+            self.error = err
+        finally:
+            self._end = time.perf_counter()
+
+    @property
+    def done(self) -> bool:
+        return not self._thread.is_alive()
+
+    @property
+    def kernels(self) -> int:
+        return self._watch.kernels if self._watch is not None else 0
+
+    @property
+    def seconds(self) -> float:
+        """Seconds since the start, until done."""
+        return (self._end or time.perf_counter()) - self.t0
+
+    def wait(self, timeout: float | None = None) -> bool:
+        self._thread.join(timeout)
+        return self.done
+
+
+def solver_paths(obj: bpy.types.Object, engine: str = DEFAULT_ENGINE) -> list[str]:
+    """The paths of ``core.warmup`` a run on ``obj`` meets first: ``"open"`` for an open curve,
+    ``"tree"`` where the tree engine runs (``engine``, or from ``core.engine.AUTO_TREE_FROM``
+    points on with ``"auto"``), else ``"exact"``."""
+    splines = obj.data.splines
+    if not all(sp.use_cyclic_u for sp in splines):
+        return ["open"]
+    n = sum(len(sp.points) for sp in splines)
+    if engine == "tree" or (engine == "auto" and n >= core.engine.AUTO_TREE_FROM):
+        return ["tree"]
+    return ["exact"]
+
+
 def solver_warm() -> bool:
     """Whether a relaxation has reached its first iterate in this session, so that the
     numerical kernels are ready (False: the next run prepares them first, see

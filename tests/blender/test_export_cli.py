@@ -107,15 +107,31 @@ def test_cli_command(scene, mb, tmp_path, capfd):
     cli = import_module(mb.__name__ + ".cli")
     assert cli._handle is not None  # registered with bpy.utils.register_cli_command
     blend, abc = tmp_path / "knot.blend", tmp_path / "knot.abc"
+    bpy.ops.mesh.primitive_cube_add()  # the scene the command starts in is not saved
+    capfd.readouterr()
     rc = cli.main(["--knot", "3_1", "--edges", "60", "--max-iterations", "3",
                    "--save", str(blend), "--export", str(abc)])
     assert rc == 0 and blend.stat().st_size > 0 and abc.stat().st_size > 0
+    out = capfd.readouterr().out
+    # the keyed frames (was the scene's range, "frames 1-250"), no line per iterate by default
+    assert "3 iterations" in out and "keyed frames 1-4 (" in out and "iteration 1/" not in out
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    assert [o.name for o in bpy.data.objects] == ["Knot 3_1"]  # no Cube, Camera or Light
     bpy.ops.wm.read_homefile(use_empty=True)
-    rc = cli.main(["--open", str(blend), "--object", "Knot 3_1", "--max-iterations", "2",
-                   "--frame-start", "5", "--save", str(blend)])
+    # both spellings of the limit; a line per iterate with --verbose
+    rc = cli.main(["--open", str(blend), "--object", "Knot 3_1", "--max-iter", "2",
+                   "--frame-start", "5", "--save", str(blend), "--verbose"])
     assert rc == 0
+    out = capfd.readouterr().out
+    assert "moebius: 'Knot 3_1' iteration 1/2, energy" in out and "iteration 2/2" in out
+    assert "keyed frames 5-7 (maximum number of iterations (2) reached)" in out
     bpy.ops.wm.open_mainfile(filepath=str(blend))
     assert mb.keyed_frames(bpy.data.objects["Knot 3_1"]) == [5.0, 6.0, 7.0]
+    assert cli.main(["--knot", "3_1", "--edges", "60", "--max-iterations", "1", "--quiet"]) == 0
+    assert "moebius" not in capfd.readouterr().out
+    assert cli.main(["--help"]) == 0
+    out = " ".join(capfd.readouterr().out.split())
+    assert "(default 200)" in out and "(default 1e-06)" in out and "--verbose" in out
     assert bpy.context.scene.frame_start <= 5 and bpy.context.scene.frame_end >= 7
     assert cli.main(["--object", "Nope"]) == 1
     assert cli.main(["--knot", "no_such_knot"]) == 1

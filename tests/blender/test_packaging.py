@@ -95,3 +95,39 @@ def test_a_new_session_runs_on_the_numba_the_extension_ships(mb):
         version, path = found[name]
         assert version == pinned[name] and path.startswith(found["wheels"]), (name, found)
     assert not found["numpy"][1].startswith(found["wheels"]), found
+
+
+@pytest.mark.lines
+def test_a_first_session_loads_the_kernels_the_zip_ships(extension_zip, tmp_path):
+    # docs/blender.md's module route in a new user directory, as right after installing:
+    # install the zip, Add Knot + Relax with progress. The linux-x64 zip of `make test` carries
+    # the kernels compiled for a generic x86-64 CPU (mk/build_extension.py): none compiles here.
+    tag = f".py{PYTHON.replace('.', '')}."
+    with zipfile.ZipFile(extension_zip) as z:
+        if not any(n.startswith("core/kernel_cache/") and tag in n for n in z.namelist()):
+            pytest.skip(f"the zip carries no kernel cache for Python {PYTHON} (`make test` "
+                        "builds one)")
+    code = (
+        "import bpy, json\n"
+        f"bpy.ops.extensions.package_install_files(filepath={str(extension_zip)!r}, "
+        "repo='user_default', enable_on_install=True)\n"
+        f"from {EXT_MODULE} import blender as moebius\n"
+        f"from {EXT_MODULE}.core import _shipped_cache, compiling\n"
+        "lines = []\n"
+        "with compiling.compiling() as watch:\n"
+        "    knot = moebius.add_knot('3_1', 100)\n"
+        "    result = moebius.relax_object(knot, max_iterations=2, tol=0.0,"
+        " progress=lines.append)\n"
+        "print(json.dumps(dict(kernels=watch.kernels, lines=lines, nit=result.nit,"
+        " generic=_shipped_cache.host_runs_generic())))\n"
+    )
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path))
+    env.pop("NUMBA_CACHE_DIR", None)  # set in this process by the extension installed here
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                          timeout=900)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    found = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert found["nit"] == 2 and found["lines"][0].startswith("'Knot 3_1' iteration 1/2, energy")
+    if not found["generic"]:
+        pytest.skip("this CPU cannot run the shipped x86-64-v3 code: the kernels compiled")
+    assert found["kernels"] == 0

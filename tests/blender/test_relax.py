@@ -211,6 +211,7 @@ def test_iteration_limit_report_suggests_the_implicit_method_for_knots(scene, mb
     out, _ = capfd.readouterr()
     assert ("(maximum number of iterations (3) reached; knots settle in fewer iterations with "
             "Advanced ▸ Method: Implicit Gradient)") in out
+    assert "Info: " in out and "Warning" not in out  # the limit set is an ordinary end
     scene.moebius.method = "projected_gradient_implicit"
     bpy.ops.moebius.relax()
     out, _ = capfd.readouterr()
@@ -358,3 +359,15 @@ def test_first_run_of_a_session_says_it_prepares_the_solver(scene, mb, trefoil, 
     assert mb.api.solver_warm()
     bpy.ops.moebius.relax()
     assert "first run" not in capfd.readouterr().out
+
+
+def test_the_kernels_are_prepared_in_the_background(scene, mb, trefoil):
+    # what the modal Relax waits on, in a thread, when a session's first run starts (the window
+    # stays responsive while numba compiles or loads the kernels)
+    assert mb.api.solver_paths(trefoil) == ["exact"]
+    assert mb.api.solver_paths(trefoil, "tree") == ["tree"]
+    trefoil.data.splines[0].use_cyclic_u = False
+    assert mb.api.solver_paths(trefoil) == ["open"]
+    prep = mb.api.Preparation(["exact"])
+    assert prep.wait(600) and prep.error is None and prep.done
+    assert prep.kernels >= 0 and 0 < prep.seconds == prep.seconds  # stops counting when done
