@@ -14,6 +14,7 @@ prefer_stable_layer()  # before any parallel kernel runs: numba settles on a lay
 from . import invariants, knots, open_energy, pd, table, tangle  # noqa: E402, F401
 from ._shipped_cache import use_shipped_cache  # noqa: E402
 from .collision import max_collision_free_step  # noqa: E402
+from .compiling import compiling  # noqa: E402
 from .constraints import Constraints  # noqa: E402
 from .energy import moebius_energy, moebius_gradient  # noqa: E402
 from .engine import ENGINES  # noqa: E402
@@ -62,6 +63,7 @@ __all__ = [
     "check_number",
     "check_polygon",
     "check_size",
+    "compiling",
     "contact_ratio",
     "default_max_edges",
     "gram_matrix",
