@@ -175,6 +175,12 @@ def build_kernel_cache(stage_dir: Path, pythons: dict[str, str]) -> None:
     for version, proc in procs:
         if proc.wait():
             sys.exit(f"the kernel cache could not be built with Python {version}")
+    ship_kernel_cache(work, stage_dir)
+
+
+def ship_kernel_cache(work: Path, stage_dir: Path) -> None:
+    """Copy numba's cache in ``work`` (made from the staged package) into its
+    ``core/kernel_cache``, one directory per source directory."""
     # numba names each source directory's cache <dir>_<sha1 of its absolute path>
     shipped = stage_dir / "core" / "kernel_cache"
     for source in sorted({p.parent for p in stage_dir.rglob("*.py")}):
@@ -182,6 +188,8 @@ def build_kernel_cache(stage_dir: Path, pythons: dict[str, str]) -> None:
         if (work / name).is_dir():
             shutil.copytree(work / name, shipped / source.relative_to(stage_dir),
                             dirs_exist_ok=True)
+    # the name the kernels' modules had here, which the loader renames (core/_shipped_cache.py)
+    (shipped / "package.txt").write_text(stage_dir.name + "\n")
     size = sum(f.stat().st_size for f in shipped.rglob("*") if f.is_file())
     print(f"kernel cache: {len(list(shipped.rglob('*.nbc')))} kernels, {size / 1e6:.1f} MB",
           flush=True)

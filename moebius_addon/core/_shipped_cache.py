@@ -18,6 +18,8 @@ differ); docs/benchmarks.md ("Compile time") has the speed measured.
 
 from __future__ import annotations
 
+import io
+import pickle
 import sys
 from pathlib import Path
 
@@ -45,14 +47,51 @@ def host_runs_generic() -> bool:
     return all(features.get(name, False) for name in _V3_FEATURES)
 
 
+#: the file in :data:`SHIPPED` naming the package as the build imported it
+PACKAGE_FILE = "package.txt"
+
+
+class _Renaming(pickle.Unpickler):
+    """Unpickles a cache entry made where the package had another name (the build's staging
+    package): numba stores the module of each kernel by name (its globals are rebuilt from it,
+    ``numba.core.environment._rebuild_env``); here the package is ``bl_ext.<repo>.…``."""
+
+    def __init__(self, data: bytes, old: str, new: str) -> None:
+        super().__init__(io.BytesIO(data))
+        self._old, self._new = old, new
+
+    def _rename(self, module: str) -> str:
+        if module == self._old or module.startswith(self._old + "."):
+            return self._new + module[len(self._old):]
+        return module
+
+    def find_class(self, module: str, name: str):
+        found = super().find_class(self._rename(module), name)
+        if (module, name) == ("numba.core.environment", "_rebuild_env"):
+            return lambda modname, *rest: found(self._rename(modname), *rest)
+        return found
+
+
+class _ShippedFile(caching.IndexDataCacheFile):
+    """The shipped index and data files of one kernel, read only, the package renamed."""
+
+    def __init__(self, cache_path: str, filename_base: str, source_stamp, old: str,
+                 new: str) -> None:
+        super().__init__(cache_path, filename_base, source_stamp)
+        self._old, self._new = old, new
+
+    def _load_data(self, name):
+        with open(self._data_path(name), "rb") as f:
+            return _Renaming(f.read(), self._old, self._new).load()
+
+
 class ShippedFunctionCache(caching.FunctionCache):
     """numba's cache of one kernel, falling back to the shipped generic-CPU entry."""
 
-    def __init__(self, py_func, shipped: Path) -> None:
+    def __init__(self, py_func, shipped: Path, old: str, new: str) -> None:
         super().__init__(py_func)
-        self._shipped = caching.IndexDataCacheFile(
-            cache_path=str(shipped), filename_base=self._impl.filename_base,
-            source_stamp=self._impl.locator.get_source_stamp())
+        self._shipped = _ShippedFile(str(shipped), self._impl.filename_base,
+                                     self._impl.locator.get_source_stamp(), old, new)
 
     def _load_overload(self, sig, target_context):
         data = super()._load_overload(sig, target_context)
@@ -72,9 +111,12 @@ def use_shipped_cache(package: str) -> int:
     whatever name it was imported) already imported the shipped cache as a second place to look;
     returns how many. Nothing when there is no shipped cache (a source checkout, the zips of
     other platforms) or when this CPU cannot run its code."""
-    if not SHIPPED.is_dir() or not host_runs_generic():
+    if not (SHIPPED / PACKAGE_FILE).is_file() or not host_runs_generic():
         return 0
     from numba.core.dispatcher import Dispatcher
+
+    built_as = (SHIPPED / PACKAGE_FILE).read_text().strip()
+    top = package.rsplit(".", 1)[0]  # the package holding core (renamed by Blender)
 
     count = 0
     for name, module in list(sys.modules.items()):
@@ -89,6 +131,6 @@ def use_shipped_cache(package: str) -> int:
                 shipped = SHIPPED / source.parent.relative_to(PACKAGE_ROOT)
             except ValueError:  # not a file of this package
                 continue
-            value._cache = ShippedFunctionCache(value.py_func, shipped)
+            value._cache = ShippedFunctionCache(value.py_func, shipped, built_as, top)
             count += 1
     return count
