@@ -100,6 +100,8 @@ def session(zip_path: str | None, path: str) -> dict:
             point.co = (math.cos(6 * a), math.sin(6 * a), 3 * a, 1.0)
         obj = bpy.data.objects.new("Cable", curve)
         bpy.context.collection.objects.link(obj)
+        for other in bpy.context.selected_objects:  # the startup file's Cube
+            other.select_set(False)
         bpy.context.view_layer.objects.active = obj
         obj.select_set(True)
         s = bpy.context.scene.moebius

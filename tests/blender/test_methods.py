@@ -187,7 +187,8 @@ def test_cli_method_and_penalty(scene, mb):
     cli = import_module(mb.__name__ + ".cli")
     rc = cli.main(["--knot", "3_1", "--edges", "100", "--method", "lbfgs", "--penalty", "1e5",
                    "--max-iterations", "2", "--tolerance", "0"])
-    assert rc == 0 and scene.moebius.last_method == "lbfgs"
+    # the command starts from a new empty scene: the fixture's scene is gone
+    assert rc == 0 and bpy.context.scene.moebius.last_method == "lbfgs"
     assert mb.keyed_frames(bpy.data.objects["Knot 3_1"]) == [1.0, 2.0, 3.0]
     before = scene_state()
     assert cli.main(["--knot", "3_1", "--penalty", "1e5"]) == 1  # default method: no penalty
