@@ -27,6 +27,7 @@ from moebius_addon import core  # noqa: E402
 
 CURVES = ROOT / "docs" / "data" / "energy_table_curves.npz"
 TABLE = ROOT / "docs" / "data" / "energy_table.csv"
+TORUS = {"3_1": (2, 3), "5_1": (2, 5), "7_1": (2, 7), "8_19": (3, 4), "10_124": (3, 5)}
 
 
 def main() -> None:
@@ -36,6 +37,9 @@ def main() -> None:
     ap.add_argument("--seeds", nargs="*", type=int, default=[0, 1])
     ap.add_argument("--scale", type=float, default=None, help="restart_scale (edge lengths)")
     ap.add_argument("--max-iter", type=int, default=3000)
+    ap.add_argument("--torus", action="store_true",
+                    help="start from the symmetric torus_knot(p, q) curve at n2 edges instead "
+                         "of the table's relaxed one (8_19 = T(3,4), 10_124 = T(3,5))")
     args = ap.parse_args()
     with open(TABLE) as f:
         rows = {r["name"]: r for r in csv.DictReader(f)}
@@ -44,6 +48,9 @@ def main() -> None:
     for name in args.names:
         P = packed[name].astype(np.float64)
         P = core.resample(P, len(P))
+        if args.torus:
+            p, q = TORUS[name]
+            P = core.knots.torus_knot(p, q, len(P))
         opts = {"method": "projected_gradient_implicit", "tol": 1e-4, "max_iter": args.max_iter}
         t = time.process_time()
         base = core.relax(P, **opts)
