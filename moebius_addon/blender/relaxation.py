@@ -52,6 +52,11 @@ def check_converted(obj: bpy.types.Object, polygons: Sequence[np.ndarray],
             continue
         ratio = float(e.max() / e.min())
         if ratio - 1.0 > EQUAL_EDGES:
+            try:  # a curve through itself hears that first: converting would not help
+                core.check_polygon(as_input(polygons), coarseness=False,
+                                   closed=closed[0] if len(closed) == 1 else list(closed))
+            except ValueError as err:
+                raise ValueError(f"'{obj.name}': {err}") from None
             where = f"'{obj.name}'" + (f" (component {k + 1})" if len(polygons) > 1 else "")
             raise ValueError(
                 f"{where} was not converted: its edges differ in length (the longest is "

@@ -243,9 +243,10 @@ class TreeEngine(DenseEngine):
     name = "tree"
     _frame = None  # the last frame and the polygon it was built at
     _saddle = None  # the solver of the current iterate (BandedSaddle or HsSaddle)
-    #: Peak memory of a run per vertex, with room: measured 6.1–7.4 kB (the explicit method,
-    #: hs and h2, 7_2 at 20 000, 50 000 and 100 000 vertices; bench figures in docs/api.md).
-    BYTES_PER_VERTEX = 12_000
+    #: Peak memory of a run per vertex: measured 5.3–7.4 kB over its first steps (7_2 at
+    #: 20 000, 50 000 and 100 000 vertices, hs and h2, explicit and implicit; docs/api.md),
+    #: 5.5 kB for the whole process at 10⁶ (docs/benchmarks.md).
+    BYTES_PER_VERTEX = 8_000
 
     @classmethod
     def check_size(cls, n: int) -> None:
