@@ -189,12 +189,21 @@ def notation_polygons(text: str, n: int | None = None, *, metric: str = "hs",
                       method: str = DEFAULT_METHOD, engine: str = DEFAULT_ENGINE) -> list:
     """Polygons of a knot or link typed as a braid word or PD code
     (``core.knots.from_notation``), equilateral and checked like :func:`knot_polygons`."""
-    from ..core import knots, notation
+    from ..core import knots, notation, pd
 
     if not str(text).strip():
         raise ValueError("type a braid word (1 -2 1 -2) or a PD code "
                          "([[1,5,2,4],[3,1,4,6],[5,3,6,2]]) first")
     kind, value = notation.parse_notation(text)
+    if kind == "pd" and pd.simplify(value).crossings == 0:
+        # PD[X[1,1,2,2]] was added as "Knot PD code of 1 crossings", a plain circle
+        k = len(value.components()) + value.loops
+        what = "the unknot" if k == 1 else f"an unlink of {k} components"
+        raise ValueError(
+            f"this PD code of {value.crossings} crossing{'' if value.crossings == 1 else 's'} "
+            f"is {what}: kinks and bigons (Reidemeister I and II moves) remove every crossing, "
+            f"and the drawing would be {'a plain circle' if k == 1 else 'plain circles'}; "
+            f"check the code, or add the unknot (0_1) to relax a circle")
     if n:
         check_edge_count(n, metric, method, engine)
     elif kind == "braid":  # its default count, before any work ("99 -99": 106 810 edges)

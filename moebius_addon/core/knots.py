@@ -339,14 +339,6 @@ def from_pd(code, n: int | None = None) -> Curve:
         d = code
     else:
         d = pd.from_rows(code)
-    if pd.simplify(d).crossings == 0:  # PD[X[1,1,2,2]] was drawn as a "1-crossing knot"
-        k = len(d.components()) + d.loops
-        what = "the unknot" if k == 1 else f"an unlink of {k} components"
-        raise ValueError(
-            f"this PD code of {d.crossings} crossing{'' if d.crossings == 1 else 's'} is "
-            f"{what}: kinks and bigons (Reidemeister I and II moves) remove every crossing, "
-            f"and the drawing would be {'a plain circle' if k == 1 else 'plain circles'}; "
-            f"check the code, or add the unknot (0_1) to relax a circle")
     curves = drawing.diagram_curves(d)
     if n is None:
         # searched upward from a guess above the dense drawing's own count: from a few

@@ -14,9 +14,11 @@ Möbius tab (a click on it), and then with xdotool mouse clicks on the buttons:
 
 Buttons are found from the panel as drawn: for one frame the harness paints operator buttons
 in a marker colour (theme ``wcol_tool.inner``), a screenshot is taken, the colour restored,
-and the marked rectangles are read off in panel order (Relax is the tall one on top, Convert the
-next full-width one, Apply | Clear the row of two). The scene checks run inside Blender
-(``harness.py``); the driver only clicks, types, screenshots and compares pixels.
+and each marked rectangle is told by what Ctrl+C over it copies (an operator button's Python
+command, ``bpy.ops.moebius.relax(append=False)``), scrolling the sidebar when a button is out
+of view: no order or size of the panel's buttons is assumed. The scene checks run inside
+Blender (``harness.py``); the driver only moves the mouse, clicks, types, screenshots and
+compares pixels.
 
 Everything lands in ``out/ui/``: numbered screenshots, ``report.json`` (every check, timings),
 ``blender.log``. Exit status 0 when every check passed.
@@ -463,7 +465,7 @@ class Scenario:
         s.move(x, y)
         s.xdo("click", "--repeat", str(abs(clicks)), "--delay", "30", "5" if clicks > 0 else "4")
         s.move(*centre(s.region_box("VIEW_3D", "WINDOW")))
-        s.settle(quiet=0.6)
+        s.settle()
 
     def buttons(self, tag: str, wanted: tuple[str, ...]) -> dict:
         """Find the ``wanted`` buttons (keys of :data:`BUTTONS`) in the sidebar as a person
@@ -477,6 +479,7 @@ class Scenario:
         self.scroll_sidebar(-40)  # from the top
         found: dict = {}
         seen: list = []
+        identified: list = []  # every page's, for the report
         for page in range(6):
             img = self.marked_screenshot("user_interface.wcol_tool.inner", f"{tag}-{page}")
             boxes = [box for row in marked_buttons(img, panel) for box in row]
@@ -487,6 +490,7 @@ class Scenario:
                     continue
                 command = self.identify(box)
                 seen.append((box, command))
+                identified.append([page, list(box), command])
                 name = BUTTONS.get(command)
                 if name is not None and name not in found:
                     found[name] = box
@@ -494,14 +498,14 @@ class Scenario:
             if all(w in found for w in wanted):
                 break
             self.scroll_sidebar(8)
-            seen.clear()  # the same boxes hold other buttons now
+            seen.clear()  # the same boxes hold other buttons now,
+            found.clear()  # and those found are elsewhere: the wanted ones on one page
         self.report.setdefault("buttons", {})[tag] = {
-            "found": {k: list(v) for k, v in found.items()},
-            "identified": [[list(b), c] for b, c in seen]}
+            "found": {k: list(v) for k, v in found.items()}, "identified": identified}
         missing = [w for w in wanted if w not in found]
         if missing:
             raise UITestError(f"buttons not found in the sidebar: {missing} (identified: "
-                              f"{[c for _, c in seen]})")
+                              f"{[c for *_, c in identified]})")
         return found
 
     def run(self) -> None:
@@ -613,7 +617,9 @@ class Scenario:
         s.wait_for("the second run to finish", lambda st: not st.get("running"), timeout=900,
                    interval=0.5)
         t["full_run_s"] = time.monotonic() - t1
+        s.settle()
         self.scroll_sidebar(-40)  # the panel from its top, for the picture
+        s.settle(quiet=2.0)
         s.screenshot("08-finished")
         res = s.command("check_run", cancelled=False)
         self.report["full_run"] = res
