@@ -120,7 +120,9 @@ def torus_knot(p: int, q: int, n: int | None = None, R: float = 2.0, r: float = 
         rho = R + r * np.cos(psi)
         # -sin: with +sin the knot would be the negative one (the mirror of the braid σ1³).
         curves.append(np.stack([rho * np.cos(phi), rho * np.sin(phi), -r * np.sin(psi)], axis=1))
-    return _finish(curves, n, fine=True)
+    sign = 1 if p * q > 0 else -1  # T(p, q): the closure of (σ1 … σ_{|p|-1})^|q|, mirrored
+    return _finish(curves, n, diagram=lambda: pd.from_braid(
+        [sign * k for k in range(1, abs(p))] * abs(q), abs(p)))
 
 
 def figure_eight(n: int = 200) -> np.ndarray:
@@ -131,7 +133,7 @@ def figure_eight(n: int = 200) -> np.ndarray:
     t = 2.0 * np.pi * np.arange(m) / m
     rho = 2.0 + np.cos(2.0 * t)
     return _finish([np.stack([rho * np.cos(3 * t), rho * np.sin(3 * t), np.sin(4 * t)], axis=1)],
-                   n, fine=True)
+                   n, diagram=lambda: pd.from_braid(table.entry("4_1").braid))
 
 
 # --------------------------------------------------------------------------------------------
@@ -184,7 +186,7 @@ def braid_closure(word: Sequence[int], n: int | None = None, strands: int | None
     if n is None:
         n = _braid_default_n(curves)
     n = _check_n(n, len(curves))
-    return _finish(curves, n, fine=True)
+    return _finish(curves, n, diagram=lambda: pd.from_braid(word, strands))
 
 
 def braid_edges(word: Sequence[int], strands: int | None = None) -> int:
@@ -355,7 +357,7 @@ def from_pd(code, n: int | None = None) -> Curve:
                 break
             base = k
         n = max(100, 10 * math.ceil(PD_EDGE_FACTOR * base / 10))
-    P = _finish(curves, _check_n(n, len(curves)), fine=True)
+    P = _finish(curves, _check_n(n, len(curves)), diagram=lambda: d)
     drawing.check_same(d, P)
     return P
 
@@ -511,16 +513,19 @@ def _split(n: int, lengths: list[float]) -> list[int]:
     return counts.tolist()
 
 
-def _finish(curves: list[np.ndarray], n: int, fine: bool = False) -> Curve:
+def _finish(curves: list[np.ndarray], n: int, diagram=None) -> Curve:
     """Resample dense closed curves to ``n`` vertices in all, centre, scale into the unit ball.
 
     Fewer than ``MIN_CHECKED_VERTICES`` per component are refused, naming a count that passes
     the start check: below it the check has no vertex pair to compare, and the polygon need not
     have the curve's knot type (T(2, 3) at 5, 6 and 7 vertices passed it as unknots, checked
-    with topoly; a coarse polygon of a tangled unknot could as well be knotted). With ``fine``
-    (the generators of a knot type: braids, torus knots, PD codes) a polygon that fails the
-    start check's coarseness test is refused too, naming the count that passes: 4_1 at 9
-    vertices came out as the trefoil m3_1, 5_2 at 9 to 18 as an unknot, a trefoil or 4_1."""
+    with topoly; a coarse polygon of a tangled unknot could as well be knotted). With
+    ``diagram`` (a function returning the :class:`.pd.PlanarDiagram` the curve draws: braids,
+    torus knots, PD codes) a polygon that fails the start check's coarseness test is compared
+    with it, and refused unless it has the diagram's Jones polynomial (Alexander's when that
+    is too costly), naming the count that passes the start check: 4_1 at 9 vertices came out
+    as the trefoil m3_1, 5_2 at 9 to 18 as an unknot, a trefoil or 4_1. A coarse polygon of
+    the right knot stays (``relax`` refines it: 3_1 at 24, where 27 passes)."""
     counts = [n] if len(curves) == 1 else _split(n, [_length(c) for c in curves])
     if min(counts) < MIN_CHECKED_VERTICES:
         k = suggest_edge_count(curves[0] if len(curves) == 1 else curves,
@@ -531,17 +536,29 @@ def _finish(curves: list[np.ndarray], n: int, fine: bool = False) -> Curve:
             f"polygon may not have the curve's knot type; use n >= {k or MIN_CHECKED_VERTICES}"
         )
     polys = resample(curves, counts, closed=True)
-    if fine and contact_ratio(polys[0] if len(polys) == 1 else polys) < CONTACT_RATIO:
+    if diagram is not None and contact_ratio(polys[0] if len(polys) == 1 else polys
+                                             ) < CONTACT_RATIO and not _draws(diagram(), polys):
         k = suggest_edge_count(curves[0] if len(curves) == 1 else curves, start=n + 1)
         raise ValueError(
             f"n = {n} is too coarse for this curve: strands far apart along it come closer "
-            f"than one edge length, and the polygon need not have the curve's knot type; "
-            + (f"use n >= {k}" if k is not None else "use many more vertices"))
+            f"than one edge length, and its polygon is not the curve's knot (a chord cuts "
+            f"across another strand); " + (f"use n >= {k}" if k is not None else
+                                           "use many more vertices"))
     allv = np.concatenate(polys)
     centre = allv.mean(axis=0)
     scale = np.linalg.norm(allv - centre, axis=1).max()
     polys = [(P - centre) / scale for P in polys]
     return polys[0] if len(polys) == 1 else polys
+
+
+def _draws(d: pd.PlanarDiagram, polys: list[np.ndarray]) -> bool:
+    """Whether the polygons have the invariants of ``d`` (:func:`.drawing.check_same`); False
+    for polygons that touch themselves or cannot be read."""
+    try:
+        drawing.check_same(d, polys[0] if len(polys) == 1 else polys)
+    except (RuntimeError, ValueError):
+        return False
+    return True
 
 
 def _cyl(rho, phi, z) -> np.ndarray:

@@ -38,9 +38,10 @@ _MAX_TRIAL_RESIDUAL = 0.12
 # more than the energy can still move is rejected without the last Newton steps (FHW at 1648
 # edges: half the back-projections belong to rejected trials, about 6 steps each).
 _EARLY = 1e-5
-# Smallest back-projection tolerance taken: the residuals are log edge lengths computed from
-# float64 coordinates; the FHW unknot at 600 edges stalled at once with 3e-15 and ran with 1e-14
-# (Blender's Back-projection Digits go up to 14 as well).
+# Smallest back-projection tolerance taken at all (a run also raises it to its own rounding,
+# below): the residuals are log edge lengths computed from float64 coordinates; before that
+# floor the FHW unknot at 600 edges stalled at once with 3e-15 and ran with 1e-14, and
+# 1e-300 ran into a reported jam (Blender's Back-projection Digits go up to 14 as well).
 MIN_BACKPROJECT_TOL = 1e-14
 
 
