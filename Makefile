@@ -20,13 +20,15 @@ $(STAMP): pyproject.toml
 include mk/lines.mk
 
 # CI runs this (via .ci/run): the whole suite except runs marked slow on Blender 5.0 (.venv),
-# then the Blender tests marked `lines` on Blender 4.2, 4.5 and 5.2 (mk/lines.mk). Every part
-# runs even when one before it failed; the status is the worst.
+# then the Blender tests marked `lines` on Blender 4.2, 4.5 and 5.2 (mk/lines.mk), then the
+# add-on in a real Blender window (mk/ui.mk: Debian's Blender 3.4 under Xvfb, the packages
+# installed with apt-get when missing). Every part runs even when one before it failed; the
+# status is the worst.
 test: $(STAMP) $(TEST_REPO)/index.json $(LINE_STAMPS)
 	@status=0; t=$$(date +%s); \
 	MOEBIUS_TEST_REPO=$(TEST_REPO) $(PY) -m pytest -q -m "not slow" || status=1; \
 	echo "[time] whole suite, Blender 5.0: $$(( $$(date +%s) - t )) s"; \
-	$(RUN_LINES); exit $$status
+	$(RUN_LINES); $(RUN_UI); exit $$status
 
 test-all: $(STAMP) $(TEST_REPO)/index.json
 	MOEBIUS_TEST_REPO=$(TEST_REPO) $(PY) -m pytest -q

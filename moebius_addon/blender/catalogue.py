@@ -47,7 +47,8 @@ def check_knot(kind: str, n: int | None = None, metric: str = "hs",
     from ..core import table
 
     if kind not in _SPECIAL and table.lookup(kind) is None:
-        near = [name for name, _ in search_knots(kind, 8)]
+        near = [name for name, _ in search_knots(kind, 8)] or table.close_matches(
+            kind, extra=tuple(_SPECIAL))
         hint = (f"did you mean {', '.join(near)}?" if near else
                 "names look like 3_1, 10_161, 12n_888, L6a4{0,0}, 'trefoil', 'Borromean "
                 "rings', or fhw, helix, random, torus, circle")
@@ -153,8 +154,7 @@ def _place(name: str, polygons: list, size: float, location, context) -> bpy.typ
     scale = size / max(float(np.ptp(X, axis=0).max()), 1e-300)
     polygons = [(P - centre) * scale for P in polygons]
     obj = make_curve_object(name, polygons, context=context)
-    obj.location = location
-    obj.data.bevel_depth = 0.01 * size
+    obj.location = location  # the bevel: 1% of the size (make_curve_object's default)
     if len(polygons) > 1:
         colour_components(obj)
     return obj
@@ -189,14 +189,34 @@ def notation_polygons(text: str, n: int | None = None, *, metric: str = "hs",
                       method: str = DEFAULT_METHOD, engine: str = DEFAULT_ENGINE) -> list:
     """Polygons of a knot or link typed as a braid word or PD code
     (``core.knots.from_notation``), equilateral and checked like :func:`knot_polygons`."""
-    from ..core import knots
+    from ..core import knots, notation, pd
 
     if not str(text).strip():
         raise ValueError("type a braid word (1 -2 1 -2) or a PD code "
                          "([[1,5,2,4],[3,1,4,6],[5,3,6,2]]) first")
+    kind, value = notation.parse_notation(text)
+    if kind == "pd" and pd.simplify(value).crossings == 0:
+        # PD[X[1,1,2,2]] was added as "Knot PD code of 1 crossings", a plain circle
+        k = len(value.components()) + value.loops
+        what = "the unknot" if k == 1 else f"an unlink of {k} components"
+        raise ValueError(
+            f"this PD code of {value.crossings} crossing{'' if value.crossings == 1 else 's'} "
+            f"is {what}: kinks and bigons (Reidemeister I and II moves) remove every crossing, "
+            f"and the drawing would be {'a plain circle' if k == 1 else 'plain circles'}; "
+            f"check the code, or add the unknot (0_1) to relax a circle")
     if n:
         check_edge_count(n, metric, method, engine)
+    elif kind == "braid":  # its default count, before any work ("99 -99": 106 810 edges)
+        default = knots.braid_edges(*value)
+        try:
+            check_edge_count(default, metric, method, engine)
+        except ValueError as err:
+            raise ValueError(f"'{text}' takes {default} edges by default (3.3 per strand "
+                             f"spacing): {err}; give fewer edges (Edges in the Add from "
+                             f"Notation dialog) or type a braid word on fewer strands") from None
     link = as_link(knots.from_notation(text, n or None))
+    if not n:  # a PD code's default count comes from its drawing
+        check_edge_count(sum(len(p) for p in link), metric, method, engine)
     try:
         core.check_polygon(as_input(link))
     except ValueError as err:

@@ -19,9 +19,10 @@ from .polygons import as_input, energy
 from .progress import Progress, reporter
 from .rest import set_rest_shape
 
-# Coordinates at or beyond this are Blender's clamped infinities (single precision: ±3.4e38).
-_FLOAT_LIMIT = 1e38
 _SOURCE = "moebius_source"
+#: Bevel depth of a new curve whose source has none, as a share of its largest extent (Add
+#: Knot's 0.01 × its size).
+BEVEL_SHARE = 0.01
 
 
 class Prepared(list):
@@ -102,15 +103,7 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
             )
         closed = bool(closed or close_open)
         points = np.asarray(points, np.float64)
-        # Blender keeps points in single precision and stores an infinity typed in the UI as
-        # ±3.4e38 (its float limit): coordinates that large are infinite ones
-        bad = ~(np.abs(points) < _FLOAT_LIMIT).all(axis=1)
-        if bad.any():
-            raise ValueError(
-                f"{where} has NaN or infinite coordinates ({int(bad.sum())} of its "
-                f"{len(points)} points, the first at index {int(np.flatnonzero(bad)[0])}; "
-                "Blender shows an infinite one as ±3.4e38); fix or delete those points"
-            )
+        geometry.check_finite_points(points, where)
         points = _dedupe(points, closed=closed)
         if len(points) < 4:
             raise ValueError(
@@ -153,21 +146,27 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
         core.check_polygon(as_input(polygons), coarseness=False, closed=_closed_arg(flags))
     except ValueError as err:
         raise ValueError(f"'{obj.name}' after resampling to {counts} edges: {err}") from None
-    if core.contact_ratio(as_input(polygons), closed=_closed_arg(flags)
-                          ) < core.polygon.CONTACT_RATIO:
+    ratio = core.contact_ratio(as_input(polygons), closed=_closed_arg(flags))
+    if ratio < core.polygon.CONTACT_RATIO:
         limit = EDGE_LIMIT if allow_large else edge_limit(metric, method, engine)
         raise ValueError(f"'{obj.name}' is too coarse at {counts} edges for its shape: strands "
                          f"far apart along the curve come closer than one edge length, and the "
                          f"energy cannot keep them apart — "
-                         f"{_finer_conversion(cleaned, counts, edge_length, limit, flags)}")
+                         f"{_finer_conversion(cleaned, counts, edge_length, limit, flags, ratio)}")
     return Prepared(polygons, flags)
 
 
-def _finer_conversion(cleaned, counts, edge_length, limit: int, flags) -> str:
-    """The fix for a too coarse conversion, in the unit of the field the user set: the
-    smallest count per component (or the largest edge length) in 10% steps that passes the
-    contact check, or a plain advice when none does up to ``limit`` edges (what the run
-    takes)."""
+#: Finer conversions tried for the suggestion of a too coarse one (each a resampling): the
+#: search in 10% steps up to the limit took 6-19 s, a freeze on every wrong Edges value typed.
+SUGGEST_TRIALS = 4
+
+
+def _finer_conversion(cleaned, counts, edge_length, limit: int, flags, ratio: float) -> str:
+    """The fix for a too coarse conversion, in the unit of the field the user set: the first
+    count per component (or edge length) that passes the contact check, tried from the count
+    the contact ratio ``ratio`` suggests (it grows about in proportion to the edge count near
+    a contact, as ``core.suggest_edge_count`` assumes) in at most :data:`SUGGEST_TRIALS` steps
+    of 10%; else a plain advice (``limit``: the edges a run takes)."""
     def finer(factor):
         return [max(4, int(np.ceil(n * factor))) for n in counts]
 
@@ -177,18 +176,23 @@ def _finer_conversion(cleaned, counts, edge_length, limit: int, flags) -> str:
         return (core.contact_ratio(as_input(polygons), closed=_closed_arg(flags))
                 >= core.polygon.CONTACT_RATIO)
 
-    # the largest count first: a search in 10% steps up to the limit would take long for
-    # nothing when even that fails
     top = limit / sum(counts)
-    if top < 1.1 or not passes(finer(top)):
-        return f"move the strands apart; no conversion up to {limit} edges resolves them"
-    factor = 1.1
-    while factor < top and not passes(finer(factor)):
+    factor = max(1.1, 1.05 * core.polygon.CONTACT_RATIO / max(ratio, 1e-9))
+    for _ in range(SUGGEST_TRIALS):
+        if factor > top:
+            return (f"move the strands apart: by their closest approach they need about "
+                    f"{finer(factor)[0]} edges per component, more than the {limit} edges a "
+                    "run takes")
+        if passes(finer(factor)):
+            if edge_length is not None:
+                return f"use an edge length of at most {edge_length / factor:.4g}"
+            return f"use at least {finer(factor)[0]} edges per component (the Edges field)"
         factor *= 1.1
-    factor = min(factor, top)
+    factor /= 1.1
     if edge_length is not None:
-        return f"use an edge length of at most {edge_length / factor:.4g}"
-    return f"use at least {finer(factor)[0]} edges per component (the Edges field)"
+        return f"use an edge length well below {edge_length / factor:.4g} (still too coarse)"
+    return (f"use more than {finer(factor)[0]} edges per component (the Edges field; that "
+            "many were still too coarse)")
 
 
 def make_curve_object(name: str, polygons: Sequence[np.ndarray],
@@ -203,7 +207,10 @@ def make_curve_object(name: str, polygons: Sequence[np.ndarray],
     polygons : sequence of (n_i, 3) arrays
         Vertices in object coordinates.
     like : bpy.types.Object, optional
-        Object whose transform, collections and (for curves) bevel and materials are copied.
+        Object whose transform, collections and (for curves) materials are copied, and its
+        bevel when it has one; without one the curve gets a visible thickness of its own
+        (:data:`BEVEL_SHARE` of its largest extent, as *Add Knot* gives), else the first
+        render of a drawn curve or an imported mesh showed nothing.
     context : bpy.types.Context, optional
         Defaults to ``bpy.context``.
     closed : bool or sequence of bool, optional
@@ -218,11 +225,15 @@ def make_curve_object(name: str, polygons: Sequence[np.ndarray],
     if closed is None:
         closed = getattr(polygons, "closed", True)
     curve = geometry.new_curve(name, polygons, closed)
-    if like is not None and like.type == "CURVE":
-        src = like.data
+    src = like.data if like is not None and like.type == "CURVE" else None
+    if src is not None and src.bevel_depth > 0:
         curve.bevel_depth = src.bevel_depth
         curve.bevel_resolution = src.bevel_resolution
         curve.use_fill_caps = src.use_fill_caps
+    else:
+        X = np.concatenate(polygons)
+        curve.bevel_depth = BEVEL_SHARE * max(float(np.ptp(X, axis=0).max()), 1e-300)
+    if src is not None:
         for mat in src.materials:
             curve.materials.append(mat)
     obj = bpy.data.objects.new(name, curve)

@@ -19,6 +19,21 @@ from . import keyframes
 #: result is resampled to equal edges afterwards, so this only sets how faithfully the shape
 #: is followed.
 READ_RESOLUTION = 24
+#: Coordinates at or beyond this are infinite ones: Blender keeps points in single precision and
+#: stores an infinity typed in the UI as ±3.4e38 (its float limit), a finite number to numpy.
+FLOAT_LIMIT = 1e38
+
+
+def check_finite_points(points: np.ndarray, where: str) -> None:
+    """ValueError for NaN, infinite or clamped-infinite coordinates (:data:`FLOAT_LIMIT`):
+    ``where`` names the curve ("'Knot'", "'Knot' (component 2 of 3)")."""
+    bad = ~(np.abs(points) < FLOAT_LIMIT).all(axis=1)
+    if bad.any():
+        raise ValueError(
+            f"{where} has NaN or infinite coordinates ({int(bad.sum())} of its {len(points)} "
+            f"points, the first at index {int(np.flatnonzero(bad)[0])}; Blender shows an "
+            "infinite one as ±3.4e38); fix or delete those points"
+        )
 
 
 def _mesh_polylines(vertices: np.ndarray, edges: np.ndarray, name: str) -> list[tuple]:
@@ -207,8 +222,13 @@ def curve_polygons(obj: bpy.types.Object, allow_open: bool = False) -> list[np.n
     scene = bpy.context.scene
     mixed = keyframes.flow_shape_at(obj, scene.frame_current + scene.frame_subframe)
     if mixed is not None:  # a flow keyed as shape keys: what they show, not the points below
-        return np.split(mixed, np.cumsum([len(s.points) for s in splines])[:-1])
-    return [p for p, _ in _curve_polylines(obj)]
+        polygons = np.split(mixed, np.cumsum([len(s.points) for s in splines])[:-1])
+    else:
+        polygons = [p for p, _ in _curve_polylines(obj)]
+    for k, P in enumerate(polygons):  # ±3.4e38 read as "repeats a point" in the core
+        check_finite_points(P, f"'{obj.name}'" + (f" (component {k + 1} of {len(polygons)})"
+                                                  if len(polygons) > 1 else ""))
+    return polygons
 
 
 def write_polygons(curve: bpy.types.Curve, polygons: Sequence[np.ndarray]) -> None:

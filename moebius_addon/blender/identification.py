@@ -20,8 +20,6 @@ from .progress import Progress, reporter
 #: them, or "" when none has them.
 KNOT_TYPE_PROP = "moebius_knot_type"
 
-_FLOAT_LIMIT = 3.0e38  # Blender shows an infinity typed in the UI as ±3.4e38
-
 
 def object_curves(obj: bpy.types.Object) -> list[np.ndarray]:
     """The closed curves of a curve or edge-loop mesh object as shown (a converted curve at the
@@ -43,9 +41,7 @@ def object_curves(obj: bpy.types.Object) -> list[np.ndarray]:
             raise ValueError(f"{where} is an open curve, which has no knot type; close it "
                              "(Edit Mode: Alt+C, or F on the end vertices of a mesh)")
         points = np.asarray(points, np.float64)
-        if not (np.abs(points) < _FLOAT_LIMIT).all():
-            raise ValueError(f"{where} has NaN or infinite coordinates; fix or delete those "
-                             "points")
+        geometry.check_finite_points(points, where)
         keep = np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1) > 0
         points = points[keep]
         if len(points) < 4:

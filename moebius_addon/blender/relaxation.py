@@ -32,6 +32,36 @@ from .rest import rest_shape, set_rest_shape
 # numerical kernels (numba compiles them once per installation, later sessions load them from
 # its cache) before its first iterate; see docs/blender.md, Install, for the times measured.
 _SESSION = {"warm": False}
+#: Largest relative spread of edge lengths in a spline that Relax takes as converted when the
+#: add-on did not make the curve (Blender keeps points in single precision: a converted
+#: curve's edges agree to about 1e-7).
+EQUAL_EDGES = 1e-3
+
+
+def check_converted(obj: bpy.types.Object, polygons: Sequence[np.ndarray],
+                    closed: Sequence[bool]) -> None:
+    """ValueError for a poly curve that was never converted: one whose splines have edges of
+    unequal length (beyond :data:`EQUAL_EDGES`) and that the add-on did not make (a converted,
+    added or relaxed curve stores its rest shape, and a run keeps the lengths it has).
+    Relax used to key such a curve silently, taking its uneven edges as targets."""
+    if rest_shape(obj) is not None:
+        return
+    for k, (P, c) in enumerate(zip(polygons, closed, strict=True)):
+        e = np.linalg.norm(np.diff(np.vstack([P, P[:1]]) if c else P, axis=0), axis=1)
+        if len(e) == 0 or e.min() <= 0:  # repeated points: the core's check says so
+            continue
+        ratio = float(e.max() / e.min())
+        if ratio - 1.0 > EQUAL_EDGES:
+            try:  # a curve through itself hears that first: converting would not help
+                core.check_polygon(as_input(polygons), coarseness=False,
+                                   closed=closed[0] if len(closed) == 1 else list(closed))
+            except ValueError as err:
+                raise ValueError(f"'{obj.name}': {err}") from None
+            where = f"'{obj.name}'" + (f" (component {k + 1})" if len(polygons) > 1 else "")
+            raise ValueError(
+                f"{where} was not converted: its edges differ in length (the longest is "
+                f"{ratio:.4g} times the shortest); convert it first (Möbius ▸ Polygon ▸ "
+                "Convert), which gives every edge the same length")
 
 
 def choose_method(method: str, polygons: Sequence[np.ndarray]) -> tuple[str, str]:
@@ -43,7 +73,10 @@ def choose_method(method: str, polygons: Sequence[np.ndarray]) -> tuple[str, str
         return method, ""
     if len(polygons) != 1:
         return EXPLICIT_METHOD, f"a link of {len(polygons)} components"
-    det = core.knot_determinant(polygons[0])
+    try:
+        det = core.knot_determinant(polygons[0])
+    except ValueError:  # too tangled to read (core.invariants refuses it before the work)
+        return EXPLICIT_METHOD, "knot type not read: too many crossings"
     if det > 1:
         return KNOT_METHOD, f"knotted, determinant {det}"
     return EXPLICIT_METHOD, "no knot detected"
@@ -58,7 +91,10 @@ def method_hint(method: str, result, polygons: Sequence[np.ndarray],
     one on unknots)."""
     if method != EXPLICIT_METHOD or result.status != core.Status.MAX_ITER or not closed:
         return ""
-    if len(polygons) != 1 or not core.is_knotted(polygons[0]):
+    try:
+        if len(polygons) != 1 or not core.is_knotted(polygons[0]):
+            return ""
+    except ValueError:  # too tangled to read
         return ""
     label = method_label(KNOT_METHOD)
     return f"; knots settle in fewer iterations with Advanced ▸ Method: {label}"
@@ -263,7 +299,10 @@ class ObjectRelaxation:
                              barycenter=options.get("barycenter", True))
             if not isinstance(refine, bool):
                 raise ValueError(f"refine must be True or False, got {refine!r}")
-            # a curve too coarse for its shape is refined by the core when refine is on
+        except ValueError as err:
+            raise ValueError(f"'{obj.name}': {err}") from None
+        check_converted(obj, polygons, closed)  # after the size: no work before either
+        try:  # a curve too coarse for its shape is refined by the core when refine is on
             core.check_polygon(as_input(polygons), closed=options.get("closed", True),
                                coarseness=not refine)
         except ValueError as err:

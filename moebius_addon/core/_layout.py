@@ -86,6 +86,23 @@ OPEN_TREE_REFUSAL = ("open curves (closed=False) run on the exact engine only: p
 MIN_OPEN_VERTICES = 3
 
 
+#: Fewest vertices of a closed component (with fewer, no two edges are disjoint).
+MIN_CLOSED_VERTICES = 4
+
+
+def real_array(a, what: str = "the polygon") -> np.ndarray:
+    """``a`` as a float64 array, or TypeError unless it holds real numbers (floats or
+    integers): complex, boolean, text and object arrays are refused rather than cast (a
+    complex array lost its imaginary part, an object array was taken as it came)."""
+    arr = np.asarray(a)
+    if arr.dtype.kind not in "iuf":
+        fix = ("take the real part (P.real) if that is what you mean"
+               if arr.dtype.kind == "c" else "convert it with np.asarray(P, dtype=float)")
+        raise TypeError(f"{what} must hold real numbers (float or int), got an array of "
+                        f"{arr.dtype}; {fix}")
+    return arr.astype(np.float64, copy=False)
+
+
 def check_closed(closed, k: int, is_link: bool) -> list[bool]:
     """``closed`` as one bool per component, or ValueError: a bool for a knot, a bool or one
     bool per component for a link."""
@@ -114,10 +131,13 @@ def as_layout(P, closed=True) -> tuple[np.ndarray, Layout]:
         raise ValueError("empty link: give at least one closed polygon")
     arrays = []
     for c, part in enumerate(parts):
-        a = np.asarray(part, dtype=np.float64)
+        where = f"component {c}" if is_link else "the polygon"
+        a = real_array(part, where)
         if a.ndim != 2 or a.shape[1] != 3:
-            where = f"component {c}" if is_link else "the polygon"
             raise ValueError(f"{where} must be an (N, 3) array of vertices, got shape {a.shape}")
+        if len(a) == 0:
+            raise ValueError(f"{where} has no vertices: give an (N, 3) array of N >= "
+                             f"{MIN_CLOSED_VERTICES} vertices (a closed polygon)")
         arrays.append(a)
     X = np.ascontiguousarray(np.concatenate(arrays, axis=0))
     sizes = [len(a) for a in arrays]
@@ -161,3 +181,105 @@ def as_unit_layout(P, closed=True) -> tuple[np.ndarray, Layout, int]:
     X, layout = as_layout(P, closed)
     k = unit_exponent(X)
     return (np.ldexp(X, -k) if k else X), layout, k
+
+
+# ---------------------------------------------------------------------------------------------
+# What every public function checks of its vertices before any kernel sees them: O(N) numpy
+# checks (and two sorts), so that no kernel divides by zero or returns NaN for bad input.
+
+
+def vertex_name(layout: Layout, v: int) -> str:
+    """``"vertex 7"``, or ``"vertex 7 of component 1"`` for a link."""
+    if layout.k == 1:
+        return f"vertex {v}"
+    c = int(layout.comp[v])
+    return f"vertex {v - layout.starts[c]} of component {c}"
+
+
+def check_counts(layout: Layout, name: str = "the curve") -> None:
+    """ValueError for a closed component of fewer than :data:`MIN_CLOSED_VERTICES` vertices
+    (open ones were checked by :func:`as_layout`)."""
+    for c in range(layout.k):
+        size = int(layout.starts[c + 1] - layout.starts[c])
+        if size < MIN_CLOSED_VERTICES and (layout.closed is None or layout.closed[c]):
+            where = f"component {c} of {name}" if layout.is_link else name
+            raise ValueError(f"{where} has {size} {'vertex' if size == 1 else 'vertices'}; a "
+                             f"closed polygon needs at least {MIN_CLOSED_VERTICES}")
+
+
+def check_finite(X: np.ndarray, layout: Layout, name: str = "the curve") -> None:
+    """ValueError naming the first vertex with a NaN or infinite coordinate."""
+    bad = ~np.isfinite(X).all(axis=1)
+    if bad.any():
+        v = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"{name} has NaN or infinite coordinates ({int(bad.sum())} vertices, first at "
+            f"{vertex_name(layout, v)}); fix or delete those points"
+        )
+
+
+def check_distinct(X: np.ndarray, layout: Layout, name: str = "the curve") -> None:
+    """ValueError for a vertex equal to the next one (an edge of length 0, relative to the
+    curve's size; the dummy edges of open components are no such edges)."""
+    edge = np.linalg.norm(X[layout.nxt] - X, axis=1)
+    scale = float(np.abs(X - X.mean(axis=0)).max()) or 1.0
+    rep = edge <= 1e-12 * scale
+    if layout.has_open:
+        rep &= layout.real
+    if rep.any():
+        v = int(np.flatnonzero(rep)[0])
+        raise ValueError(
+            f"{name} repeats a point: {vertex_name(layout, v)} and the next vertex coincide "
+            f"({int(rep.sum())} repeated in all); merge duplicates (Blender: Merge by Distance) "
+            f"or resample the curve"
+        )
+
+
+def _equal_rows(R: np.ndarray) -> tuple[int, int] | None:
+    """Indices of two equal rows of ``R`` (the first pair in sorted order), or None."""
+    order = np.lexsort(R.T[::-1])
+    S = R[order]
+    same = np.flatnonzero((S[1:] == S[:-1]).all(axis=1))
+    if not len(same):
+        return None
+    a, b = sorted((int(order[same[0]]), int(order[same[0] + 1])))
+    return a, b
+
+
+def check_not_touching(X: np.ndarray, layout: Layout, name: str = "the curve") -> None:
+    """ValueError for two vertices in the same place, or two edges that are not neighbours
+    with the same midpoint: the kernels divide by those distances (an exact coincidence; a
+    near one is the start check's business, :func:`..polygon.check_polygon`)."""
+    pair = _equal_rows(X)
+    if pair is not None:
+        a, b = pair
+        raise ValueError(f"{name} touches itself: {vertex_name(layout, a)} and "
+                         f"{vertex_name(layout, b)} are the same point; move the strands apart")
+    real = np.flatnonzero(layout.real) if layout.has_open else np.arange(layout.n)
+    M = 0.5 * (X[real] + X[layout.nxt[real]])
+    order = np.lexsort(M.T[::-1])
+    S = M[order]
+    same = np.flatnonzero((S[1:] == S[:-1]).all(axis=1))
+    for k in same:  # neighbouring edges share a midpoint only where the curve turns back
+        i, j = int(real[order[k]]), int(real[order[k + 1]])
+        if layout.nxt[i] != j and layout.nxt[j] != i:
+            i, j = min(i, j), max(i, j)
+            raise ValueError(f"{name} touches itself: the edges after {vertex_name(layout, i)} "
+                             f"and after {vertex_name(layout, j)} have the same midpoint; move "
+                             f"the strands apart")
+
+
+def as_checked_layout(P, closed=True, *, name: str = "the curve",
+                      touching: bool = True) -> tuple[np.ndarray, Layout, int]:
+    """:func:`as_unit_layout` of a curve whose vertices passed the checks of every public
+    door: real numbers in (N, 3) arrays, no empty component, at least
+    :data:`MIN_CLOSED_VERTICES` vertices per closed component, finite coordinates, no vertex
+    equal to the next, and (``touching``) no two vertices or midpoints of disjoint edges in
+    one place. ValueError (TypeError for the type) says which and where."""
+    X, layout, k = as_unit_layout(P, closed)
+    check_counts(layout, name)
+    check_finite(X, layout, name)
+    check_distinct(X, layout, name)
+    if touching:
+        check_not_touching(X, layout, name)
+    return X, layout, k

@@ -357,8 +357,9 @@ class Frame:
         self._own = (X.copy(), edges, clusters)
         nc = clusters[-1]
         m = tree.size
-        # each list holds about 2.8–3.9 m / theta pairs (measured from 5 000 to 100 000 edges)
-        cap = max(256, int(8 * m / self.theta / _SPLIT_CHUNKS))
+        # each list holds about 2.8–3.9 m / theta pairs (measured from 5 000 to 100 000 edges),
+        # and never more than every pair of nodes (a tiny theta asked for petabytes here)
+        cap = max(256, int(min(8 * m / self.theta, m * (m + 1) / 2) / _SPLIT_CHUNKS))
         far, near = _split(tree.left, tree.right, bmin, bmax, nc, self.theta**2, _SPLIT_CHUNKS,
                            64 * _SPLIT_CHUNKS, cap)
         self.far_pairs = far.shape[0]

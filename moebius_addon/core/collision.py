@@ -18,7 +18,8 @@ import numba as nb
 import numpy as np
 
 from . import tree_contact
-from ._layout import Layout, as_layout, as_unit_layout
+from ._checks import check_number
+from ._layout import Layout, as_checked_layout, as_layout, check_finite
 from ._pairs import _pair_contact, edge_motion, pair_time, segment_distance2  # noqa: F401
 
 # From these many edges on, the queries go through the hierarchy (tree_contact): the same answers,
@@ -87,8 +88,15 @@ def max_collision_free_step(P, U, tau_max: float, eps: float | None = None) -> f
     float
         Conservative (never larger than the true contact time).
     """
-    X, layout, k = as_unit_layout(P)
-    Ux, _ = as_layout(U)
+    tau_max = check_number("tau_max", tau_max, 0)
+    if eps is not None:
+        eps = check_number("eps", eps, 0, above=True)
+    X, layout, k = as_checked_layout(P, touching=False)
+    Ux, ulayout = as_layout(U)
+    if not np.array_equal(ulayout.starts, layout.starts) or ulayout.is_link != layout.is_link:
+        raise ValueError("U must have the shape of P: one (N, 3) row per vertex (a list of "
+                         "such arrays for a link)")
+    check_finite(Ux, layout, "the direction U")
     if k:  # P, U and eps scaled alike (exactly, by 2^-k): the same contact time
         Ux = np.ldexp(Ux, -k)
         eps = None if eps is None else float(np.ldexp(eps, -k))

@@ -14,7 +14,7 @@ import numba as nb
 import numpy as np
 
 from . import barnes_hut
-from ._layout import OPEN_TREE_REFUSAL, Layout, as_unit_layout
+from ._layout import OPEN_TREE_REFUSAL, Layout, as_checked_layout
 
 # Partial gradients go to a fixed number of buffers, independent of the thread count, so the
 # result is bit-for-bit the same on every machine with the same inputs.
@@ -252,7 +252,7 @@ def moebius_energy(P, *, engine: str = "auto", theta: float | None = None,
         invariant under similarities and reversal. Scale-free (computed at a size near 1 for
         curves spanning more than 2^64 or less than 2^-64).
     """
-    X, layout, _ = as_unit_layout(P, closed)
+    X, layout, _ = as_checked_layout(P, closed)
     frame = _engine_x(X, layout, engine, theta)
     return energy_x(X, layout) if frame is None else frame.energy(X)
 
@@ -272,7 +272,7 @@ def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None, clo
     (N, 3) array or list of arrays
         Same shape as ``P``; units 1/length.
     """
-    X, layout, k = as_unit_layout(P, closed)
+    X, layout, k = as_checked_layout(P, closed)
     frame = _engine_x(X, layout, engine, theta)
     g = (energy_gradient_x(X, layout) if frame is None else frame.energy_gradient(X))[1]
     return layout.split(np.ldexp(g, -k) if k else g)  # ∇E(2^k X) = 2^-k ∇E(X)

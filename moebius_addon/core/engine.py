@@ -29,6 +29,7 @@ import numpy as np
 
 from . import barnes_hut, hs_solve, hs_tree
 from ._layout import Layout
+from ._memory import check_memory
 from .banded import BANDED_METRICS, BandedSaddle
 from .collision import contact_time_x
 from .constraints import Jacobian
@@ -123,6 +124,11 @@ class DenseEngine:
         self.obstacles = None
         self._penalty_factorizations = 0
         self._banded_factorizations = 0
+
+    @classmethod
+    def check_size(cls, n: int) -> None:
+        """ValueError for a size whose run would not fit in memory (the exact engine's dense
+        sizes are bounded by ``solvers.base.check_dense_size``)."""
 
     @classmethod
     def holds_dense(cls, metric: str) -> bool:
@@ -237,8 +243,19 @@ class TreeEngine(DenseEngine):
     name = "tree"
     _frame = None  # the last frame and the polygon it was built at
     _saddle = None  # the solver of the current iterate (BandedSaddle or HsSaddle)
+    #: Peak memory of a run per vertex: measured 5.3–7.4 kB over its first steps (7_2 at
+    #: 20 000, 50 000 and 100 000 vertices, hs and h2, explicit and implicit; docs/api.md),
+    #: 5.5 kB for the whole process at 10⁶ (docs/benchmarks.md).
+    BYTES_PER_VERTEX = 8_000
+
+    @classmethod
+    def check_size(cls, n: int) -> None:
+        check_memory(cls.BYTES_PER_VERTEX * float(n), f"a tree-engine run of {n} vertices",
+                     "resample to fewer vertices (core.resample(P, n)); 100 000 take about "
+                     "1 GB, and a few hundred untangle most knots")
 
     def __init__(self, layout: Layout, metric: str, **options):
+        self.check_size(layout.n)  # before anything is built
         super().__init__(layout, metric, **options)
         self._tree_krylov: list[int] = []  # per solve: Krylov iterations (0: direct)
 

@@ -11,7 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ._layout import as_unit_layout
+from ._layout import as_checked_layout
 from .constraints import jacobian, make_constraints
 from .energy import energy_gradient_x
 from .linalg import Factorization
@@ -99,7 +99,7 @@ def sobolev_gradient(P, metric: str = "hs", projected: bool = True):
         Direction of steepest ascent in that metric (the flow moves along its negative); the
         paper's Fig. 2 compares these fields.
     """
-    X, layout, k = as_unit_layout(P)  # u(2^k X) = 2^k u(X): every Gram matrix scales as 4^-k
+    X, layout, k = as_checked_layout(P)  # u(2^k X) = 2^k u(X): every Gram matrix scales as 4^-k
     check_dense_size(layout.n)
     _, g = energy_gradient_x(X, layout)
     A = gram_x(metric, X, layout)

@@ -28,7 +28,7 @@ import numba as nb
 import numpy as np
 
 from . import goeritz, jones
-from ._layout import as_layout
+from ._layout import as_layout, check_distinct
 from .pd import DisjointSets, PlanarDiagram, from_passages, simplify
 
 # Two primes below 2^31: products of residues stay below 2^62 in int64.
@@ -36,8 +36,13 @@ _PRIMES = (2147483647, 2147483629)
 _PROJECTIONS = 12
 # Projections (those with the fewest crossings) simplified by planar_diagram.
 _SIMPLIFIED = 4
-# Alexander polynomials of diagrams with more crossings are not attempted (O(c^4)).
+# Alexander and Jones polynomials of diagrams with more crossings are not attempted (O(c^4);
+# the Jones sum of a 614-crossing diagram ran 135 s before it gave up on its state budget).
 MAX_ALEXANDER_CROSSINGS = 200
+# Projections with more crossings than this in every direction tried are not simplified:
+# simplification costs about c² (a closed 3 000-step random walk, 2 735 crossings at best:
+# 9 s for its four diagrams, down to 614 crossings). Table curves have at most a few dozen.
+MAX_PROJECTION_CROSSINGS = 2000
 
 
 @dataclass(frozen=True)
@@ -70,6 +75,7 @@ def _projections(P, seed: int = 0):
         raise ValueError("the curve has NaN or infinite coordinates")
     if (np.diff(layout.starts) < 3).any():
         raise ValueError("every component needs at least 3 vertices")
+    check_distinct(X, layout)  # a collapsed curve projects to a diagram of the wrong knot
     Q = X - X.mean(axis=0)
     Q /= max(np.abs(Q).max(), np.finfo(float).tiny)  # only the shape matters
     rng = np.random.default_rng(20261125 + seed)
@@ -109,6 +115,10 @@ def planar_diagram(P, seed: int = 0) -> PlanarDiagram:
         return P
     layout, found = _projections(P, seed)
     found.sort(key=len)
+    if len(found[0]) > MAX_PROJECTION_CROSSINGS:
+        raise ValueError(f"every projection tried has more than {MAX_PROJECTION_CROSSINGS} "
+                         f"crossings ({len(found[0])} at best), too many to simplify; relax "
+                         f"the curve first (the flow keeps its knot type)")
     best = None
     for rows in found[:_SIMPLIFIED]:
         d = simplify(from_passages(rows[:, 0], rows[:, 1], rows[:, 2].astype(np.int64),
@@ -161,11 +171,7 @@ def alexander_polynomial(P) -> list[int]:
     polynomial of a link), lowest degree first, normalized as KnotInfo writes it: the lowest
     power is ``t^0`` and its coefficient positive (3_1: ``[1, -1, 1]``, 4_1: ``[1, -3, 1]``,
     the unknot ``[1]``, a split link ``[0]``). ``P`` may be a :class:`~.pd.PlanarDiagram`."""
-    d = planar_diagram(P)
-    if d.crossings > MAX_ALEXANDER_CROSSINGS:
-        raise ValueError(f"every projection tried has more than {MAX_ALEXANDER_CROSSINGS} "
-                         f"crossings after simplification ({d.crossings} at best); relax the "
-                         f"curve first")
+    d = _small_diagram(P)
     A0, A1 = _alexander_matrix(d)
     if A0 is None:
         return [0]
@@ -187,7 +193,17 @@ def jones_polynomial(P, max_states: int = jones.MAX_STATES) -> tuple[float, list
     Kauffman's bracket summed tangle by tangle (:mod:`.jones`) on the simplified diagram of
     :func:`planar_diagram`; a diagram that needs more than ``max_states`` intermediate states
     raises :class:`~.jones.TooComplex` (a ``ValueError``)."""
-    return laurent(jones.jones(planar_diagram(P), max_states))
+    return laurent(jones.jones(_small_diagram(P), max_states))
+
+
+def _small_diagram(P) -> PlanarDiagram:
+    """:func:`planar_diagram`, refused above :data:`MAX_ALEXANDER_CROSSINGS` crossings."""
+    d = planar_diagram(P)
+    if d.crossings > MAX_ALEXANDER_CROSSINGS:
+        raise ValueError(f"every projection tried has more than {MAX_ALEXANDER_CROSSINGS} "
+                         f"crossings after simplification ({d.crossings} at best); relax the "
+                         f"curve first")
+    return d
 
 
 def signature(P) -> int:

@@ -46,8 +46,15 @@ import numba as nb
 import numpy as np
 
 from . import drawing, notation, pd, table
+from ._memory import check_memory
 from .objio import read_obj
-from .polygon import MIN_CHECKED_VERTICES, contact_ratio, resample, suggest_edge_count
+from .polygon import (
+    CONTACT_RATIO,
+    MIN_CHECKED_VERTICES,
+    contact_ratio,
+    resample,
+    suggest_edge_count,
+)
 
 __all__ = [
     "braid_closure",
@@ -94,13 +101,14 @@ def torus_knot(p: int, q: int, n: int | None = None, R: float = 2.0, r: float = 
     Default ``n``: ``40 (|p| + |q|)``; with ``R/r = 2`` the coarseness rule holds down to about
     ``5 (|p| + |q|)``.
     """
-    p, q = int(p), int(q)
+    p, q = _whole("p", p), _whole("q", q)
     if p == 0 or q == 0:
         raise ValueError(f"torus_knot({p}, {q}): p and q must be nonzero integers")
     if not 0 < r < R:
         raise ValueError(f"torus_knot needs 0 < r < R (got R={R}, r={r})")
     d = math.gcd(p, q)
     n = _check_n(40 * (abs(p) + abs(q)) if n is None else n, d)
+    _check_dense(_dense_count(n // d) * d, f"torus_knot({p}, {q})")
     m = _dense_count(n // d)
     t = 2.0 * np.pi * np.arange(m) / m
     curves = []
@@ -112,16 +120,20 @@ def torus_knot(p: int, q: int, n: int | None = None, R: float = 2.0, r: float = 
         rho = R + r * np.cos(psi)
         # -sin: with +sin the knot would be the negative one (the mirror of the braid σ1³).
         curves.append(np.stack([rho * np.cos(phi), rho * np.sin(phi), -r * np.sin(psi)], axis=1))
-    return _finish(curves, n)
+    sign = 1 if p * q > 0 else -1  # T(p, q): the closure of (σ1 … σ_{|p|-1})^|q|, mirrored
+    return _finish(curves, n, diagram=lambda: pd.from_braid(
+        [sign * k for k in range(1, abs(p))] * abs(q), abs(p)))
 
 
 def figure_eight(n: int = 200) -> np.ndarray:
     """The figure-eight knot 4_1, ``((2 + cos 2t) cos 3t, (2 + cos 2t) sin 3t, sin 4t)``."""
     n = _check_n(n, 1)
     m = _dense_count(n)
+    _check_dense(m, "figure_eight")
     t = 2.0 * np.pi * np.arange(m) / m
     rho = 2.0 + np.cos(2.0 * t)
-    return _finish([np.stack([rho * np.cos(3 * t), rho * np.sin(3 * t), np.sin(4 * t)], axis=1)], n)
+    return _finish([np.stack([rho * np.cos(3 * t), rho * np.sin(3 * t), np.sin(4 * t)], axis=1)],
+                   n, diagram=lambda: pd.from_braid(table.entry("4_1").braid))
 
 
 # --------------------------------------------------------------------------------------------
@@ -133,6 +145,12 @@ def figure_eight(n: int = 200) -> np.ndarray:
 _HZ = 0.6
 _SLOT = 2.5  # arc length of a slot at the innermost radius (sets r0)
 _PER_SLOT = 48  # dense samples per slot and strand
+# Peak memory per dense sample of a generator's curve and per vertex of its result (the dense
+# arrays, their resampling, the result), with room: measured 144 bytes per sample
+# (torus_knot(2, 3, 100 000): 16 samples per vertex) and 234 bytes per vertex (named("3_1",
+# 300 000)).
+_BYTES_PER_SAMPLE = 200
+_BYTES_PER_VERTEX = 400
 
 
 def braid_closure(word: Sequence[int], n: int | None = None, strands: int | None = None) -> Curve:
@@ -162,11 +180,23 @@ def braid_closure(word: Sequence[int], n: int | None = None, strands: int | None
     that at every crossing they pass 1.2 spacings apart vertically.
     """
     word, strands = pd.braid_word(word, strands)
+    _check_dense(strands * max(len(word), 3) * _PER_SLOT,
+                 f"the closure of a braid on {strands} strands")
     curves = _braid_curves(word, strands)
     if n is None:
         n = _braid_default_n(curves)
     n = _check_n(n, len(curves))
-    return _finish(curves, n)
+    return _finish(curves, n, diagram=lambda: pd.from_braid(word, strands))
+
+
+def braid_edges(word: Sequence[int], strands: int | None = None) -> int:
+    """The edge count :func:`braid_closure` takes for ``n=None`` (3.3 edges per strand
+    spacing of length, at least 100), found without resampling: a caller that bounds the
+    size (Blender's *Add from Notation*) asks before any work."""
+    word, strands = pd.braid_word(word, strands)
+    _check_dense(strands * max(len(word), 3) * _PER_SLOT,
+                 f"the closure of a braid on {strands} strands")
+    return _braid_default_n(_braid_curves(word, strands))
 
 
 def _braid_curves(word: list[int], strands: int) -> list[np.ndarray]:
@@ -327,7 +357,7 @@ def from_pd(code, n: int | None = None) -> Curve:
                 break
             base = k
         n = max(100, 10 * math.ceil(PD_EDGE_FACTOR * base / 10))
-    P = _finish(curves, _check_n(n, len(curves)))
+    P = _finish(curves, _check_n(n, len(curves)), diagram=lambda: d)
     drawing.check_same(d, P)
     return P
 
@@ -441,7 +471,23 @@ def _check_n(n, components: int) -> int:
     n = int(n)
     if n < 4 * components:
         raise ValueError(f"n = {n} is too small: need at least 4 vertices per component")
+    check_memory(n * _BYTES_PER_VERTEX, f"a curve of n = {n} vertices",
+                 "ask for fewer: a few hundred untangle most knots, and Blender takes at "
+                 "most 100 000")
     return n
+
+
+def _whole(name: str, value) -> int:
+    """``value`` as an int, or TypeError: 2.5 used to become 2 silently."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, int | np.integer):
+        raise TypeError(f"{name} must be a whole number (int), got {value!r}")
+    return int(value)
+
+
+def _check_dense(samples: int, what: str) -> None:
+    """Refuse, before they are made, dense samples that would not fit in memory."""
+    check_memory(samples * _BYTES_PER_SAMPLE, f"{what} ({samples} dense samples)",
+                 "use fewer strands, turns or vertices")
 
 
 def _dense_count(n: int) -> int:
@@ -467,13 +513,19 @@ def _split(n: int, lengths: list[float]) -> list[int]:
     return counts.tolist()
 
 
-def _finish(curves: list[np.ndarray], n: int) -> Curve:
+def _finish(curves: list[np.ndarray], n: int, diagram=None) -> Curve:
     """Resample dense closed curves to ``n`` vertices in all, centre, scale into the unit ball.
 
     Fewer than ``MIN_CHECKED_VERTICES`` per component are refused, naming a count that passes
     the start check: below it the check has no vertex pair to compare, and the polygon need not
     have the curve's knot type (T(2, 3) at 5, 6 and 7 vertices passed it as unknots, checked
-    with topoly; a coarse polygon of a tangled unknot could as well be knotted)."""
+    with topoly; a coarse polygon of a tangled unknot could as well be knotted). With
+    ``diagram`` (a function returning the :class:`.pd.PlanarDiagram` the curve draws: braids,
+    torus knots, PD codes) a polygon that fails the start check's coarseness test is compared
+    with it, and refused unless it has the diagram's Jones polynomial (Alexander's when that
+    is too costly), naming the count that passes the start check: 4_1 at 9 vertices came out
+    as the trefoil m3_1, 5_2 at 9 to 18 as an unknot, a trefoil or 4_1. A coarse polygon of
+    the right knot stays (``relax`` refines it: 3_1 at 24, where 27 passes)."""
     counts = [n] if len(curves) == 1 else _split(n, [_length(c) for c in curves])
     if min(counts) < MIN_CHECKED_VERTICES:
         k = suggest_edge_count(curves[0] if len(curves) == 1 else curves,
@@ -484,11 +536,29 @@ def _finish(curves: list[np.ndarray], n: int) -> Curve:
             f"polygon may not have the curve's knot type; use n >= {k or MIN_CHECKED_VERTICES}"
         )
     polys = resample(curves, counts, closed=True)
+    if diagram is not None and contact_ratio(polys[0] if len(polys) == 1 else polys
+                                             ) < CONTACT_RATIO and not _draws(diagram(), polys):
+        k = suggest_edge_count(curves[0] if len(curves) == 1 else curves, start=n + 1)
+        raise ValueError(
+            f"n = {n} is too coarse for this curve: strands far apart along it come closer "
+            f"than one edge length, and its polygon is not the curve's knot (a chord cuts "
+            f"across another strand); " + (f"use n >= {k}" if k is not None else
+                                           "use many more vertices"))
     allv = np.concatenate(polys)
     centre = allv.mean(axis=0)
     scale = np.linalg.norm(allv - centre, axis=1).max()
     polys = [(P - centre) / scale for P in polys]
     return polys[0] if len(polys) == 1 else polys
+
+
+def _draws(d: pd.PlanarDiagram, polys: list[np.ndarray]) -> bool:
+    """Whether the polygons have the invariants of ``d`` (:func:`.drawing.check_same`); False
+    for polygons that touch themselves or cannot be read."""
+    try:
+        drawing.check_same(d, polys[0] if len(polys) == 1 else polys)
+    except (RuntimeError, ValueError):
+        return False
+    return True
 
 
 def _cyl(rho, phi, z) -> np.ndarray:

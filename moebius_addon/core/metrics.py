@@ -24,7 +24,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ._layout import Layout, as_unit_layout
+from ._layout import Layout, as_checked_layout
+from ._memory import check_memory
 from .open_metrics import open_hs
 
 # Tiny L² term that keeps the pure W^{3/2,2} matrix definite for 4-gons, where disjoint edge
@@ -350,7 +351,13 @@ def gram_matrix(metric: str, P, closed=True) -> np.ndarray:
     (N, N) array
         Symmetric positive definite ``A`` with ``G = A ⊗ I₃``; entries scale as 1/length².
     """
-    X, layout, k = as_unit_layout(P, closed)
+    if metric not in METRICS:
+        raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
+    X, layout, k = as_checked_layout(P, closed)
+    n = layout.n
+    # the matrix itself, and room for its assembly (measured 7.9 bytes per entry at 3 000)
+    check_memory(16.0 * n * n, f"the {n} x {n} Gram matrix",
+                 "resample the curve to fewer vertices (core.resample(P, n))")
     A = gram_x(metric, X, layout)
     if not k:
         return A

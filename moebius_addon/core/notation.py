@@ -61,10 +61,12 @@ def _checked(word: list[int], strands: int | None, text: str) -> tuple[list[int]
 
 
 def is_pd(text: str) -> bool:
-    """Whether ``text`` is written as a PD code (``X[…]``, or several groups of numbers inside
-    one more pair of brackets) rather than a braid word."""
+    """Whether ``text`` is written as a PD code (``X[…]``, or groups of numbers inside one more
+    pair of brackets, ``[[1,2,3,4]]`` too) rather than a braid word."""
     text = str(text)
     if re.search(r"X\s*\[", text) or re.match(r"^\s*PD\s*\[", text):
+        return True
+    if re.match(r"^\s*[\[\{\(]\s*[\[\{\(]", text):  # a list of crossings, even of one
         return True
     groups = re.findall(r"[\[\{\(][^\[\]\{\}\(\)]*[\]\}\)]", text)
     loose = re.sub(r"[\[\{\(][^\[\]\{\}\(\)]*[\]\}\)]", " ", text)
@@ -86,4 +88,4 @@ def describe(kind: str, value) -> str:
         s = " ".join(str(g) for g in word)
         return f"braid {s}" + (f" ({strands} strands)" if strands else "")
     d: PlanarDiagram = value
-    return f"PD code of {d.crossings} crossings"
+    return f"PD code of {d.crossings} crossing{'' if d.crossings == 1 else 's'}"

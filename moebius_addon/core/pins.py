@@ -53,12 +53,11 @@ def _indices(value, where: str, size: int) -> np.ndarray:
     for i, v in enumerate(arr):
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
             raise ValueError(f"pinned{where} must hold whole vertex indices (int), got {v!r}")
+        if not 0 <= int(v) < size:  # before int64: 10**20 does not fit one
+            raise ValueError(f"pinned index {int(v)}{where} is out of range: the "
+                             f"{'component' if where else 'polygon'} has {size} vertices, "
+                             f"indices 0 to {size - 1}")
         out[i] = int(v)
-    bad = out[(out < 0) | (out >= size)]
-    if bad.size:
-        raise ValueError(f"pinned index {int(bad[0])}{where} is out of range: the "
-                         f"{'component' if where else 'polygon'} has {size} vertices, "
-                         f"indices 0 to {size - 1}")
     uniq, counts = np.unique(out, return_counts=True)
     if np.any(counts > 1):
         raise ValueError(f"pinned index {int(uniq[counts > 1][0])}{where} is given more "

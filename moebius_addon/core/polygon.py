@@ -11,7 +11,19 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ._layout import Layout, as_unit_layout, unit_exponent
+from ._checks import check_number
+from ._layout import (
+    MIN_CLOSED_VERTICES,
+    as_checked_layout,
+    as_unit_layout,
+    check_counts,
+    check_distinct,
+    check_finite,
+    real_array,
+    unit_exponent,
+    vertex_name,
+)
+from ._memory import check_memory
 from ._tridiagonal import cyclic_tridiagonal_solve
 from .collision import closest_pairs
 
@@ -24,7 +36,7 @@ CONTACT_GAP = 4
 # (CONTACT_GAP edges apart both ways along the curve); below it a knot can pass unchecked.
 MIN_CHECKED_VERTICES = 2 * CONTACT_GAP + 1
 CONTACT_RATIO = 1.0
-MIN_VERTICES = 4
+MIN_VERTICES = MIN_CLOSED_VERTICES
 # Chord lengths probed (evenly below the mean arc per edge) for sign changes of the closing
 # condition before bisecting.
 _SCAN = 64
@@ -41,6 +53,11 @@ _EQUAL = 5e-11
 # misses measured); with 1e-6 alone, 10⁶ edges tried all 16 starts and took 267 s.
 _ROUNDING_MISS = 1e-6
 _ROUNDING_PER_N2 = 3e-16
+# Peak memory of resample per vertex of the result (the marches' arrays and equalize's), with
+# room: measured 234 bytes per vertex at 300 000 vertices (the trefoil).
+_RESAMPLE_BYTES = 400
+_FEWER_VERTICES = ("ask for fewer vertices: a few hundred untangle most knots, and Blender "
+                   "takes at most 100 000")
 
 
 @nb.njit(cache=True)
@@ -282,16 +299,26 @@ def resample(points, n, closed: bool = True):
         them by :func:`equalize` (``closed=False``) in the same way.
     """
     if isinstance(points, (list, tuple)):
-        ns = list(n) if np.ndim(n) else _split_count(points, int(n))
+        if not points:
+            raise ValueError("empty link: give at least one polyline")
+        if np.ndim(n):
+            ns = [check_number("n", k, integer=True) for k in n]
+        else:
+            ns = _split_count(points, check_number("n", n, integer=True))
+        check_memory(_RESAMPLE_BYTES * sum(ns), f"resampling to {sum(ns)} vertices",
+                     _FEWER_VERTICES)
         return [resample(p, k, closed) for p, k in zip(points, ns, strict=True)]
-    P = np.asarray(points, dtype=np.float64)
+    P = real_array(points, "points")
     if P.ndim != 2 or P.shape[1] != 3:
         raise ValueError(f"points must be an (M, 3) array, got shape {P.shape}")
+    if len(P) < 2:
+        raise ValueError(f"points must hold at least 2 points of a polyline, got {len(P)}")
     if not np.all(np.isfinite(P)):
         raise ValueError("points contain NaN or infinite coordinates; remove or fix them first")
-    n = int(n)
+    n = check_number("n", n, integer=True)
     if n < MIN_VERTICES:
         raise ValueError(f"need at least {MIN_VERTICES} vertices for a closed polygon, got {n}")
+    check_memory(_RESAMPLE_BYTES * n, f"resampling to {n} vertices", _FEWER_VERTICES)
     k = unit_exponent(P)
     if k:  # a curve far larger or smaller than 1: resampled at a size near 1 (exact scaling)
         return np.ldexp(_resample_one(np.ldexp(P, -k), n, closed), k)
@@ -372,7 +399,8 @@ def contact_ratio(P, min_gap: int = CONTACT_GAP, closed=True) -> float:
     """Closest distance between vertices at least ``min_gap`` edges apart along the curve (or on
     different components), divided by the mean edge length. The start check wants >= 1.
     ``closed=False``: open polylines (distances along them do not wrap round the ends)."""
-    X, layout, _ = as_unit_layout(P, closed)
+    min_gap = check_number("min_gap", min_gap, 1, integer=True)
+    X, layout, _ = as_checked_layout(P, closed, touching=False)
     (dv, _), _ = closest_pairs(X, layout, min_gap)
     return dv / _mean_edge(X, layout)
 
@@ -382,13 +410,6 @@ def _mean_edge(X, layout):
     return float((ln[layout.real] if layout.has_open else ln).mean())
 
 
-def _where(layout: Layout, v: int) -> str:
-    if layout.k == 1:
-        return f"vertex {v}"
-    c = int(layout.comp[v])
-    return f"vertex {v - layout.starts[c]} of component {c}"
-
-
 def suggest_edge_count(P, max_edges: int = 20000, start: int | None = None,
                        closed: bool = True) -> int | None:
     """Smallest edge count (total over a link) whose equilateral resampling of ``P`` passes the
@@ -396,7 +417,8 @@ def suggest_edge_count(P, max_edges: int = 20000, start: int | None = None,
     ``P``'s own count from its contact ratio); None if none up to ``max_edges``.
     ``closed=False``: open polylines (vertex counts, as the result counts them)."""
     closed = bool(closed)
-    X, layout, _ = as_unit_layout(P, closed)
+    max_edges = check_number("max_edges", max_edges, MIN_VERTICES, integer=True)
+    X, layout, _ = as_checked_layout(P, closed, touching=False)
     parts = layout.split(X) if layout.is_link else X
     if start is None:
         n = layout.n
@@ -425,43 +447,20 @@ def check_polygon(P, *, coarseness: bool = True, name: str = "the curve",
     least 3 vertices, distances along them not wrapping round the ends.
     """
     X, layout, e2 = as_unit_layout(P, closed)
-    for c in range(layout.k):
-        size = int(layout.starts[c + 1] - layout.starts[c])
-        if size < MIN_VERTICES and (layout.closed is None or layout.closed[c]):
-            where = f"component {c} of {name}" if layout.is_link else name
-            raise ValueError(
-                f"{where} has {size} vertices; a closed polygon needs at least {MIN_VERTICES}"
-            )
-    bad = ~np.isfinite(X).all(axis=1)
-    if bad.any():
-        v = int(np.flatnonzero(bad)[0])
-        raise ValueError(
-            f"{name} has NaN or infinite coordinates ({int(bad.sum())} vertices, first at "
-            f"{_where(layout, v)}); fix or delete those points"
-        )
+    check_counts(layout, name)
+    check_finite(X, layout, name)
+    check_distinct(X, layout, name)
     edge = np.linalg.norm(X[layout.nxt] - X, axis=1)
-    if layout.has_open:  # the dummy edges (._layout) are no repeated points
+    if layout.has_open:  # the dummy edges (._layout) are no edges
         edge = edge[layout.real]
-    scale = float(np.abs(X - X.mean(axis=0)).max()) or 1.0
-    rep = edge <= 1e-12 * scale
-    if layout.has_open and rep.any():
-        rep = np.zeros(layout.n, bool)
-        rep[np.flatnonzero(layout.real)] = edge <= 1e-12 * scale
-    if rep.any():
-        v = int(np.flatnonzero(rep)[0])
-        raise ValueError(
-            f"{name} repeats a point: {_where(layout, v)} and the next vertex coincide "
-            f"({int(rep.sum())} repeated in all); merge duplicates (Blender: Merge by Distance) "
-            f"or resample the curve"
-        )
     h = float(edge.mean())
     (dv, (vi, vj)), (de, (ei, ej), (s, t)) = closest_pairs(X, layout, CONTACT_GAP)
     if de <= 1e-6 * h:
         point = np.ldexp(X[ei] + s * (X[layout.nxt[ei]] - X[ei]), e2)
         raise ValueError(
-            f"{name} intersects itself: the edges after {_where(layout, ei)} and after "
-            f"{_where(layout, ej)} touch near ({point[0]:.6g}, {point[1]:.6g}, {point[2]:.6g}); "
-            f"move the strands apart before relaxing"
+            f"{name} intersects itself: the edges after {vertex_name(layout, ei)} and after "
+            f"{vertex_name(layout, ej)} touch near ({point[0]:.6g}, {point[1]:.6g}, "
+            f"{point[2]:.6g}); move the strands apart before relaxing"
         )
     if coarseness and dv < CONTACT_RATIO * h:
         flags = [True] if layout.closed is None else list(layout.closed)
@@ -476,8 +475,9 @@ def check_polygon(P, *, coarseness: bool = True, name: str = "the curve",
             else "move the strands apart or use a much finer polygon"
         )
         raise ValueError(
-            f"{name} is too coarse for its shape: {_where(layout, vi)} and {_where(layout, vj)} "
-            f"are {dv / h:.2f} edge lengths apart in space but far apart along the curve "
+            f"{name} is too coarse for its shape: {vertex_name(layout, vi)} and "
+            f"{vertex_name(layout, vj)} are {dv / h:.2f} edge lengths apart in space but far "
+            f"apart along the curve "
             f"(need >= {CONTACT_RATIO}); the energy cannot keep the strands apart at this "
             f"resolution — {fix}"
         )

@@ -12,6 +12,7 @@ trefoil); ``3_1*``, ``mirror of 3_1`` and ``3_1 mirror`` are read the same way.
 
 from __future__ import annotations
 
+import difflib
 import gzip
 import json
 import re
@@ -215,7 +216,7 @@ def entry(name: str) -> Entry:
     """The entry ``name`` means (:func:`lookup`); ``ValueError`` naming close matches if none."""
     key = lookup(name)
     if key is None:
-        near = search(name, limit=8)
+        near = search(name, limit=8) or close_matches(name)
         hint = f"; did you mean {', '.join(near)}?" if near else (
             "; names look like 3_1, 10_161, 11a_1, 12n_888, L2a1{0}, L6a4{0,0}, or 'trefoil', "
             "'Borromean rings'; core.knots.search(text) finds them")
@@ -255,3 +256,12 @@ def search(text: str, limit: int | None = 50) -> list[str]:
             break
     out += prefix + rest
     return out[:limit] if limit is not None else out
+
+
+def close_matches(text: str, limit: int = 5, extra: tuple[str, ...] = ()) -> list[str]:
+    """Names and aliases spelled like ``text`` (difflib's ratio at least 0.75), best first:
+    what a "did you mean …?" offers when :func:`search` finds nothing (``"trefoyl"`` →
+    ``["trefoil"]``). ``extra``: more names to offer (the Blender catalogue's generators)."""
+    t = _load()
+    words = [*t["aliases"], *t["lower"], *(_normal(e) for e in extra)]
+    return difflib.get_close_matches(_normal(str(text)), words, n=limit, cutoff=0.75)

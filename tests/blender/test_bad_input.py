@@ -77,7 +77,8 @@ def test_gradients_of_a_broken_curve(scene, mb, core):
     P[5, 0] = np.nan
     poly_curve("Knot", [P])
     # made three meshes of NaN arrows before
-    _refused(bpy.ops.moebius.show_gradient, "'Knot': the curve has NaN or infinite coordinates")
+    _refused(bpy.ops.moebius.show_gradient, r"'Knot' has NaN or infinite coordinates \(1 of "
+                                            r"its 100 points, the first at index 5")
     t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
     poly_curve("Lemniscate", [np.column_stack([np.sin(t), np.sin(t) * np.cos(t), 0 * t])])
     _refused(bpy.ops.moebius.show_gradient, "'Lemniscate': the curve intersects itself")
@@ -161,6 +162,59 @@ def test_infinite_points_named_as_such(scene, mb, value):
     poly_curve("Far", [P])
     _refused(bpy.ops.moebius.convert, r"'Far' has NaN or infinite coordinates \(1 of its 40 "
                                       r"points, the first at index 9; .*3\.4e38\)")
+
+
+@pytest.mark.parametrize("value", [np.inf, np.finfo(np.float32).max])
+def test_relax_and_gradients_name_an_infinite_point(scene, mb, value):
+    # an infinite coordinate (stored as ±3.4e38) made Relax and Show Gradients say "repeats a
+    # point (98 repeated)": the core saw a finite, enormous curve whose other points coincide
+    assert bpy.ops.moebius.add_knot(kind="3_1", edges=100) == {"FINISHED"}
+    obj = bpy.context.active_object
+    obj.data.splines[0].points[5].co = (value, 0.0, 0.0, 1.0)
+    for op in (bpy.ops.moebius.relax, bpy.ops.moebius.show_gradient, bpy.ops.moebius.identify):
+        _refused(op, r"'Knot 3_1' has NaN or infinite coordinates \(1 of its 100 points, the "
+                     r"first at index 5; Blender shows an infinite one as ±3\.4e38\)")
+
+
+def test_relax_refuses_a_curve_that_was_never_converted(scene, mb):
+    # a poly curve drawn with uneven edges was keyed silently (its edges taken as targets)
+    t = np.sort(np.random.default_rng(0).uniform(0, 2 * np.pi, 40))
+    poly_curve("Drawn", [np.column_stack([np.cos(t), np.sin(t), 0.3 * np.sin(3 * t)])])
+    _refused(bpy.ops.moebius.relax, r"'Drawn' was not converted: its edges differ in length "
+                                    r"\(the longest is [\d.]+ times the shortest\); convert it")
+    assert bpy.ops.moebius.convert() == {"FINISHED"}  # the fix it names
+    bpy.context.scene.moebius.max_iterations = 1
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    # equal edges drawn by a script are a polygon to relax as they are; so is a converted
+    # curve moved by hand in Edit Mode (the add-on made it: it keeps the lengths it has)
+    poly_curve("Regular", [_circle(40)])
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    assert bpy.ops.moebius.add_knot(kind="3_1", edges=100) == {"FINISHED"}
+    bpy.context.active_object.data.splines[0].points[3].co = (0.5, 0.5, 0.5, 1.0)
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+
+
+def test_a_too_coarse_conversion_is_refused_without_a_long_search(scene, mb, core,
+                                                                  monkeypatch):
+    # the suggestion searched in 10% steps up to the limit, resampling at every step: 6-19 s
+    # for each wrong value typed in the Edges field, where a valid one converts in 0.02 s
+    poly_curve("FHW", [core.knots.freedman_unknot(1184)])
+    obj = bpy.context.active_object
+    conversion = __import__(mb.__name__ + ".conversion", fromlist=["core"])
+    resample = conversion.core.resample
+    sizes = []
+
+    def counted(points, n, closed=True):
+        sizes.append(n)
+        return resample(points, n, closed)
+
+    monkeypatch.setattr(conversion.core, "resample", counted)
+    with pytest.raises(ValueError, match=r"too coarse .* use at least (\d+) edges per") as err:
+        mb.prepare_conversion(obj, edges=300)
+    assert len(sizes) <= 1 + conversion.SUGGEST_TRIALS and max(sizes) < 1000, sizes
+    k = int(re.search(r"use at least (\d+) edges", str(err.value)).group(1))
+    monkeypatch.undo()
+    assert len(mb.prepare_conversion(obj, edges=k)) == 1  # the count named works
 
 
 def test_coarse_link_names_the_count_per_component(scene, mb):

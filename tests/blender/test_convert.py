@@ -121,6 +121,20 @@ def test_convert_obj_polyline_import(scene, mb, core, tmp_path):
                   - np.sort(np.linalg.norm(P_world - P_world.mean(0), axis=1))).max() < 0.05
 
 
+def test_converted_curves_are_visible_in_a_render(scene, mb):
+    # a drawn curve has no bevel, and the converted one copied it: the first F12 showed nothing
+    bpy.ops.curve.primitive_bezier_circle_add(radius=3.0)
+    assert bpy.context.active_object.data.bevel_depth == 0.0
+    assert bpy.ops.moebius.convert() == {"FINISHED"}
+    new = bpy.context.active_object
+    assert new.data.bevel_depth == pytest.approx(0.01 * 6.0, rel=1e-3)  # 1% of its extent
+    # a source with a bevel of its own keeps it
+    bpy.ops.curve.primitive_nurbs_circle_add()
+    bpy.context.active_object.data.bevel_depth = 0.123
+    assert bpy.ops.moebius.convert() == {"FINISHED"}
+    assert bpy.context.active_object.data.bevel_depth == pytest.approx(0.123)
+
+
 def test_close_open_splines_option(scene, mb):
     t = np.linspace(0, 1.5 * np.pi, 20)
     arc = np.column_stack([np.cos(t), np.sin(t), 0 * t])

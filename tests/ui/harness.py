@@ -157,6 +157,15 @@ def cmd_marker(args) -> dict:
     return {"sidebar_draws": _state["sidebar_draws"]}
 
 
+def cmd_clipboard(args) -> dict:
+    """The window manager's clipboard (set to ``set`` first, if given): the driver presses
+    Ctrl+C over a button, which copies an operator button's Python command."""
+    wm = bpy.context.window_manager
+    if "set" in args:
+        wm.clipboard = args["set"]
+    return {"clipboard": wm.clipboard}
+
+
 def _flow_object():
     obj = bpy.context.view_layer.objects.active
     return obj if obj is not None and obj.type == "CURVE" else None

@@ -14,9 +14,11 @@ Möbius tab (a click on it), and then with xdotool mouse clicks on the buttons:
 
 Buttons are found from the panel as drawn: for one frame the harness paints operator buttons
 in a marker colour (theme ``wcol_tool.inner``), a screenshot is taken, the colour restored,
-and the marked rectangles are read off in panel order (Relax is the tall one on top, Convert the
-next full-width one, Apply | Clear the row of two). The scene checks run inside Blender
-(``harness.py``); the driver only clicks, types, screenshots and compares pixels.
+and each marked rectangle is told by what Ctrl+C over it copies (an operator button's Python
+command, ``bpy.ops.moebius.relax(append=False)``), scrolling the sidebar when a button is out
+of view: no order or size of the panel's buttons is assumed. The scene checks run inside
+Blender (``harness.py``); the driver only moves the mouse, clicks, types, screenshots and
+compares pixels.
 
 Everything lands in ``out/ui/``: numbered screenshots, ``report.json`` (every check, timings),
 ``blender.log``. Exit status 0 when every check passed.
@@ -356,6 +358,16 @@ def distinct_pairs(shots) -> list[tuple[int, int]]:
     return pairs
 
 
+#: What Ctrl+C over each button the scenario presses copies (its operator and arguments).
+BUTTONS = {
+    "bpy.ops.moebius.relax(append=False)": "relax",
+    "bpy.ops.moebius.relax(append=True)": "continue",
+    "bpy.ops.moebius.convert()": "convert",
+    "bpy.ops.moebius.apply_frame()": "apply",
+    "bpy.ops.moebius.clear_animation()": "clear",
+}
+
+
 def centre(box) -> tuple[int, int]:
     return (box[0] + box[2]) // 2, (box[1] + box[3]) // 2
 
@@ -429,24 +441,71 @@ class Scenario:
                 break
         raise UITestError(f"clicking {what} had no effect")
 
-    def buttons(self, tag: str) -> dict:
-        """Find Relax, Convert, Apply, Clear in the sidebar (one-frame marker colour)."""
+    def identify(self, box) -> str:
+        """The Python command of the operator button at ``box``, as Blender copies it: Ctrl+C
+        with the mouse over an operator button copies ``bpy.ops.moebius.relax(append=False)``
+        (Blender's ui_but_copy_operator), which the harness reads from the clipboard."""
         s = self.s
-        img = self.marked_screenshot("user_interface.wcol_tool.inner", tag)
-        rows = marked_buttons(img, s.region_box("VIEW_3D", "UI"))
-        full = [r[0] for r in rows if len(r) == 1]
-        pairs = [r for r in rows if len(r) == 2]
-        found = {}
-        if len(full) >= 2:
-            found["relax"], found["convert"] = full[0], full[1]
-        if pairs:
-            found["apply"], found["clear"] = pairs[0]
-        self.report.setdefault("buttons", {})[tag] = {k: list(v) for k, v in found.items()}
-        if "relax" in found and "convert" in found:
-            h_relax = found["relax"][3] - found["relax"][1]
-            h_convert = found["convert"][3] - found["convert"][1]
-            if not h_relax > 1.2 * h_convert:  # Relax is drawn 1.4× tall
-                raise UITestError(f"marked buttons not in the expected order: {rows}")
+        s.command("clipboard", set="")
+        x, y = centre(box)
+        s.move(x, y)
+        s.move(x + 1, y)  # a motion event over the button makes it the active one
+        s.key("ctrl+c")
+        for _ in range(10):
+            time.sleep(0.2)
+            text = s.command("clipboard")["clipboard"]
+            if text:
+                return text
+        return ""
+
+    def scroll_sidebar(self, clicks: int) -> None:
+        """Turn the mouse wheel over the sidebar: ``clicks`` > 0 scrolls down, < 0 up."""
+        s = self.s
+        x, y = centre(s.region_box("VIEW_3D", "UI"))
+        s.move(x, y)
+        s.xdo("click", "--repeat", str(abs(clicks)), "--delay", "30", "5" if clicks > 0 else "4")
+        s.move(*centre(s.region_box("VIEW_3D", "WINDOW")))
+        s.settle()
+
+    def buttons(self, tag: str, wanted: tuple[str, ...]) -> dict:
+        """Find the ``wanted`` buttons (keys of :data:`BUTTONS`) in the sidebar as a person
+        would: the operator buttons are the rectangles painted in the marker colour for one
+        frame (theme ``wcol_tool.inner``), and each is told by what Ctrl+C over it copies,
+        top to bottom until every wanted one is known; the sidebar is scrolled down a page at
+        a time when one is not in view (the panel is longer than the window after a run).
+        Returns ``{name: box}`` in screen pixels, valid until the sidebar scrolls again."""
+        s = self.s
+        panel = s.region_box("VIEW_3D", "UI")
+        self.scroll_sidebar(-40)  # from the top
+        found: dict = {}
+        seen: list = []
+        identified: list = []  # every page's, for the report
+        for page in range(6):
+            img = self.marked_screenshot("user_interface.wcol_tool.inner", f"{tag}-{page}")
+            boxes = [box for row in marked_buttons(img, panel) for box in row]
+            for box in boxes:
+                if all(w in found for w in wanted):
+                    break
+                if any(box == b for b, _ in seen):
+                    continue
+                command = self.identify(box)
+                seen.append((box, command))
+                identified.append([page, list(box), command])
+                name = BUTTONS.get(command)
+                if name is not None and name not in found:
+                    found[name] = box
+            s.move(*centre(s.region_box("VIEW_3D", "WINDOW")))  # no tooltip left over
+            if all(w in found for w in wanted):
+                break
+            self.scroll_sidebar(8)
+            seen.clear()  # the same boxes hold other buttons now,
+            found.clear()  # and those found are elsewhere: the wanted ones on one page
+        self.report.setdefault("buttons", {})[tag] = {
+            "found": {k: list(v) for k, v in found.items()}, "identified": identified}
+        missing = [w for w in wanted if w not in found]
+        if missing:
+            raise UITestError(f"buttons not found in the sidebar: {missing} (identified: "
+                              f"{[c for *_, c in identified]})")
         return found
 
     def run(self) -> None:
@@ -470,9 +529,7 @@ class Scenario:
         s.screenshot("02-panel")
 
         # Convert.
-        b = self.buttons("before-convert")
-        if "convert" not in b:
-            raise UITestError("Convert button not found in the sidebar")
+        b = self.buttons("before-convert", ("convert",))
         t["convert_s"] = self.press(b["convert"], "Convert",
                                     lambda st: st.get("active") == "Helix.moebius")
         self.check("convert_made_polygon", "Helix.moebius" in s.state()["objects"])
@@ -481,7 +538,7 @@ class Scenario:
         idle = s.screenshot("03-converted")
 
         # Relax, screenshots while it runs, then Esc.
-        b = self.buttons("before-relax")
+        b = self.buttons("before-relax", ("relax",))
         t1 = time.monotonic()
         t["relax_start_s"] = self.press(b["relax"], "Relax", lambda st: st.get("running"))
         # The first iterate may wait for numba to compile (or load) the flow's kernels.
@@ -542,9 +599,7 @@ class Scenario:
             self.check(f"esc_{k}", v)
 
         # Clear Flow Animation brings back the start; Relax again runs to the end.
-        b = self.buttons("before-clear")
-        if "clear" not in b:
-            raise UITestError("Clear Flow Animation button not found")
+        b = self.buttons("before-clear", ("clear",))
         self.press(b["clear"], "Clear Flow Animation", lambda st: st.get("energy_keys") == 0)
         s.settle()
         res = s.command("check_cleared")
@@ -552,7 +607,7 @@ class Scenario:
         for k, v in res["ok"].items():
             self.check(f"clear_{k}", v)
         s.screenshot("06-cleared")
-        b = self.buttons("before-full-run")
+        b = self.buttons("before-full-run", ("relax",))
         t1 = time.monotonic()
         self.press(b["relax"], "Relax (full run)", lambda st: st.get("running"))
         # Half way through the untangling (about 70 iterates in all) for the docs' picture.
@@ -563,6 +618,8 @@ class Scenario:
                    interval=0.5)
         t["full_run_s"] = time.monotonic() - t1
         s.settle()
+        self.scroll_sidebar(-40)  # the panel from its top, for the picture
+        s.settle(quiet=2.0)
         s.screenshot("08-finished")
         res = s.command("check_run", cancelled=False)
         self.report["full_run"] = res

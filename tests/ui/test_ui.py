@@ -2,8 +2,9 @@
 
 Opt-in, because it needs Debian packages (blender, xvfb, xdotool, imagemagick, python3-numba;
 ``make ui-deps`` installs them) and takes minutes: set ``MOEBIUS_UI_TEST=1``. It is also marked
-``slow`` and ``ui``, so ``make test`` (``-m "not slow"``) never runs it; ``make ui-test`` runs the
-driver directly. The screenshots and ``report.json`` stay in ``out/ui-pytest/`` for a look.
+``slow`` and ``ui``, so the suites of ``make test`` (``-m "not slow"``) skip it: ``make test``
+runs the driver itself after them (``make ui-test``, mk/ui.mk), so that CI runs it once. The
+screenshots and ``report.json`` stay in ``out/ui-pytest/`` for a look.
 """
 
 from __future__ import annotations

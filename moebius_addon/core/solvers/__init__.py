@@ -128,7 +128,9 @@ def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
     Raises
     ------
     ValueError
-        For a size the run would refuse, or an unknown method, metric or engine; for
+        For a size the run would refuse (the dense sizes, and on the tree engine what would
+        not fit in memory: ``engine.TreeEngine.BYTES_PER_VERTEX``), or an unknown method,
+        metric or engine; for
         ``pinned`` with a method that cannot keep pins (the penalty methods).
     """
     if method not in METHOD_CLASSES:
@@ -137,6 +139,7 @@ def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
         raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
     if pinned and method not in FEASIBLE:
         raise ValueError(pinned_refusal(method))
+    engine_class(engine, n).check_size(n)  # the tree engine's memory (nothing dense)
     if METHOD_CLASSES[method]._DENSE_METRIC:
         check_dense_size(n, "method")
     elif engine_class(engine, n).holds_dense(metric):

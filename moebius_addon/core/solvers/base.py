@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._checks import check_number  # noqa: F401 - public as core.check_number
 from .._layout import OPEN_TREE_REFUSAL, as_unit_layout
 from ..engine import make_engine
 from ..metrics import METRICS
@@ -108,37 +109,6 @@ class RelaxResult:
             f"RelaxResult(fun={self.fun:.10g}, nit={self.nit}, success={self.success}, "
             f"status={int(self.status)}, message={self.message!r})"
         )
-
-
-def check_number(name: str, value, low: float = -np.inf, *, above: bool = False,
-                 integer: bool = False):
-    """``value`` as a finite float (an int with ``integer``) at least ``low`` (above it with
-    ``above``), else ValueError naming the option: NaN compares False with every bound, so
-    plain comparisons let it through to a run that then stalls for no visible reason.
-
-    Parameters
-    ----------
-    name : str
-        The option's name as the caller knows it (goes into the message).
-    value : object
-        What the caller passed.
-    low : float
-        Smallest allowed value (excluded with ``above``).
-    integer : bool
-        Require a whole number and return it as ``int``.
-    """
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not np.isfinite(x) or x < low or (above and x == low):
-        bound = "" if low == -np.inf else f" {'>' if above else '>='} {low:g}"
-        raise ValueError(f"{name} must be a finite number{bound}, got {value!r}")
-    if integer:
-        if x != int(x):
-            raise ValueError(f"{name} must be a whole number, got {value!r}")
-        return int(x)
-    return x
 
 
 def _check_names(metric: str, target_lengths: str) -> None:

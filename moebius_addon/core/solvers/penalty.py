@@ -25,6 +25,7 @@ import numpy as np
 
 from ..constraints import jacobian, make_constraints
 from ..pins import count_pins
+from ._interrupts import resumable
 from .base import HISTORY_KEYS, Run, _check_names, _OutOfTime, check_number
 
 #: Default weight α of Hencky's stretch penalty (units where the total length is 1).
@@ -83,6 +84,7 @@ class _PenaltyRun(Run):
         if count_pins(pinned):
             raise ValueError(pinned_refusal(self.NAME))
         _check_names(metric, target_lengths)
+        c1, c2 = check_number("c1", c1), check_number("c2", c2)
         if not 0 < c1 < c2 < 1:
             raise ValueError("Wolfe constants need 0 < c1 < c2 < 1")
         alpha = check_number("alpha", alpha, 0)
@@ -126,14 +128,19 @@ class _PenaltyRun(Run):
     def _set_point(self, Y, ev, solver=None):
         """Move to Y with its evaluation and the metric gradient there (with ``solver``, a
         metric built elsewhere, if given)."""
-        self.X = Y
+        msolver = solver if solver is not None else self._metric_solver(Y, ev[4])
+        z = msolver.solve(ev[2])
+        # committed whole (an interruption before leaves the last point as it was)
+        self.X, self.msolver, self.z = Y, msolver, z
         self.f, self.E, self.g, self.phi, self.jac = ev
-        self.msolver = solver if solver is not None else self._metric_solver(Y, self.jac)
-        self.z = self.msolver.solve(self.g)
         self.gz = _dot(self.g, self.z)
 
     def _init_method(self):
         pass
+
+    def _resume(self) -> None:
+        """Nothing to rebuild after an interruption: every point's metric solver is made
+        afresh and committed with it (:meth:`_set_point`)."""
 
     # -- bookkeeping ----------------------------------------------------------------------------
 
@@ -155,6 +162,7 @@ class _PenaltyRun(Run):
             f"gradient norm is still {gn:.3g}; strands are probably jammed — use more edges"
         )
 
+    @resumable
     def step(self) -> bool:
         """Advance by one accepted iterate. Returns False once the run is finished."""
         if self.done:
@@ -271,7 +279,7 @@ class LBFGS(_PenaltyRun):
     NAME = "lbfgs"
 
     def __init__(self, P, metric="hs", max_iter=200, tol=1e-6, *, history: int = 30, **options):
-        self.m = int(history)
+        self.m = check_number("history", history, 1, integer=True)
         super().__init__(P, metric, max_iter, tol, **options)
 
     def _init_method(self):

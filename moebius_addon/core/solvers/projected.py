@@ -24,6 +24,7 @@ import numpy as np
 
 from ..constraints import Constraints, jacobian, make_constraints, residual
 from ..pinned_solve import tree_borders
+from ._interrupts import resumable
 from .base import HISTORY_KEYS, Run, _check_names, check_dense_size, check_number
 
 # The modified Newton back-projection gives up on a trial step once |Φ| shrinks by less than
@@ -37,14 +38,19 @@ _MAX_TRIAL_RESIDUAL = 0.12
 # more than the energy can still move is rejected without the last Newton steps (FHW at 1648
 # edges: half the back-projections belong to rejected trials, about 6 steps each).
 _EARLY = 1e-5
+# Smallest back-projection tolerance taken at all (a run also raises it to its own rounding,
+# below): the residuals are log edge lengths computed from float64 coordinates; before that
+# floor the FHW unknot at 600 edges stalled at once with 3e-15 and ran with 1e-14, and
+# 1e-300 ran into a reported jam (Blender's Back-projection Digits go up to 14 as well).
+MIN_BACKPROJECT_TOL = 1e-14
 
 
 def check_line_search(armijo: float, growth: float) -> tuple[float, float]:
     """The explicit method's Armijo constant in (0, 1) and step growth >= 1, or ValueError
     naming the option."""
-    if not 0 < armijo < 1:
+    if not 0 < check_number("armijo", armijo) < 1:
         raise ValueError("armijo must lie in (0, 1)")
-    return armijo, check_number("growth", growth, 1)
+    return float(armijo), check_number("growth", growth, 1)
 
 
 class Relaxation(Run):
@@ -156,6 +162,11 @@ class Relaxation(Run):
         initial_step = check_number("initial_step", initial_step, 0, above=True)
         backproject_iter = check_number("backproject_iter", backproject_iter, 0, integer=True)
         backproject_tol = check_number("backproject_tol", backproject_tol, 0, above=True)
+        if backproject_tol < MIN_BACKPROJECT_TOL:
+            raise ValueError(
+                f"backproject_tol must be at least {MIN_BACKPROJECT_TOL:g}, got "
+                f"{backproject_tol!r}: the constraint residuals are log edge lengths, whose "
+                f"float64 rounding alone exceeds that (the default is 1e-10)")
         super().__init__(P, metric, max_iter, tol, energy_target=energy_target, ftol=ftol,
                          max_seconds=max_seconds, target_lengths=target_lengths, check=check,
                          equilateral=True, engine=engine, theta=theta, precision=precision,
@@ -191,16 +202,20 @@ class Relaxation(Run):
     # -- state ---------------------------------------------------------------------------------
 
     def _prepare(self, X: np.ndarray, E: float, g: np.ndarray) -> None:
-        """Steps 1–2 at the (feasible) polygon X."""
-        self.X = X
-        self.E = E
-        self.g = g
-        self.jac = jacobian(X, self.con)
-        self.engine.update(X, self.jac)
-        self.u, _ = self.engine.solve(g, np.zeros(self.con.size))
-        self.gu = float(np.einsum("ij,ij->", g, self.u))
+        """Steps 1–2 at the (feasible) polygon X; the iterate is committed whole at the end
+        (an interruption before leaves the last one as it was, :mod:`._interrupts`)."""
+        jac = jacobian(X, self.con)
+        self.engine.update(X, jac)
+        u, _ = self.engine.solve(g, np.zeros(self.con.size))
+        phi = residual(X, self.con)
+        self.X, self.E, self.g, self.jac, self.u, self.phi = X, E, g, jac, u, phi
+        self.gu = float(np.einsum("ij,ij->", g, u))
         self._gnorm = float(np.linalg.norm(g))
-        self.phi = residual(X, self.con)
+
+    def _resume(self) -> None:
+        """After an interruption inside a step: the engine built again at the accepted
+        iterate (its last update may have stopped half-way)."""
+        self.engine.update(self.X, self.jac)
 
     def _record(self, tau: float) -> None:
         h = self.history
@@ -269,6 +284,7 @@ class Relaxation(Run):
         rest = self._bp_step * rho / (1.0 - rho)
         return 20.0 * self._gnorm * rest + 1e-14 * abs(self.E)
 
+    @resumable
     def step(self) -> bool:
         """Advance by one accepted iterate. Returns False once the run is finished."""
         if self.done:
@@ -306,9 +322,9 @@ class Relaxation(Run):
             if EQ <= target and self.engine.contact_time(X, X - Q, 1.0, self.eps) >= 1.0:
                 EQ, gQ = self.engine.energy_gradient(Q)
                 if EQ <= target:
+                    self._prepare(Q, EQ, gQ)
                     self.tau = tau
                     self.nit += 1
-                    self._prepare(Q, EQ, gQ)
                     self._record(tau)
                     self._check_stop(E)
                     return not self.done

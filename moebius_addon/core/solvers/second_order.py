@@ -21,7 +21,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..constraints import jacobian, residual
-from .base import _OutOfTime
+from ._interrupts import resumable
+from .base import _OutOfTime, check_number
 from .projected import Relaxation
 
 # Forward-difference displacement of a Hessian-vector product: the fastest vertex moves this
@@ -49,15 +50,14 @@ class _Feasible(Relaxation):
         # Relaxation._prepare's steps 1–2, keeping λ of the one saddle-point solve
         # [[G, Cᵀ], [C, 0]] [u; λ] = [g; 0] (the Lagrangian gradient is g − Cᵀλ = G u): calling
         # it and solving again for λ doubled the solves and the Krylov iterations per iterate
-        self.X = X
-        self.E = E
-        self.g = g
-        self.jac = jacobian(X, self.con)
-        self.engine.update(X, self.jac)
-        self.u, self.lam = self.engine.solve(g, np.zeros(self.con.size))
-        self.gu = float(np.einsum("ij,ij->", g, self.u))
+        # committed whole at the end, as Relaxation._prepare
+        jac = jacobian(X, self.con)
+        self.engine.update(X, jac)
+        u, lam = self.engine.solve(g, np.zeros(self.con.size))
+        phi = residual(X, self.con)
+        self.X, self.E, self.g, self.jac, self.u, self.lam, self.phi = X, E, g, jac, u, lam, phi
+        self.gu = float(np.einsum("ij,ij->", g, u))
         self._gnorm = float(np.linalg.norm(g))
-        self.phi = residual(X, self.con)
         self.hess_products = getattr(self, "hess_products", 0)
 
     def _lagrangian_gradient(self, Y):
@@ -112,6 +112,7 @@ class _Feasible(Relaxation):
             rz = rz_new
         return s, False
 
+    @resumable
     def step(self) -> bool:
         """Advance by one accepted iterate. Returns False once the run is finished."""
         if self.done:
@@ -125,9 +126,9 @@ class _Feasible(Relaxation):
             return self._time_up()
 
     def _accept(self, Q, EQ, gQ, step):
-        self.nit += 1
         E = self.E
         self._prepare(Q, EQ, gQ)
+        self.nit += 1
         self._record(step)
         self._check_stop(E)
         return not self.done
@@ -156,9 +157,9 @@ class ImplicitProjectedGradient(_Feasible):
 
     def __init__(self, P, metric="hs", max_iter=200, tol=1e-6, *, newton_iter: int = 2,
                  cg_iter: int = 10, cg_rtol: float = 0.1, armijo: float = 1e-4, **options):
-        self.newton_iter = int(newton_iter)
-        self.cg_iter = int(cg_iter)
-        self.cg_rtol = float(cg_rtol)
+        self.newton_iter = check_number("newton_iter", newton_iter, 1, integer=True)
+        self.cg_iter = check_number("cg_iter", cg_iter, 1, integer=True)
+        self.cg_rtol = check_number("cg_rtol", cg_rtol, 0, above=True)
         # the explicit method's default growth (8) suits the collision-bounded first trial;
         # the implicit step starts from growth × τ alone, measured with 1.5 (bench/paper.py)
         options.setdefault("growth", 1.5)
@@ -266,10 +267,13 @@ class TrustRegion(_Feasible):
 
     def __init__(self, P, metric="hs", max_iter=200, tol=1e-6, *, newton_rtol: float = 1e-2,
                  cg_iter: int = 20, cg_rtol: float = 1e-2, eta: float = 0.1, **options):
-        self.newton_rtol = float(newton_rtol)
-        self.cg_iter = int(cg_iter)
-        self.cg_rtol = float(cg_rtol)
-        self.eta = float(eta)
+        self.newton_rtol = check_number("newton_rtol", newton_rtol, 0)
+        self.cg_iter = check_number("cg_iter", cg_iter, 1, integer=True)
+        self.cg_rtol = check_number("cg_rtol", cg_rtol, 0, above=True)
+        self.eta = check_number("eta", eta, 0)
+        if not self.eta < 1:
+            raise ValueError(f"eta must lie in [0, 1) (the share of the predicted decrease a "
+                             f"step must achieve), got {eta!r}")
         self.u_prev = None
         super().__init__(P, metric, max_iter, tol, **options)
         self.gn0 = float(np.sqrt(max(self.gu, 0.0)))
