@@ -63,7 +63,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--keep-open", action="store_true",
                    help="keep open splines open (their ends where they are) and relax them as "
                         "open curves (exact engine)")
-    p.add_argument("--seed", type=int, default=0, help="seed of --knot random")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of --knot random and of --restarts (default %(default)s)")
     p.add_argument("--pq", type=int, nargs=2, default=(2, 3), metavar=("P", "Q"),
                    help="p and q of --knot torus")
     p.add_argument("--metric", default="hs", choices=[m for m, *_ in api.METRICS])
@@ -87,6 +88,15 @@ def _parser() -> argparse.ArgumentParser:
                    default=DEFAULT_TOLERANCE, metavar="TOL",
                    help="stop once the gradient norm in the metric is below TOL (default "
                         "%(default)g)")
+    p.add_argument("--no-refine", dest="refine", action="store_false",
+                   help="do not add edges: refuse a start too coarse for its shape and stop "
+                        "where strands jam, as before refinement existed (default: refine)")
+    p.add_argument("--max-edges", type=int, default=None, metavar="N",
+                   help="most edges refinement may reach (default: 4 times the start's, at "
+                        "least 2000, within what the metric and engine can run)")
+    p.add_argument("--restarts", type=int, default=0, metavar="K",
+                   help="after converging, relax K small random nudges of the result and keep "
+                        "the lowest energy (projected gradient methods; default %(default)s)")
     p.add_argument("--frame-start", type=int, default=1,
                    help="frame of the start shape (default %(default)s)")
     p.add_argument("--stride", type=int, default=1,
@@ -158,14 +168,18 @@ def _run(args, run: dict, notation: str | None):
                                   penalty=args.penalty, engine=args.engine,
                                   theta=args.theta, max_iterations=args.max_iterations,
                                   tolerance=args.tolerance, frame_start=args.frame_start,
-                                  keyframe_stride=args.stride,
-                                  progress=_say if args.verbose else False)
+                                  keyframe_stride=args.stride, refine=args.refine,
+                                  max_edges=args.max_edges, restarts=args.restarts,
+                                  seed=args.seed, progress=_say if args.verbose else False)
         frames = keyframes.keyed_frames(obj)
         say(f"{method}{f' ({why})' if why else ''}, "
             f"{result.stats['engine']} engine, {result.nit} iterations in "
             f"{time.perf_counter() - t0:.2f} s, energy "
             f"{result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, keyed frames "
             f"{frames[0]:g}-{frames[-1]:g} ({result.message})")
+        for r in getattr(result, "refinements", []):
+            say(f"refined {r['edges_before']} -> {r['edges_after']} edges at iteration "
+                f"{r['iteration']} ({r['reason']})")
         kept, words = ((None, "an open curve has no knot type") if is_open
                        else api.type_kept(start, api.object_curves(obj)))
         if kept is False:
@@ -192,6 +206,15 @@ def main(argv: list[str]) -> int:
         api.check_relax_options(args.max_iterations, args.tolerance, args.stride,
                                 args.frame_start, args.method, args.penalty, args.engine,
                                 args.theta)
+        if args.max_edges is not None and args.max_edges < 1:
+            raise ValueError(f"--max-edges must be a positive whole number, got "
+                             f"{args.max_edges}")
+        if args.restarts < 0:
+            raise ValueError(f"--restarts must be 0 or more, got {args.restarts}")
+        if args.restarts and args.method in api.PENALTY_METHODS:
+            raise ValueError(f"--restarts needs a projected gradient method (they keep the "
+                             f"edge lengths exactly); --method {args.method} holds them by a "
+                             f"penalty")
         run = dict(metric=args.metric, method=args.method, engine=args.engine)
         if args.knot:
             api.check_knot(args.knot, args.edges, **run)

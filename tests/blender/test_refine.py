@@ -95,3 +95,37 @@ def test_continue_after_a_refined_run(jammed, scene, mb):
     assert bpy.ops.moebius.relax(append=True) == {"FINISHED"}
     assert mb.keyed_frames(obj) == list(range(1, 77))
     assert [len(sp.points) for sp in obj.data.splines] == [360]
+
+
+def test_the_command_line_refines_and_says_so(scene, mb, core, tmp_path, capfd):
+    from importlib import import_module
+
+    cli = import_module(mb.__name__ + ".cli")
+    _coarse_trefoil(core)
+    blend = tmp_path / "coarse.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    capfd.readouterr()
+    # a curve too coarse for its shape: refined to 48 edges by default, and the line says so
+    assert cli.main(["--open", str(blend), "--object", "Coarse", "--max-iterations", "2"]) == 0
+    out = capfd.readouterr().out
+    assert "refined 24 -> 48 edges at iteration 0 (start too coarse" in out
+    assert [len(sp.points) for sp in bpy.data.objects["Coarse"].data.splines] == [48]
+    # --no-refine keeps the refusal; bad values of the new options are refused before any work
+    for argv, words in (
+            (["--no-refine"], "too coarse"),
+            (["--max-edges", "0"], "--max-edges must be a positive whole number, got 0"),
+            (["--restarts", "-1"], "--restarts must be 0 or more, got -1"),
+            (["--restarts", "1", "--method", "lbfgs"], "--restarts needs a projected gradient")):
+        assert cli.main(["--open", str(blend), "--object", "Coarse", "--max-iterations", "2",
+                         *argv]) == 1, argv
+        assert words in capfd.readouterr().err, argv
+        assert [len(sp.points) for sp in bpy.data.objects["Coarse"].data.splines] == [24], argv
+    # a restart runs after convergence, seeded: the same energy twice
+    energies = []
+    for _ in range(2):
+        capfd.readouterr()
+        assert cli.main(["--knot", "3_1", "--edges", "60", "--max-iterations", "300",
+                         "--restarts", "1", "--seed", "3", "--tolerance", "1e-2"]) == 0
+        assert "1 restarts, " in capfd.readouterr().out
+        energies.append(bpy.data.objects["Knot 3_1"][mb.api.ENERGY_PROP])
+    assert energies[0] == energies[1]
