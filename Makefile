@@ -20,15 +20,12 @@ $(STAMP): pyproject.toml
 include mk/lines.mk
 
 # CI runs this (via .ci/run): the whole suite except runs marked slow on Blender 5.0 (.venv),
-# then the Blender tests marked `lines` on Blender 4.2, 4.5 and 5.2 (mk/lines.mk), then the
-# add-on in a real Blender window (mk/ui.mk: Debian's Blender 3.4 under Xvfb, the packages
-# installed with apt-get when missing). Every part runs even when one before it failed; the
-# status is the worst.
-test: $(STAMP) $(TEST_REPO)/index.json $(LINE_STAMPS)
-	@status=0; t=$$(date +%s); \
-	MOEBIUS_TEST_REPO=$(TEST_REPO) $(PY) -m pytest -q -m "not slow" || status=1; \
-	echo "[time] whole suite, Blender 5.0: $$(( $$(date +%s) - t )) s"; \
-	$(RUN_LINES); $(RUN_UI); exit $$status
+# the Blender tests marked `lines` on Blender 4.2, 4.5 and 5.2 (mk/lines.mk) and the add-on in a
+# real Blender window (mk/ui.mk: Debian's Blender 3.4 under Xvfb, the packages installed with
+# apt-get when missing), in two streams side by side (mk/run_tests.py: most parts use one core).
+# Every part runs even when one before it failed; the status is the worst.
+test: $(STAMP) $(LINE_STAMPS)
+	@$(PY) mk/run_tests.py --python $(PY) --repo $(TEST_REPO) --lines $(LINES) --make "$(MAKE)"
 
 test-all: $(STAMP) $(TEST_REPO)/index.json
 	MOEBIUS_TEST_REPO=$(TEST_REPO) $(PY) -m pytest -q

@@ -1,6 +1,6 @@
 # The add-on in a real Blender window under Xvfb, driven as a person would (docs/ui-testing.md).
 # Included from the main Makefile (`include mk/ui.mk`). Needs only Debian packages, not .venv:
-# the driver runs on Debian's python3 with python3-numpy. `make test` runs it last (RUN_UI).
+# the driver runs on Debian's python3 with python3-numpy. `make test` runs it (mk/run_tests.py).
 #
 #   make ui-test        install the packages if missing, run the scenario; out/ui/ (report.json,
 #                       screenshots); exit status 0 when every check passed (part of make test)
@@ -15,11 +15,6 @@ UI_OUT  ?= out/ui
 UI_SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 .PHONY: ui-deps ui-test ui-test-cold ui-docs-img legacy-addon
-
-# The UI test as a part of `make test`, timed (a shell fragment like RUN_LINES: it sets status
-# to 1 when the test fails, the packages' install included, and lets the other parts run).
-RUN_UI = t=$$(date +%s); $(MAKE) --no-print-directory ui-test || status=1; \
-	echo "[time] UI test, Blender 3.4 window: $$(( $$(date +%s) - t )) s"
 
 # Idempotent and quiet: apt-get runs only when one of the packages is missing (about 90 MB).
 ui-deps:
