@@ -1,14 +1,16 @@
-"""`make test`: every part of the suite, in two streams side by side (CI has two cores).
+"""`make test`: every part of the suite, on two workers side by side (CI has two cores).
 
 Most parts run one process on one core (pytest, numba's compiler, Blender), so run one after
-the other they left the second core idle for most of `make test`. Here two streams share the
-machine, each running its parts in order:
+the other they left the second core idle for most of `make test`. Here two workers take the
+parts in this order, each the next one it can run:
 
-* stream 1: the test repository (``make build/test-repo/index.json``: the zip with its kernel
-  cache, two compiling processes), then the Blender tests on 5.0 (``tests/blender`` in .venv);
-* stream 2: the core suite (everything outside ``tests/blender``), the UI test in a real
-  Blender window (``make ui-test``), then the ``lines`` tests on 4.2, 4.5 and 5.2, which wait
-  for stream 1's repository.
+1. the test repository (``make build/test-repo/index.json``: the zip with its kernel cache,
+   two compiling processes);
+2. the UI test in a real Blender window (``make ui-test``), beside the repository's build;
+3. the core suite (everything outside ``tests/blender``), once the repository is built: it
+   loads the kernels the zip ships (``$MOEBIUS_KERNEL_CACHE``) rather than compiling them;
+4. the Blender tests on 5.0 (``tests/blender`` in .venv), once the repository is built;
+5. the ``lines`` tests on 4.2, 4.5 and 5.2, once the repository is built.
 
 Every part runs even when one before it failed (a part that needs the repository is failed
 when the repository could not be built); each part's output is printed whole when it ends,
@@ -21,10 +23,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import subprocess
 import sys
 import threading
 import time
+import zipfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,7 +50,7 @@ class Runner:
         if needs_repo:
             self.repo_built.wait()
             if not self.repo_ok:
-                self._report(name, "FAIL", 0.0, "not run: the test repository was not built\n")
+                self.fail(name, "not run: the test repository was not built")
                 return False
         LOGS.mkdir(parents=True, exist_ok=True)
         log = LOGS / (name.replace(" ", "-").replace("/", "-") + ".log")
@@ -58,6 +62,9 @@ class Runner:
         self._report(name, "PASS" if rc == 0 else "FAIL", seconds, log.read_text())
         return rc == 0
 
+    def fail(self, name: str, why: str) -> None:
+        self._report(name, "FAIL", 0.0, why + "\n")
+
     def _report(self, name: str, verdict: str, seconds: float, text: str) -> None:
         with self.lock:
             self.results.append((name, verdict, seconds))
@@ -68,6 +75,19 @@ class Runner:
 
     def _elapsed(self) -> float:
         return time.perf_counter() - self.start
+
+
+def unpack_kernel_cache(repo: Path, dest: Path) -> None:
+    """``core/kernel_cache`` of the repository's linux-x64 zip, unpacked into ``dest``."""
+    shutil.rmtree(dest, ignore_errors=True)
+    (zip_path,) = repo.glob("*-linux_x64.zip")
+    prefix = "core/kernel_cache/"
+    with zipfile.ZipFile(zip_path) as z:
+        for name in z.namelist():
+            if name.startswith(prefix) and not name.endswith("/"):
+                target = dest / name[len(prefix):]
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_bytes(z.read(name))
 
 
 def main() -> int:
@@ -85,26 +105,51 @@ def main() -> int:
     # the slowest tests of each part are listed, to see where CI's minutes go
     pytest = [args.python, "-m", "pytest", "-q", "--durations=15"]
 
-    def stream1() -> None:
-        try:
-            run.repo_ok = run.part("test repository", [*make, f"{args.repo}/index.json"])
-        finally:
-            run.repo_built.set()
-        run.part("Blender 5.0 (tests/blender)", [*pytest, "-m", "not slow", "tests/blender"],
-                 repo_env, needs_repo=True)
+    # the core suite loads the kernels of the test zip (compiled for the generic CPU, as users
+    # on linux-x64 run them) instead of compiling every one natively (core/_shipped_cache.py);
+    # the Blender tests install the zip, whose own cache they test, so they are not pointed
+    core_env = {"MOEBIUS_KERNEL_CACHE": str(ROOT / "build" / "test-kernel-cache")}
+    # (name, argv, env, needs the repository), in the order the workers take them
+    parts = [("test repository", [*make, f"{args.repo}/index.json"], None, False)]
+    if not args.no_ui:
+        parts.append(("UI test, Blender 3.4 window", [*make, "ui-test"], None, False))
+    parts += [("core suite (all but tests/blender)",
+               [*pytest, "-m", "not slow", "tests", "--ignore=tests/blender"], core_env, True),
+              ("Blender 5.0 (tests/blender)", [*pytest, "-m", "not slow", "tests/blender"],
+               repo_env, True)]
+    queue = threading.Condition()
 
-    def stream2() -> None:
-        run.part("core suite (all but tests/blender)", [
-            *pytest, "-m", "not slow", "tests",
-            "--ignore=tests/blender"])
-        if not args.no_ui:
-            run.part("UI test, Blender 3.4 window", [*make, "ui-test"])
-        for line in args.lines:
-            run.part(f"Blender {line} (lines)", [
-                f".venv-blender-{line}/bin/python", "-m", "pytest", "-q", "--durations=15", "-m",
-                "lines and not slow", "tests/blender"], repo_env, needs_repo=True)
+    def take():
+        """The next part this worker can run (None when none is left); one that needs the
+        repository waits for it unless a part that does not is left."""
+        with queue:
+            while parts:
+                for i, p in enumerate(parts):
+                    if not p[3] or run.repo_built.is_set():
+                        return parts.pop(i)
+                queue.wait()
+            return None
 
-    threads = [threading.Thread(target=stream1), threading.Thread(target=stream2)]
+    def worker() -> None:
+        while (p := take()) is not None:
+            name, argv, env, needs_repo = p
+            ok = False
+            try:
+                ok = run.part(name, argv, env, needs_repo)
+                if ok and name == "test repository":
+                    try:
+                        unpack_kernel_cache(ROOT / args.repo, ROOT / "build" / "test-kernel-cache")
+                    except (OSError, ValueError, zipfile.BadZipFile) as err:
+                        run.fail(name, f"its kernel cache could not be unpacked: {err}")
+                        ok = False
+            finally:
+                if name == "test repository":
+                    run.repo_ok = ok
+                    run.repo_built.set()
+                    with queue:
+                        queue.notify_all()
+
+    threads = [threading.Thread(target=worker) for _ in range(2)]
     for t in threads:
         t.start()
     for t in threads:
@@ -113,7 +158,7 @@ def main() -> int:
     print("\nmake test:")
     for name, verdict, seconds in run.results:
         print(f"  {verdict}  {seconds:6.0f} s  {name}")
-    print(f"[time] make test, both streams: {run._elapsed():.0f} s; "
+    print(f"[time] make test, two workers: {run._elapsed():.0f} s; "
           f"{'failed: ' + ', '.join(failed) if failed else 'every part passed'}", flush=True)
     return 1 if failed else 0
 

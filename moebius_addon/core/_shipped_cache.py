@@ -19,6 +19,7 @@ differ); docs/benchmarks.md ("Compile time") has the speed measured.
 from __future__ import annotations
 
 import io
+import os
 import pickle
 import sys
 from pathlib import Path
@@ -26,8 +27,13 @@ from pathlib import Path
 from numba.core import caching
 
 #: where the shipped cache lives, one directory per source directory of the package
-#: (``kernel_cache/core`` for ``core/*.py``)
-SHIPPED = Path(__file__).resolve().parent / "kernel_cache"
+#: (``kernel_cache/core`` for ``core/*.py``). ``$MOEBIUS_KERNEL_CACHE`` names another: ``make
+#: test`` points a checkout at the cache its test zip ships, whose index stamps are the
+#: checkout's own files' (the build copies them with their times), so the suite loads those
+#: kernels instead of compiling them a third time (mk/run_tests.py); a kernel whose source
+#: differs from what the cache was built from is compiled as before (numba's stamp check).
+SHIPPED = Path(os.environ.get("MOEBIUS_KERNEL_CACHE")
+               or Path(__file__).resolve().parent / "kernel_cache").resolve()
 PACKAGE_ROOT = Path(__file__).resolve().parents[1]
 #: LLVM's name of the CPU the shipped kernels were compiled for
 GENERIC_CPU = "x86-64-v3"
