@@ -90,33 +90,48 @@ def unpack_kernel_cache(repo: Path, dest: Path) -> None:
                 target.write_bytes(z.read(name))
 
 
-def main() -> int:
+def plan(args) -> list[tuple[str, list[str], dict | None, bool]]:
+    """The parts as (name, argv, environment, needs the repository), in the order the
+    workers take them."""
+    repo_env = {"MOEBIUS_TEST_REPO": args.repo}
+    make = [args.make, "--no-print-directory"]
+    # the slowest tests of each part are listed, to see where CI's minutes go
+    pytest = ["-m", "pytest", "-q", "--durations=15"]
+    # the core suite loads the kernels of the test zip (compiled for the generic CPU, as users
+    # on linux-x64 run them) instead of compiling every one natively (core/_shipped_cache.py);
+    # the Blender tests install the zip, whose own cache they test, so they are not pointed
+    core_env = {"MOEBIUS_KERNEL_CACHE": str(ROOT / "build" / "test-kernel-cache")}
+    parts = [("test repository", [*make, f"{args.repo}/index.json"], None, False)]
+    if not args.no_ui:
+        parts.append(("UI test, Blender 3.4 window", [*make, "ui-test"], None, False))
+    parts += [("core suite (all but tests/blender)",
+               [args.python, *pytest, "-m", "not slow", "tests", "--ignore=tests/blender"],
+               core_env, True),
+              ("Blender 5.0 (tests/blender)",
+               [args.python, *pytest, "-m", "not slow", "tests/blender"], repo_env, True)]
+    for line in args.lines:
+        parts.append((f"Blender {line} (lines)",
+                      [f".venv-blender-{line}/bin/python", *pytest, "-m", "lines and not slow",
+                       "tests/blender"], repo_env, True))
+    return parts
+
+
+def parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--python", default=str(ROOT / ".venv" / "bin" / "python"))
     ap.add_argument("--repo", default="build/test-repo")
     ap.add_argument("--lines", nargs="*", default=["4.2", "4.5", "5.2"])
     ap.add_argument("--make", default=os.environ.get("MAKE", "make"))
     ap.add_argument("--no-ui", action="store_true", help="leave out the real-window UI test")
-    args = ap.parse_args()
+    return ap
+
+
+def main() -> int:
+    args = parser().parse_args()
 
     run = Runner(args.repo)
-    repo_env = {"MOEBIUS_TEST_REPO": args.repo}
-    make = [args.make, "--no-print-directory"]
-    # the slowest tests of each part are listed, to see where CI's minutes go
-    pytest = [args.python, "-m", "pytest", "-q", "--durations=15"]
-
-    # the core suite loads the kernels of the test zip (compiled for the generic CPU, as users
-    # on linux-x64 run them) instead of compiling every one natively (core/_shipped_cache.py);
-    # the Blender tests install the zip, whose own cache they test, so they are not pointed
-    core_env = {"MOEBIUS_KERNEL_CACHE": str(ROOT / "build" / "test-kernel-cache")}
-    # (name, argv, env, needs the repository), in the order the workers take them
-    parts = [("test repository", [*make, f"{args.repo}/index.json"], None, False)]
-    if not args.no_ui:
-        parts.append(("UI test, Blender 3.4 window", [*make, "ui-test"], None, False))
-    parts += [("core suite (all but tests/blender)",
-               [*pytest, "-m", "not slow", "tests", "--ignore=tests/blender"], core_env, True),
-              ("Blender 5.0 (tests/blender)", [*pytest, "-m", "not slow", "tests/blender"],
-               repo_env, True)]
+    parts = plan(args)
+    names = [p[0] for p in parts]
     queue = threading.Condition()
 
     def take():
@@ -154,6 +169,9 @@ def main() -> int:
         t.start()
     for t in threads:
         t.join()
+    for name in names:  # a part that never reported (its worker died) is a failure too
+        if name not in {r[0] for r in run.results}:
+            run.fail(name, "did not run")
     failed = [name for name, verdict, _ in run.results if verdict != "PASS"]
     print("\nmake test:")
     for name, verdict, seconds in run.results:

@@ -1,0 +1,32 @@
+"""`make test`'s plan (mk/run_tests.py): every part CI must run is in it."""
+
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "mk"))
+import run_tests  # noqa: E402 - mk/ is not a package
+
+sys.path.pop(0)
+
+
+def test_every_part_is_planned_in_order():
+    args = run_tests.parser().parse_args(["--lines", "4.2", "4.5", "5.2"])
+    parts = run_tests.plan(args)
+    assert [p[0] for p in parts] == [
+        "test repository", "UI test, Blender 3.4 window", "core suite (all but tests/blender)",
+        "Blender 5.0 (tests/blender)", "Blender 4.2 (lines)", "Blender 4.5 (lines)",
+        "Blender 5.2 (lines)"]
+    needs_repo = {name for name, _, _, needs in parts if needs}
+    assert "test repository" not in needs_repo and "UI test, Blender 3.4 window" not in needs_repo
+    core = dict((p[0], p) for p in parts)["core suite (all but tests/blender)"]
+    assert "--ignore=tests/blender" in core[1] and "MOEBIUS_KERNEL_CACHE" in core[2]
+    lines = [p for p in parts if p[0].endswith("(lines)")]
+    assert all("lines and not slow" in p[1] and p[1][0].startswith(".venv-blender-")
+               for p in lines)
+
+
+def test_the_makefile_passes_the_lines_of_lines_mk():
+    makefile = (ROOT / "Makefile").read_text()
+    assert "mk/run_tests.py" in makefile and "--lines $(LINES)" in makefile
+    assert "LINES     := 4.2 4.5 5.2" in (ROOT / "mk" / "lines.mk").read_text()
