@@ -240,12 +240,6 @@ def report() -> None:
             if "error" not in r:
                 w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v)
                             for k, v in r.items()})
-    groups = {
-        "knots ≤ 9 crossings, braid tangle": lambda r: r["name"] != "3_1" or not
-        r["id"].startswith("trefoil"),
-        "trefoils, braid tangles": lambda r: r["id"].startswith("trefoil-braid"),
-        "trefoils, crumpled": lambda r: r["id"].startswith("trefoil-crumple"),
-    }
     print("| starts | runs | type kept | within 1 % of the table | refused/errors | "
           "iterations median / max | CPU s median / max | refinements per run (mean, max) |")
     print("|---|---|---|---|---|---|---|---|")
@@ -260,7 +254,6 @@ def report() -> None:
                 "trefoil-braid")]),
             ("trefoils, crumpled", [r for r in rows if r["id"].startswith(
                 "trefoil-crumple")])]
-    del groups
     for label, rs in sets:
         ok = [r for r in rs if "error" not in r]
         if not rs:

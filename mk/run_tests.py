@@ -47,8 +47,7 @@ class Runner:
     def part(self, name: str, argv: list[str], env: dict | None = None,
              needs_repo: bool = False) -> bool:
         """Run one part, its output into a log file; print the log whole when it ends."""
-        if needs_repo:
-            self.repo_built.wait()
+        if needs_repo:  # handed out only once the repository's build has ended (take())
             if not self.repo_ok:
                 self.fail(name, "not run: the test repository was not built")
                 return False
@@ -70,10 +69,10 @@ class Runner:
             self.results.append((name, verdict, seconds))
             bar = "=" * 20
             print(f"\n{bar} {name}: {verdict} {bar}\n{text.rstrip()}", flush=True)
-            print(f"[time] {name}: {seconds:.0f} s (at {self._elapsed():.0f} s of make test)",
+            print(f"[time] {name}: {seconds:.0f} s (at {self.elapsed():.0f} s of make test)",
                   flush=True)
 
-    def _elapsed(self) -> float:
+    def elapsed(self) -> float:
         return time.perf_counter() - self.start
 
 
@@ -176,7 +175,7 @@ def main() -> int:
     print("\nmake test:")
     for name, verdict, seconds in run.results:
         print(f"  {verdict}  {seconds:6.0f} s  {name}")
-    print(f"[time] make test, two workers: {run._elapsed():.0f} s; "
+    print(f"[time] make test, two workers: {run.elapsed():.0f} s; "
           f"{'failed: ' + ', '.join(failed) if failed else 'every part passed'}", flush=True)
     return 1 if failed else 0
 
