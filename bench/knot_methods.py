@@ -3,6 +3,7 @@
     python bench/knot_methods.py                  # all 36 entries, 200 iterations (about 8 min)
     python bench/knot_methods.py --names 4_1 7_3 --max-iter 600
     python bench/knot_methods.py --equal-time    # explicit given the implicit run's seconds
+    python bench/knot_methods.py --equal-time --tangled-links --max-iter 5000 --tol 1e-4
 
 For each knot at its default edge count: iterations, seconds, final energy above the lowest
 of the three methods, and whether the run converged (``success``: gradient below ``tol`` or
@@ -26,10 +27,20 @@ def main():
     ap.add_argument("--equal-time", action="store_true",
                     help="per knot: the implicit method, then the explicit one with the same "
                          "seconds and no iteration limit")
+    ap.add_argument("--tangled-links", action="store_true",
+                    help="with --equal-time: the links of bench/untangle.py, their tangled "
+                         "starts (names from there unless --names)")
+    ap.add_argument("--tol", type=float, default=1e-6)
     args = ap.parse_args()
+    if args.tangled_links:
+        import untangle
+
+        tasks = {t["name"]: t for t in untangle.tasks() if t["name"] in untangle.LINKS}
+        starts = [(n, untangle.start_of(tasks[n])) for n in (args.names or untangle.LINKS)]
+        return equal_time(starts, args.max_iter, args.tol)
     names = args.names or core.knots.names()
     if args.equal_time:
-        return equal_time(names, args.max_iter)
+        return equal_time([(n, core.knots.named(n)) for n in names], args.max_iter, args.tol)
     for m in METHODS:  # compile every kernel before timing
         core.relax(core.knots.named("3_1"), method=m, max_iter=3)
     print(f"{'knot':5s} {'N':>4s} | " + " | ".join(f"{m[:24]:>24s}" for m in METHODS))
@@ -57,29 +68,32 @@ def main():
               f"(within 1e-3) on {low}")
 
 
-def equal_time(names, max_iter):
-    """Whether the explicit method, given the seconds the implicit one took on a knot (its
-    ``max_iter`` iterations or convergence), reaches as low an energy."""
+def equal_time(starts, max_iter, tol):
+    """Whether the explicit method, given the seconds the implicit one took on a curve (its
+    ``max_iter`` iterations or convergence), reaches as low an energy; ``starts`` are
+    (name, polygon or link) pairs."""
     for m in METHODS[:2]:
         core.relax(core.knots.named("3_1"), method=m, max_iter=3)
-    print(f"{'knot':5s} {'N':>4s} | {'implicit':>30s} | {'explicit, same seconds':>30s} | diff")
+    print(f"{'curve':9s} {'N':>4s} | {'implicit':>34s} | {'explicit, same seconds':>34s} | "
+          "diff")
     lower = 0
-    for name in names:
-        P = core.knots.named(name)
+    for name, P in starts:
+        n = sum(len(p) for p in P) if isinstance(P, list) else len(P)
         t = time.perf_counter()
-        imp = core.relax(P, method="projected_gradient_implicit", max_iter=max_iter)
+        imp = core.relax(P, method="projected_gradient_implicit", max_iter=max_iter, tol=tol)
         sec = time.perf_counter() - t
         t = time.perf_counter()
-        exp = core.relax(P, method="projected_gradient", max_iter=100 * max_iter,
+        exp = core.relax(P, method="projected_gradient", max_iter=100 * max_iter, tol=tol,
                          max_seconds=sec)
         sec_e = time.perf_counter() - t
         diff = float(exp.fun) - float(imp.fun)
         lower += diff > 1e-3
-        print(f"{name:5s} {len(P):4d} | {imp.nit:4d} it {sec:6.2f} s E={float(imp.fun):10.4f} | "
-              f"{exp.nit:4d} it {sec_e:6.2f} s E={float(exp.fun):10.4f} | {diff:+8.4f}",
+        print(f"{name:9s} {n:4d} | {imp.nit:4d} it {sec:7.2f} s E={float(imp.fun):10.4f}"
+              f"{'*' if imp.success else ' '} | {exp.nit:4d} it {sec_e:7.2f} s "
+              f"E={float(exp.fun):10.4f}{'*' if exp.success else ' '} | {diff:+8.4f}",
               flush=True)
-    print(f"{len(names)} knots: the implicit method ended lower (by more than 1e-3) than the "
-          f"explicit one in the same time on {lower}")
+    print(f"{len(starts)} curves: the implicit method ended lower (by more than 1e-3) than the "
+          f"explicit one in the same time on {lower} (* converged)")
 
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@ The starts (``core.tangle``, seeded):
   conjugations) and 50 crumples (20–500 steps), at 100 edges (the trefoil's ``n1``).
 
 Each start is relaxed by ``core.relax`` as the Blender panel's Relax does by default (method
-*Automatic*: the implicit projected gradient for a knot, the explicit one for a link;
+*Automatic*: the implicit projected gradient for a knot or a link;
 metric ``hs``; refinement on) with ``tol=1e-4`` (the table's) and ``--max-iter`` iterations.
 Checked for each: its knot or link type at the end (``core.identify`` names the start's
 entry), no two edges of any accepted iterate closer than the run's contact distance (a
@@ -149,7 +149,7 @@ def run_task(task: dict, max_iter: int) -> dict:
     P = start_of(task)
     links = isinstance(P, list)
     n0 = sum(len(p) for p in P) if links else len(P)
-    method = "projected_gradient" if links else "projected_gradient_implicit"
+    method = "projected_gradient_implicit"  # Automatic's choice for knots and links
     worst = [closest_edges(P)]
 
     def check(state):

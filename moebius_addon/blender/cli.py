@@ -69,8 +69,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="p and q of --knot torus")
     p.add_argument("--metric", default="hs", choices=[m for m, *_ in api.METRICS])
     p.add_argument("--method", default=api.DEFAULT_METHOD, choices=[m for m, *_ in api.METHODS],
-                   help="optimizer (default auto: the implicit gradient for a knotted curve, "
-                        "the paper's explicit projected gradient for unknots and links); ncg, "
+                   help="optimizer (default auto: the implicit gradient for a knotted curve or "
+                        "a link, the paper's explicit projected gradient for unknots); ncg, "
                         "lbfgs and nesterov hold the edge lengths by a penalty")
     p.add_argument("--engine", default=api.DEFAULT_ENGINE, choices=[e for e, *_ in api.ENGINES],
                    help="how the energy is evaluated (default auto: exact below "

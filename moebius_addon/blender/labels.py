@@ -39,8 +39,8 @@ DEFAULT_TOLERANCE = 1e-6
 _METHOD_TEXT = {
     AUTO_METHOD: (
         "Automatic",
-        "Implicit Gradient for a knotted curve (knot determinant above 1), Projected Gradient "
-        "for unknots and links: the faster of the two on each, as measured (default)"),
+        "Implicit Gradient for a knotted curve (knot determinant above 1) or a link, Projected "
+        "Gradient for unknots: the faster of the two on each, as measured (default)"),
     "projected_gradient": (
         "Projected Gradient",
         "The paper's explicit projected Sobolev gradient with Armijo steps: keeps edge lengths "

@@ -38,7 +38,7 @@ def acting_settings(method: str, engine: str = DEFAULT_ENGINE) -> frozenset:
     tree = {"theta"} if engine != "exact" else set()
     if method in PENALTY_METHODS:
         return frozenset({"penalty"} | tree)
-    # the automatic choice passes them on to the explicit method (unknots and links)
+    # the automatic choice passes them on to the explicit method (unknots)
     own = {"armijo", "growth"} if method in (EXPLICIT_METHOD, AUTO_METHOD) else set()
     return frozenset(own | tree | {"backproject_iter", "backproject_digits",
                                    "keep_edge_lengths", "keep_barycenter"})

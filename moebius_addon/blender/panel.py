@@ -195,7 +195,7 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
         col.label(text="Line Search")
         col.prop(s, "initial_step")
         sub = col.column(align=True)
-        sub.active = "armijo" in acting  # with Automatic: for unknots and links
+        sub.active = "armijo" in acting  # with Automatic: for unknots
         sub.prop(s, "armijo")
         sub.prop(s, "growth")
         col = layout.column(align=True)

@@ -131,13 +131,13 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     armijo: FloatProperty(
         name="Armijo Constant", default=0.5, min=1e-6, max=0.999, precision=3,
         description="Sufficient-decrease constant σ of the explicit projected gradient's line "
-                    "search (the paper's 1/2; also Automatic on unknots and links; the other "
+                    "search (the paper's 1/2; also Automatic on unknots; the other "
                     "methods use their own)",
     )
     growth: FloatProperty(
         name="Step Growth", default=8.0, min=1.0, soft_max=10.0,
         description="Largest factor by which the step may grow from one iteration to the next "
-                    "(explicit projected gradient, also Automatic on unknots and links; the "
+                    "(explicit projected gradient, also Automatic on unknots; the "
                     "first trial is also kept below 2/3 of the first contact)",
     )
     backproject_iter: IntProperty(

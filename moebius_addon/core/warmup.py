@@ -35,7 +35,7 @@ def _relax(P, method: str, steps: int = 2, **options) -> None:
 
 def _knot(name: str, n: int, method: str = "projected_gradient_implicit") -> None:
     """Add Knot + Relax of a knot: *Automatic* takes the implicit method (determinant > 1);
-    the explicit one for unknots and links."""
+    the explicit one for unknots."""
     P = knots.named(name, n)
     check_polygon(P)
     moebius_energy(P)
@@ -46,7 +46,7 @@ def _knot(name: str, n: int, method: str = "projected_gradient_implicit") -> Non
 
 def _exact() -> None:
     _knot("3_1", 100)
-    _relax(knots.named("3_1", 100), "projected_gradient")  # unknots, links, and as chosen
+    _relax(knots.named("3_1", 100), "projected_gradient")  # unknots, and as chosen
 
 
 def _tree() -> None:

@@ -241,5 +241,6 @@ def test_automatic_method_follows_the_knot_type(scene, mb, core, trefoil):
     assert (run.method, run.why) == ("projected_gradient", "no knot detected")
     assert run.run.armijo == pytest.approx(0.3)  # a float32 property
     hopf = core.knots.braid_closure([1, 1])
-    assert mb.api.choose_method("auto", hopf) == ("projected_gradient", "a link of 2 components")
+    assert mb.api.choose_method("auto", hopf) == ("projected_gradient_implicit",
+                                                  "a link of 2 components")
     assert mb.api.choose_method("trust_region", hopf) == ("trust_region", "")

@@ -86,9 +86,10 @@ def test_a_too_coarse_start_is_refined_not_refused():
     assert "refined 24 → 48 edges at iteration 0" in r.message
     assert r.history["edges"] == [48, 48, 48]
     assert r.stats["refinements"] == 1
-    # a start too coarse for max_edges is refused as before, naming the count that works
+    # a start too coarse for max_edges, whose strands cannot be pushed apart at 16 edges
+    # either, is refused as before, naming the count that works
     with pytest.raises(ValueError, match="too coarse.*at least"):
-        core.relax(P, max_iter=2, max_edges=40)
+        core.relax(knots.named("3_1", 16), max_iter=2, max_edges=20)
 
 
 @pytest.fixture(scope="module")
@@ -195,6 +196,107 @@ def test_refine_options_are_checked():
         core.relax(P, method="lbfgs", restarts=1)
     with pytest.raises(ValueError, match="restarts must be"):
         core.relax(P, restarts=-2)
+
+
+# -- separated starts --------------------------------------------------------------------------
+
+def _barrier_by_numpy(X, reach, gap):
+    """The separation barrier summed over every pair of edges, by numpy alone."""
+    n = len(X)
+    A, B = X, np.roll(X, -1, axis=0)
+    h = np.linalg.norm(B - A, axis=1).mean()
+    i, j = np.triu_indices(n, 1)
+    d = np.minimum(j - i, n - (j - i))
+    i, j = i[d >= gap], j[d >= gap]
+    x = segments_closest(A[i], B[i], A[j], B[j]) / h
+    x = x[x < reach]
+    return float(np.sum((1.0 / x - 1.0 / reach) ** 2))
+
+
+def test_the_separation_barrier_against_numpy_and_its_gradient():
+    from moebius_addon.core import separate
+
+    rng = np.random.default_rng(3)
+    X = core.resample(knots.named("3_1", 30) * [1.0, 1.0, 0.3], 30)  # flattened: strands close
+    B, G, d = separate.barrier(X)
+    assert B > 0 and 0 < d < 1
+    assert B == pytest.approx(_barrier_by_numpy(X, separate.REACH, 4), rel=1e-12)
+    # central differences in random directions, the edge length h held (as the steps hold
+    # it); the barrier is smooth where no pair enters or leaves its reach
+    h = np.linalg.norm(np.roll(X, -1, axis=0) - X, axis=1).mean()
+    for _ in range(5):
+        V = rng.standard_normal(X.shape)
+        t = 1e-6
+        fd = (separate.barrier(X + t * V, h=h)[0] - separate.barrier(X - t * V, h=h)[0]) / (
+            2 * t)
+        assert np.sum(G * V) == pytest.approx(fd, rel=1e-5)
+
+
+@pytest.fixture(scope="module")
+def separated_run():
+    # a braid-tangled trefoil (bench/untangle.py's trefoil-braid-49): two edges 0.003 edge
+    # lengths apart; split four times it still fails the start check (3 552 edges would pass)
+    P = core.tangle.tangled("3_1", 100, 149, "braid", pairs=10, conjugations=5)
+    seen = []
+    r = core.relax(P, method="projected_gradient_implicit", tol=1e-4, max_iter=400,
+                   callback=lambda s: seen.append((s.nit, s.x.copy(), s.energy)))
+    return P, r, seen
+
+
+def test_strands_that_nearly_touch_are_pushed_apart(separated_run):
+    P, r, seen = separated_run
+    assert core.contact_ratio(P) < 0.4 and core.contact_ratio(core.subdivide(P, 4)) < 1
+    ref = r.refinements[0]
+    steps = ref["separation_steps"]
+    assert ref["iteration"] == 0 and ref["edges_before"] == ref["edges_after"] == len(P)
+    assert 0 < steps < 400 and "strands pushed apart" in ref["reason"]
+    assert "(strands pushed apart)" in r.message
+    # the separation's steps are the path's first iterates: energies, no gradient norms
+    assert len(r.history["energy"]) == r.nit + 1
+    assert np.all(np.isnan(r.history["grad_norm"][:steps]))
+    assert not np.isnan(r.history["grad_norm"][steps])
+    assert [s[0] for s in seen] == list(range(1, r.nit + 1))
+    assert [s[2] for s in seen] == r.history["energy"][1:]
+    assert core.contact_ratio(seen[steps - 1][1]) >= 1.0
+    # relaxed to the table's energy at its edge count (74.5295 at 136 edges), a trefoil
+    assert r.status == core.Status.CONVERGED
+    assert core.identify(r.x).names == ("3_1",)
+    assert r.fun == pytest.approx(74.5295, rel=1e-3)
+
+
+def test_a_separated_run_never_crosses(separated_run):
+    # independent of the core's contact search: every iterate, and the midpoint of the straight
+    # path between two iterates of one resolution
+    P, _, seen = separated_run
+    prev = P
+    for _, x, _ in seen:
+        scale = np.linalg.norm(np.roll(x, -1, axis=0) - x, axis=1).mean()
+        assert _min_gap_distance(x) > 1e-4 * scale
+        if len(prev) == len(x):
+            assert _min_gap_distance(0.5 * (prev + x)) > 1e-4 * scale
+        prev = x
+
+
+def test_a_separation_stopped_half_way_ends_where_it_is(separated_run):
+    P, r, seen = separated_run
+    run = core.make_run("projected_gradient_implicit", P, tol=1e-4)
+    for _ in range(3):
+        assert run.step()
+    run.stop()
+    res = run.result()
+    assert res.nit == 3 and len(res.history["energy"]) == 4
+    np.testing.assert_array_equal(res.x, seen[2][1])
+    assert res.fun == seen[2][2]
+
+
+def test_pins_and_obstacles_are_not_pushed_past():
+    # the separation would move pinned vertices and does not see meshes: such starts are
+    # split as before (here not enough within max_edges: refused)
+    P = core.tangle.tangled("3_1", 100, 149, "braid", pairs=10, conjugations=5)
+    with pytest.raises(ValueError, match="too coarse"):
+        core.relax(P, max_iter=2, pinned=[0])
+    with pytest.raises(ValueError, match="too coarse"):
+        core.relax(P, max_iter=2, refine=False)
 
 
 # -- restarts ----------------------------------------------------------------------------------

@@ -31,12 +31,17 @@ import numpy as np
 from .._layout import as_layout
 from ..pins import check_pins
 from ..polygon import CONTACT_RATIO, check_polygon, contact_ratio, subdivide
-from .base import RelaxResult, Status, check_number
+from ..separate import separate
+from .base import IterationState, RelaxResult, Status, check_number
 
 #: Edges a refinement makes of every edge (a split in two: the flow doubles its resolution
 #: where it jammed and everywhere else; the examples of docs/benchmarks.md that jammed at
 #: n edges relaxed at 2n).
 FACTOR = 2
+#: A start too coarse is split up to this many times its edges before strands that nearly
+#: touch are pushed apart instead (edges 0.05 edge lengths apart need some 20× the edges to
+#: pass the start check by splitting alone; docs/benchmarks.md "Untangling benchmark").
+SPLIT_FIRST = 4
 #: Fewest edges ``max_edges`` allows by default, whatever the start (a coarse drawn curve of
 #: 50 points may need several refinements).
 MIN_MAX_EDGES = 2000
@@ -90,6 +95,13 @@ def _pins_after(pinned: np.ndarray, layout, factor: int):
     return out if layout.is_link else out[0]
 
 
+def _words(r: dict) -> str:
+    """A refinement in a few words: "100 → 200 edges at iteration 0", "strands pushed apart"
+    added for a separated start."""
+    apart = " (strands pushed apart)" if r.get("separation_steps") else ""
+    return f"{r['edges_before']} → {r['edges_after']} edges at iteration {r['iteration']}{apart}"
+
+
 class AdaptiveRun:
     """A run of any method that refines its polygon when it jams, and restarts from nudged
     copies of a converged result; the interface of :class:`.base.Run` (``step()``,
@@ -122,7 +134,8 @@ class AdaptiveRun:
     def __init__(self, make, P, max_iter: int, *, refine: bool = True,
                  max_edges: int | None = None, restarts: int = 0, seed: int = 0,
                  restart_scale: float = RESTART_SCALE, max_seconds: float | None = None,
-                 closed=True, pinned=None, pin_tangents: bool = False, check: bool = True):
+                 closed=True, pinned=None, pin_tangents: bool = False, check: bool = True,
+                 obstacles=None):
         self.t0 = time.perf_counter()
         self._make = make
         self.refine = bool(refine)
@@ -140,9 +153,10 @@ class AdaptiveRun:
             check_number("max_edges", max_edges, 1, integer=True))
         #: what was refined: dicts of iteration, edges before and after, why (and energies)
         self.refinements: list[dict] = []
-        start, changes = P, {}
+        start, changes, path = P, {}, []
         if self.refine and check:
-            start, changes = self._refine_start(P, X, layout, pinned, pin_tangents)
+            start, changes, path = self._refine_start(P, X, layout, pinned, pin_tangents,
+                                                      obstacles is None)
         self.run = make(start, self.max_iter, self.max_seconds, **changes)
         self._retired: list[dict] = []  # the counters of every run left behind
         self.history = {k: list(v) for k, v in self.run.history.items()}
@@ -155,6 +169,54 @@ class AdaptiveRun:
         self._trial = None  # the restart in progress: (index, first iterate)
         self._why_not = ""
         self.done = False
+        #: the iterates of a separated start still to be stepped through (polygon, energy),
+        #: then None for the run's own start; the one shown now (None: the run's)
+        self._prelude: list = []
+        self._current = None
+        if path:
+            self._begin_prelude(path)
+            return
+        self._checkpoint = (self.nit, None, len(self.history["energy"]))
+        if self.refine:
+            self._note_checkpoint(self.run)
+        self._after_step()
+
+    # -- a separated start ------------------------------------------------------------------
+
+    def _begin_prelude(self, path) -> None:
+        """Make the separation's polygons (``path``, the run's start not included) the first
+        iterates of the path: the caller steps through them as through any (the history has
+        their energy; what only a run has, such as the gradient norm, is NaN)."""
+        run = self.run
+        engine_energy = run.engine.energy
+        layout = run.layout
+        energies = [float(engine_energy(np.ascontiguousarray(as_layout(Q, self.closed)[0])))
+                    for Q in path]
+        self._prelude = list(zip(path[1:], energies[1:], strict=True)) + [None]
+        self._current = (path[0], energies[0])
+        first = {k: [v[0]] for k, v in run.history.items()}
+        self.history = {k: [np.nan] for k in first}
+        self._set_entry(energies[0], layout.n)
+
+    def _set_entry(self, energy: float, n: int) -> None:
+        """The last history entry: a separation step's."""
+        h = self.history
+        h["energy"][-1] = energy
+        h["seconds"][-1] = time.perf_counter() - self.t0
+        h.setdefault("edges", [n] * len(h["energy"]))[-1] = n
+
+    def _prelude_step(self) -> None:
+        nxt = self._prelude.pop(0)
+        self.nit += 1
+        if nxt is not None:
+            self._current = nxt
+            for v in self.history.values():
+                v.append(np.nan)
+            self._set_entry(nxt[1], self.run.layout.n)
+            return
+        # the run's own start, the last polygon of the separation: its entry as the run has it
+        self._current = None
+        self._append(self.run, 0)
         self._checkpoint = (self.nit, None, len(self.history["energy"]))
         if self.refine:
             self._note_checkpoint(self.run)
@@ -165,27 +227,57 @@ class AdaptiveRun:
 
     # -- refinement ------------------------------------------------------------------------
 
-    def _refine_start(self, P, X, layout, pinned, pin_tangents):
-        """``(P, {})``, or ``P`` split until it passes the coarseness check and the options
-        that change with it (recorded as the refinement of iteration 0)."""
+    def _refine_start(self, P, X, layout, pinned, pin_tangents, separable: bool):
+        """``(P, {}, [])``, or ``P`` made fine enough for the start check, the options that
+        change with it and the path of a separation (recorded as the refinement of iteration
+        0). Splitting its edges is tried first (the same curve), up to
+        :data:`SPLIT_FIRST` times the edges; strands that pass closer than that resolves are
+        pushed apart (:func:`..separate.separate`, at the fewest edges where that works: its
+        steps become the path's first iterates); then splitting up to ``max_edges``."""
         changes = {} if pinned is None else {"pinned": pinned}
         check_polygon(P, coarseness=False, closed=self.closed)
         ratio = contact_ratio(P, closed=self.closed)
-        factor, Q, r = 1, P, ratio
-        while r < CONTACT_RATIO and self._edges(layout.n) * factor * FACTOR <= self.max_edges:
-            factor *= FACTOR
-            Q = subdivide(P, factor, self.closed)
-            r = contact_ratio(Q, closed=self.closed)
-        if factor == 1 or r < CONTACT_RATIO:
-            return P, changes  # the run's own check refuses it, naming the count that works
+        if ratio >= CONTACT_RATIO:
+            return P, changes, []
+        edges = self._edges(layout.n)
+        factors = [FACTOR ** k for k in range(1, 64)
+                   if edges * FACTOR ** k <= self.max_edges]
+        reason = f"start too coarse (contact ratio {ratio:.2f} < {CONTACT_RATIO:g})"
+        path, found, moved = [], None, None
+        for factor in [f for f in factors if f <= SPLIT_FIRST]:
+            if contact_ratio(subdivide(P, factor, self.closed), closed=self.closed) >= (
+                    CONTACT_RATIO):
+                found = factor
+                break
+        # pins and obstacles stay where they are: a separation would move past them unchecked
+        if found is None and separable and pinned is None:
+            for factor in [1, *factors]:
+                try:
+                    path, moved = separate(subdivide(P, factor, self.closed), self.closed)
+                except ValueError:
+                    continue
+                found = factor
+                reason += (f"; strands pushed apart by up to {moved:.2f} edge lengths in "
+                           f"{len(path) - 1} steps")
+                break
+        if found is None:
+            for factor in [f for f in factors if f > SPLIT_FIRST]:
+                if contact_ratio(subdivide(P, factor, self.closed), closed=self.closed) >= (
+                        CONTACT_RATIO):
+                    found = factor
+                    break
+        if found is None:
+            return P, changes, []  # the run's own check refuses it, naming the count that works
+        Q = path[-1] if path else subdivide(P, found, self.closed)
         if pinned is not None:
             fixed = check_pins(pinned, layout, X, tangents=bool(pin_tangents))
-            changes = {"pinned": _pins_after(fixed, layout, factor), "pin_tangents": False}
+            changes = {"pinned": _pins_after(fixed, layout, found), "pin_tangents": False}
         self.refinements.append({
-            "iteration": 0, "edges_before": self._edges(layout.n),
-            "edges_after": self._edges(factor * layout.n - (factor - 1) * self._open),
-            "reason": f"start too coarse (contact ratio {ratio:.2f} < {CONTACT_RATIO:g})"})
-        return Q, changes
+            "iteration": 0, "edges_before": edges,
+            "edges_after": self._edges(found * layout.n - (found - 1) * self._open),
+            "reason": reason, **({} if not path else {
+                "separation_steps": len(path) - 1, "moved": moved})})
+        return Q, changes, path[:-1]
 
     def _refine_run(self, reason: str) -> bool:
         """Go on from the last healthy iterate of the current run (its checkpoint, the last
@@ -360,9 +452,7 @@ class AdaptiveRun:
         self.success, self.status = success, status
         notes = []
         if self.refinements:
-            notes.append("refined " + ", ".join(
-                f"{r['edges_before']} → {r['edges_after']} edges at iteration {r['iteration']}"
-                for r in self.refinements))
+            notes.append("refined " + ", ".join(_words(r) for r in self.refinements))
         if status == Status.STALLED and self._why_not:
             notes.append(self._why_not)
         if self._restart_log:
@@ -375,6 +465,9 @@ class AdaptiveRun:
         back when it finishes). Returns False once finished."""
         if self.done:
             return False
+        if self._prelude:
+            self._prelude_step()
+            return not self.done
         self.run.step()
         self._after_step()
         return not self.done
@@ -385,6 +478,7 @@ class AdaptiveRun:
         already lower than the best, else rolled back."""
         if self.done:
             return
+        self._prelude = []  # a separation stopped half way ends where it is (self._current)
         self.run.stop(message, status)
         if self._trial is not None:
             self._end_restart()
@@ -394,17 +488,21 @@ class AdaptiveRun:
 
     @property
     def x(self):
-        return self.run.x
+        return self.run.x if self._current is None else self._current[0]
 
     @property
     def energy(self) -> float:
-        return self.run.E
+        return self.E
 
     @property
     def E(self) -> float:
-        return self.run.E
+        return self.run.E if self._current is None else self._current[1]
 
     def state(self):
+        if self._current is not None:
+            h = self.history
+            return IterationState(self.nit, self.x, self.E, np.nan, np.nan, 0.0,
+                                  h["seconds"][-1])
         s = self.run.state()
         s.nit = self.nit
         s.seconds = self.history["seconds"][-1]
@@ -432,6 +530,6 @@ class AdaptiveRun:
         if self.restarts:
             stats["restarts"] = [dict(r) for r in self._restart_log]
         return RelaxResult(
-            x=res.x, fun=res.fun, nit=self.nit, success=self.success, message=self.message,
+            x=self.x, fun=self.E if self._current is not None else res.fun, nit=self.nit, success=self.success, message=self.message,
             status=self.status, history={k: list(v) for k, v in self.history.items()},
             metric=res.metric, stats=stats, refinements=[dict(r) for r in self.refinements])
