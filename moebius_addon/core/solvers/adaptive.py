@@ -530,6 +530,7 @@ class AdaptiveRun:
         if self.restarts:
             stats["restarts"] = [dict(r) for r in self._restart_log]
         return RelaxResult(
-            x=self.x, fun=self.E if self._current is not None else res.fun, nit=self.nit, success=self.success, message=self.message,
+            x=self.x, fun=res.fun if self._current is None else self.E, nit=self.nit,
+            success=self.success, message=self.message,
             status=self.status, history={k: list(v) for k, v in self.history.items()},
             metric=res.metric, stats=stats, refinements=[dict(r) for r in self.refinements])
