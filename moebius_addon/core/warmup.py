@@ -22,6 +22,7 @@ from .energy import moebius_energy
 from .identify import identify
 from .invariants import knot_determinant
 from .polygon import check_polygon, contact_ratio, resample
+from .separate import separate
 from .solvers import make_run
 
 
@@ -47,6 +48,8 @@ def _knot(name: str, n: int, method: str = "projected_gradient_implicit") -> Non
 def _exact() -> None:
     _knot("3_1", 100)
     _relax(knots.named("3_1", 100), "projected_gradient")  # unknots, and as chosen
+    # a start whose strands nearly touch is pushed apart first (solvers.adaptive)
+    separate(resample(knots.named("3_1", 30) * [1.0, 1.0, 0.3], 30))
 
 
 def _tree() -> None:

@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 from bpy_helpers import imported_points, points_at, poly_curve, scene_state, spline_points
 
+from tests.mesh_checks import segments_closest
+
 
 def _coarse_trefoil(core):
     # the table's trefoil at 24 edges: 27 is the least count that passes the start check
@@ -129,3 +131,38 @@ def test_the_command_line_refines_and_says_so(scene, mb, core, tmp_path, capfd):
         assert "1 restarts, " in capfd.readouterr().out
         energies.append(bpy.data.objects["Knot 3_1"][mb.api.ENERGY_PROP])
     assert energies[0] == energies[1]
+
+
+def _closest_edges(X):
+    """Smallest distance between two edges of the closed polygon ``X`` at least 2 apart along
+    it, in mean edge lengths (numpy alone, every pair)."""
+    n = len(X)
+    Y = np.roll(X, -1, axis=0)
+    i, j = np.triu_indices(n, 2)
+    keep = (j - i) <= n - 2
+    i, j = i[keep], j[keep]
+    h = np.linalg.norm(Y - X, axis=1).mean()
+    return float(segments_closest(X[i], Y[i], X[j], Y[j]).min() / h)
+
+
+def test_strands_pushed_apart_are_the_first_frames(scene, mb, core):
+    # a braid-tangled trefoil whose edges pass 0.003 edge lengths apart (tests/core/
+    # test_adaptive.py): its separation's steps are keyed as the first frames, at its own
+    # point count, and no frame or straight move between two frames crosses
+    P = core.tangle.tangled("3_1", 100, 149, "braid", pairs=10, conjugations=5)
+    obj = poly_curve("Tangled", [P])
+    s = scene.moebius
+    s.max_iterations, s.tolerance = 80, 1e-4
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    m = re.search(r"136 → 136 edges at iteration 0 \(start too coarse, strands pushed apart "
+                  r"in (\d+) steps\)", s.last_refined)
+    assert m and 0 < int(m.group(1)) < 80
+    assert s.last_method == "projected_gradient_implicit"
+    frames = mb.keyed_frames(obj)
+    assert frames == list(range(1, 82))
+    shapes = [points_at(obj, f) for f in frames]
+    assert {len(X) for X in shapes} == {136}
+    np.testing.assert_allclose(shapes[0], P, atol=1e-6)
+    for a, b in itertools.pairwise(shapes):
+        assert _closest_edges(b) > 1e-4 and _closest_edges(0.5 * (a + b)) > 1e-4
+    assert "3_1" in s.last_type and "kept" in s.last_type

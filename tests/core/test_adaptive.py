@@ -287,6 +287,14 @@ def test_a_separation_stopped_half_way_ends_where_it_is(separated_run):
     assert res.nit == 3 and len(res.history["energy"]) == 4
     np.testing.assert_array_equal(res.x, seen[2][1])
     assert res.fun == seen[2][2]
+    # its steps count as iterations: max_iter ends it half way, or leaves the run the rest
+    steps = r.refinements[0]["separation_steps"]
+    short = core.relax(P, method="projected_gradient_implicit", tol=1e-4, max_iter=5)
+    assert short.status == core.Status.MAX_ITER and short.nit == 5
+    np.testing.assert_array_equal(short.x, seen[4][1])
+    more = core.relax(P, method="projected_gradient_implicit", tol=1e-4, max_iter=steps + 3)
+    assert more.nit == steps + 3 and more.status == core.Status.MAX_ITER
+    np.testing.assert_array_equal(more.x, seen[steps + 2][1])
 
 
 def test_pins_and_obstacles_are_not_pushed_past():

@@ -157,7 +157,8 @@ class AdaptiveRun:
         if self.refine and check:
             start, changes, path = self._refine_start(P, X, layout, pinned, pin_tangents,
                                                       obstacles is None)
-        self.run = make(start, self.max_iter, self.max_seconds, **changes)
+        # a separation's steps count as iterations of the path
+        self.run = make(start, max(0, self.max_iter - len(path)), self.max_seconds, **changes)
         self._retired: list[dict] = []  # the counters of every run left behind
         self.history = {k: list(v) for k, v in self.run.history.items()}
         self.history["edges"] = [self.run.layout.n] * len(self.history["energy"])
@@ -213,6 +214,10 @@ class AdaptiveRun:
             for v in self.history.values():
                 v.append(np.nan)
             self._set_entry(nxt[1], self.run.layout.n)
+            if self.nit >= self.max_iter:  # ends half way, as stopped (a crossing-free curve)
+                self._prelude = []
+                self._finish(False, f"maximum number of iterations ({self.max_iter}) reached",
+                             Status.MAX_ITER)
             return
         # the run's own start, the last polygon of the separation: its entry as the run has it
         self._current = None
