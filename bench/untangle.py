@@ -28,6 +28,7 @@ and writes ``docs/data/untangle.csv``::
     .venv/bin/python bench/untangle.py --jobs 2               # everything, hours
     .venv/bin/python bench/untangle.py --only 6_2 9_13        # some tasks (by knot name)
     .venv/bin/python bench/untangle.py --report               # the tables
+    .venv/bin/python bench/untangle.py --links-reference      # links against the catalogue
 """
 
 from __future__ import annotations
@@ -300,6 +301,34 @@ def report() -> None:
           f"{min(r['closest_edges'] for r in rows if 'error' not in r):.3g} mean edge lengths")
 
 
+def links_reference(max_iter: int) -> None:
+    """Each link's tangled result beside the catalogue curve (``knots.named``) relaxed the same
+    way at the same edge count, with the two curves' component lengths: the flow keeps every
+    component's length (the edge-length constraints), so the ratio of the lengths is fixed by
+    the start."""
+    from moebius_addon import core
+
+    rows = {}
+    with open(RESULTS) as f:
+        for line in f:
+            r = json.loads(line)
+            if r["name"] in LINKS and "error" not in r:
+                rows[r["name"]] = r
+    starts = {t["name"]: t for t in tasks() if t["name"] in LINKS}
+    print("| link | edges | tangled start: lengths, relaxed E | catalogue curve: lengths, "
+          "relaxed E | tangled / catalogue |\n|---|---|---|---|---|")
+    for name, r in rows.items():
+        n = r["edges_end"]
+        C = core.knots.named(name, n)
+        res = core.relax(C, method="projected_gradient_implicit", tol=1e-4, max_iter=max_iter)
+        share = [len(p) for p in start_of(starts[name])]
+        mine = ":".join(str(round(100 * k / sum(share))) for k in share)
+        theirs = ":".join(str(round(100 * len(p) / n)) for p in C)
+        print(f"| {name} | {n} | {mine}, {r['energy']:.4f} | {theirs}, {float(res.fun):.4f}"
+              f"{'' if res.success else ' (' + res.status.name + ')'} | "
+              f"{r['energy'] / float(res.fun):.4f} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--jobs", type=int, default=1)
@@ -308,9 +337,14 @@ def main() -> None:
     ap.add_argument("--max-crossings", type=int, default=9)
     ap.add_argument("--report", action="store_true")
     ap.add_argument("--list", action="store_true")
+    ap.add_argument("--links-reference", action="store_true",
+                    help="the links' results beside their catalogue curves relaxed alike")
     args = ap.parse_args()
     if args.report:
         report()
+        return
+    if args.links_reference:
+        links_reference(args.max_iter)
         return
     todo = tasks(args.max_crossings)
     if args.only:

@@ -189,15 +189,13 @@ class AdaptiveRun:
         iterates of the path: the caller steps through them as through any (the history has
         their energy; what only a run has, such as the gradient norm, is NaN)."""
         run = self.run
-        engine_energy = run.engine.energy
-        layout = run.layout
-        energies = [float(engine_energy(np.ascontiguousarray(as_layout(Q, self.closed)[0])))
+        # the Möbius energy is scale-free: the run's engine takes the caller's size as well
+        energies = [float(run.engine.energy(np.ascontiguousarray(as_layout(Q, self.closed)[0])))
                     for Q in path]
         self._prelude = list(zip(path[1:], energies[1:], strict=True)) + [None]
         self._current = (path[0], energies[0])
-        first = {k: [v[0]] for k, v in run.history.items()}
-        self.history = {k: [np.nan] for k in first}
-        self._set_entry(energies[0], layout.n)
+        self.history = {k: [np.nan] for k in run.history}
+        self._set_entry(energies[0], run.layout.n)
 
     def _set_entry(self, energy: float, n: int) -> None:
         """The last history entry: a separation step's."""
