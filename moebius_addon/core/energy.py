@@ -14,43 +14,13 @@ import numba as nb
 import numpy as np
 
 from . import barnes_hut
+from ._dense import CHUNKS, FASTMATH, edge_data, row_range
 from ._layout import OPEN_TREE_REFUSAL, Layout, as_checked_layout
-
-# Partial gradients go to a fixed number of buffers, independent of the thread count, so the
-# result is bit-for-bit the same on every machine with the same inputs.
-_CHUNKS = 8
-# Reassociation lets LLVM vectorize the pair sums (results change in the last bits only);
-# no 'nnan'/'ninf': non-finite input must stay visible.
-_FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
+from .energies.moebius import CLOSED_CONSTANT, FOLDED, VALUE, link_pair, pair
+from .open_energy import open_energy_gradient_x, open_energy_x
 
 
-def edge_data(X: np.ndarray, layout: Layout):
-    """Edge vectors, midpoints and lengths as separate contiguous coordinate arrays."""
-    E = X[layout.nxt] - X
-    M = 0.5 * (X[layout.nxt] + X)
-    lengths = np.sqrt(np.einsum("ij,ij->i", E, E))
-    return (
-        np.ascontiguousarray(E[:, 0]),
-        np.ascontiguousarray(E[:, 1]),
-        np.ascontiguousarray(E[:, 2]),
-        np.ascontiguousarray(M[:, 0]),
-        np.ascontiguousarray(M[:, 1]),
-        np.ascontiguousarray(M[:, 2]),
-        lengths,
-    )
-
-
-@nb.njit(cache=True, inline="always")
-def _row_range(i, comp_start, comp_end):
-    """Edges J > i of the same component that are disjoint from edge i: [i+2, end)."""
-    lo = i + 2
-    hi = comp_end
-    if i == comp_start:
-        hi = comp_end - 1  # the last edge of the component touches vertex comp_start
-    return lo, hi
-
-
-@nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _energy_rows(ex, ey, ez, mx, my, mz, ln, starts, comp):
     """Per-row sums Σ_{J>I, disjoint} f_IJ (unordered pairs)."""
     n = ln.shape[0]
@@ -63,7 +33,7 @@ def _energy_rows(ex, ey, ez, mx, my, mz, ln, starts, comp):
             if side == 1 and i == k:
                 break
             c = comp[i]
-            lo, hi = _row_range(i, starts[c], starts[c + 1])
+            lo, hi = row_range(i, starts[c], starts[c + 1])
             ax, ay, az, li = ex[i], ey[i], ez[i], ln[i]
             px, py, pz = mx[i], my[i], mz[i]
             s = 0.0
@@ -71,21 +41,18 @@ def _energy_rows(ex, ey, ez, mx, my, mz, ln, starts, comp):
                 dx = px - mx[j]
                 dy = py - my[j]
                 dz = pz - mz[j]
-                inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-                ab = ax * ex[j] + ay * ey[j] + az * ez[j]
-                da = dx * ax + dy * ay + dz * az
-                db = dx * ex[j] + dy * ey[j] + dz * ez[j]
-                s += ((li * ln[j] + ab) - 2.0 * da * db * inv) * inv
+                s += pair(dx, dy, dz, ax, ay, az, ex[j], ey[j], ez[j], li, ln[j],
+                          dx * dx + dy * dy + dz * dz, VALUE)[0]
             for j in range(starts[c + 1], n):
                 dx = px - mx[j]
                 dy = py - my[j]
                 dz = pz - mz[j]
-                s += li * ln[j] / (dx * dx + dy * dy + dz * dz)
+                s += link_pair(li, ln[j], dx * dx + dy * dy + dz * dz, VALUE)[0]
             rows[i] = s
     return rows
 
 
-@nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _energy_gradient_parts(ex, ey, ez, mx, my, mz, ln, starts, comp, nchunks):
     """Row sums of f and the partial derivatives of Σ_{I<J} f_IJ with respect to every edge
     vector (ga) and midpoint (gm), accumulated in ``nchunks`` fixed buffers."""
@@ -102,38 +69,23 @@ def _energy_gradient_parts(ex, ey, ez, mx, my, mz, ln, starts, comp, nchunks):
                 if side == 1 and i == k:
                     break
                 c = comp[i]
-                lo, hi = _row_range(i, starts[c], starts[c + 1])
+                lo, hi = row_range(i, starts[c], starts[c + 1])
                 ax, ay, az, li = ex[i], ey[i], ez[i], ln[i]
                 px, py, pz = mx[i], my[i], mz[i]
                 s = 0.0
                 gax = gay = gaz = gmx = gmy = gmz = 0.0
                 for j in range(lo, hi):
+                    # loads in this order: under reassociation LLVM ranks values by it (the
+                    # bits of the energy's sum depend on it)
                     bx, by, bz, lj = ex[j], ey[j], ez[j], ln[j]
                     dx = px - mx[j]
                     dy = py - my[j]
                     dz = pz - mz[j]
-                    inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-                    ab = ax * bx + ay * by + az * bz
-                    da = dx * ax + dy * ay + dz * az
-                    db = dx * bx + dy * by + dz * bz
-                    sv = (li * lj + ab) * inv
-                    q = da * db * inv * inv
-                    s += sv - 2.0 * q
-                    # ∂f/∂e_I, ∂f/∂e_J, ∂f/∂d (d = m_I − m_J); see docs/design.md for f.
-                    ci = lj / li
-                    cj = li / lj
-                    tb = 2.0 * db * inv
-                    ta = 2.0 * da * inv
-                    fax = (ci * ax + bx - tb * dx) * inv
-                    fay = (ci * ay + by - tb * dy) * inv
-                    faz = (ci * az + bz - tb * dz) * inv
-                    fbx = (cj * bx + ax - ta * dx) * inv
-                    fby = (cj * by + ay - ta * dy) * inv
-                    fbz = (cj * bz + az - ta * dz) * inv
-                    cd = 8.0 * q - 2.0 * sv
-                    fdx = (cd * dx - tb * ax - ta * bx) * inv
-                    fdy = (cd * dy - tb * ay - ta * by) * inv
-                    fdz = (cd * dz - tb * az - ta * bz) * inv
+                    # f, ∂f/∂e_I, ∂f/∂e_J, ∂f/∂d (d = m_I − m_J)
+                    f, fax, fay, faz, fbx, fby, fbz, fdx, fdy, fdz, _, _ = pair(
+                        dx, dy, dz, ax, ay, az, bx, by, bz, li, lj, dx * dx + dy * dy + dz * dz,
+                        FOLDED)
+                    s += f
                     gax += fax
                     gay += fay
                     gaz += faz
@@ -151,12 +103,8 @@ def _energy_gradient_parts(ex, ey, ez, mx, my, mz, ln, starts, comp, nchunks):
                     dx = px - mx[j]
                     dy = py - my[j]
                     dz = pz - mz[j]
-                    inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-                    f = li * lj * inv
+                    f, ci, cj, cd, _, _ = link_pair(li, lj, dx * dx + dy * dy + dz * dz, FOLDED)
                     s += f
-                    ci = lj * inv / li
-                    cj = li * inv / lj
-                    cd = -2.0 * f * inv
                     gax += ci * ax
                     gay += ci * ay
                     gaz += ci * az
@@ -181,13 +129,12 @@ def _energy_gradient_parts(ex, ey, ez, mx, my, mz, ln, starts, comp, nchunks):
 
 def _energy_from_rows(rows: np.ndarray, layout: Layout) -> float:
     # E = 4 per component + Σ over ordered pairs = 4K + 2 Σ over unordered pairs.
-    return 4.0 * layout.k + 2.0 * float(np.sum(rows))
+    return CLOSED_CONSTANT * layout.k + 2.0 * float(np.sum(rows))
 
 
 def energy_x(X: np.ndarray, layout: Layout) -> float:
     """Energy of the stacked vertex array (private fast path used by the flow)."""
     if layout.closed is not None:
-        from .open_energy import open_energy_x  # it builds on this module
         return open_energy_x(X, layout)
     ed = edge_data(X, layout)
     return _energy_from_rows(_energy_rows(*ed, layout.starts, layout.comp), layout)
@@ -196,10 +143,9 @@ def energy_x(X: np.ndarray, layout: Layout) -> float:
 def energy_gradient_x(X: np.ndarray, layout: Layout) -> tuple[float, np.ndarray]:
     """Energy and exact gradient ``(N, 3)`` of the stacked vertex array."""
     if layout.closed is not None:
-        from .open_energy import open_energy_gradient_x
         return open_energy_gradient_x(X, layout)
     ed = edge_data(X, layout)
-    rows, buf = _energy_gradient_parts(*ed, layout.starts, layout.comp, _CHUNKS)
+    rows, buf = _energy_gradient_parts(*ed, layout.starts, layout.comp, CHUNKS)
     part = buf.sum(axis=0)  # (6, N): ∂/∂e_I then ∂/∂m_I of the unordered sum
     ga = part[:3].T
     gm = part[3:].T
