@@ -5,7 +5,9 @@ Midpoint rule for the Ishizeki–Nagasawa integrand over ordered pairs of disjoi
     E(P) = 4 + Σ_{(I,J) disjoint} (l_I l_J + <e_I, e_J>) / |d|² − 2 <d, e_I> <d, e_J> / |d|⁴
 
 with ``d = m_I − m_J``; between components of a link the O'Hara kernel ``l_I l_J / |d|²``.
-The sum is symmetric, so the kernels visit each unordered pair once and double it.
+The sum is symmetric, so the kernels visit each unordered pair once and double it. The pair
+terms are :mod:`.energies.moebius`'s; the public evaluators, which choose between this exact
+sum and the tree (:mod:`.barnes_hut`) by the engine's name, are in :mod:`.engine`.
 """
 
 from __future__ import annotations
@@ -13,9 +15,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from . import barnes_hut
 from ._dense import CHUNKS, FASTMATH, edge_data, row_range
-from ._layout import OPEN_TREE_REFUSAL, Layout, as_checked_layout
+from ._layout import Layout
 from .energies.moebius import CLOSED_CONSTANT, FOLDED, VALUE, link_pair, pair
 from .open_energy import open_energy_gradient_x, open_energy_x
 
@@ -153,72 +154,3 @@ def energy_gradient_x(X: np.ndarray, layout: Layout) -> tuple[float, np.ndarray]
     G = 2.0 * (0.5 * gm - ga)
     G[layout.nxt] += 2.0 * (ga + 0.5 * gm)  # nxt is a permutation: no repeated index
     return _energy_from_rows(rows, layout), G
-
-
-def _engine_x(X, layout, engine, theta):
-    """The Barnes–Hut frame for ``engine``/``theta`` at X, or None for the exact sum (always
-    for open curves: "auto" takes the exact sum, "tree" is refused)."""
-    theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
-    if layout.has_open:
-        if engine == "tree":
-            raise ValueError(OPEN_TREE_REFUSAL)
-        if engine not in ("exact", "auto"):
-            barnes_hut.uses_tree(engine, layout.n)  # its message for an unknown name
-        return None
-    if not barnes_hut.uses_tree(engine, layout.n):
-        return None
-    return barnes_hut.Frame(X, layout, theta)
-
-
-def moebius_energy(P, *, engine: str = "auto", theta: float | None = None,
-                   closed=True) -> float:
-    """Discrete Möbius energy of a closed polygon or a link.
-
-    Parameters
-    ----------
-    P : (N, 3) array or list of (N_k, 3) arrays
-        Vertices of a closed polygon (vertex ``i`` joined to ``i+1``, the last to the first), or
-        the components of a link.
-    engine : {"exact", "tree", "auto"}
-        "exact": the sum over all pairs; "tree": Barnes–Hut on a hierarchy of edges with
-        admissibility ``theta`` (relative error about 1e-4 at the default, O(N log N));
-        "auto": the tree from ``barnes_hut.TREE_FROM`` edges on.
-    theta : float, optional
-        Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); smaller is more
-        accurate and slower.
-    closed : bool or sequence of bool
-        False: ``P`` is an open polyline (for a link: one flag per component, or one for
-        all), whose energy is O'Hara's regularized sum (docs/api.md, "Open curves"; exact
-        engine only).
-
-    Returns
-    -------
-    float
-        ``4 + Σ`` over ordered pairs of disjoint edges (docs/design.md); 4 for a regular polygon,
-        invariant under similarities and reversal. Scale-free (computed at a size near 1 for
-        curves spanning more than 2^64 or less than 2^-64).
-    """
-    X, layout, _ = as_checked_layout(P, closed)
-    frame = _engine_x(X, layout, engine, theta)
-    return energy_x(X, layout) if frame is None else frame.energy(X)
-
-
-def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None, closed=True):
-    """Exact derivative of :func:`moebius_energy` with respect to the vertices.
-
-    Parameters
-    ----------
-    P : (N, 3) array or list of (N_k, 3) arrays
-    engine, theta, closed
-        As in :func:`moebius_energy`; with the tree, the exact derivative of the approximated
-        sum.
-
-    Returns
-    -------
-    (N, 3) array or list of arrays
-        Same shape as ``P``; units 1/length.
-    """
-    X, layout, k = as_checked_layout(P, closed)
-    frame = _engine_x(X, layout, engine, theta)
-    g = (energy_gradient_x(X, layout) if frame is None else frame.energy_gradient(X))[1]
-    return layout.split(np.ldexp(g, -k) if k else g)  # ∇E(2^k X) = 2^-k ∇E(X)

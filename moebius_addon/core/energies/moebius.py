@@ -12,7 +12,7 @@ Three kinds of pairs of disjoint edges ``I, J`` (``d = m_I − m_J``, ``r2 = |d|
 Each returns the pair's value and the partial derivatives the sums need, in one of three
 forms (a constant argument: inlined, the other branches compile away):
 
-* ``VALUE``: the value alone, in the order the dense energy sum (``energy.moebius_energy``)
+* ``VALUE``: the value alone, in the order the dense energy sum (``core.moebius_energy``)
   has always used (for :func:`pair` one multiplication fewer than the gradient's order; the
   two give different last bits, and the energies of every earlier release are kept bit for
   bit, so both orders stay);
