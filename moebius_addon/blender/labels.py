@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from .. import core
 from ..core import barnes_hut
-from ..core.engine import AUTO_TREE_FROM
+from ..core.engine import AUTO_TREE_FROM, ENGINE_NAMES
 
 #: Metrics offered for the flow, as ``(core name, label, description)``.
 METRICS = (
@@ -101,10 +101,10 @@ _ENGINE_TEXT = {
 }
 
 #: Engines that evaluate the energy, as ``(name, label, description)``: exactly
-#: ``core.barnes_hut.ENGINE_NAMES`` in its order.
+#: ``core.engine.ENGINE_NAMES`` in its order.
 ENGINES = tuple(
     (e, *_ENGINE_TEXT.get(e, (e.title(), f"core.engine '{e}'")))
-    for e in barnes_hut.ENGINE_NAMES
+    for e in ENGINE_NAMES
 )
 
 

@@ -100,7 +100,7 @@ def check_relax_options(max_iterations, tolerance, keyframe_stride, frame_start,
 
     The method options are the extra keywords of ``core.make_run``: ``alpha`` of a penalty
     method, ``engine`` and ``theta`` (refused by name as the core would: an engine not in
-    ``barnes_hut.ENGINE_NAMES``, a θ outside (0, 2); None is the core's default θ)."""
+    ``core.engine.ENGINE_NAMES``, a θ outside (0, 2); None is the core's default θ)."""
     max_iterations = core.check_number("max_iterations", max_iterations, 0, integer=True)
     tolerance = core.check_number("tolerance", tolerance, 0)
     keyframe_stride = core.check_number("keyframe_stride", keyframe_stride, 1, integer=True)

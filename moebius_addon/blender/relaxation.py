@@ -155,7 +155,7 @@ def solver_paths(obj: bpy.types.Object, engine: str = DEFAULT_ENGINE) -> list[st
     if not all(sp.use_cyclic_u for sp in splines):
         return ["open"]
     n = sum(len(sp.points) for sp in splines)
-    if engine == "tree" or (engine == "auto" and n >= core.engine.AUTO_TREE_FROM):
+    if engine in core.engine.ENGINE_NAMES and core.engine.uses_tree(engine, n, run=True):
         return ["tree"]
     return ["exact"]
 

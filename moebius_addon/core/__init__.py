@@ -16,8 +16,7 @@ from ._shipped_cache import use_shipped_cache  # noqa: E402
 from .collision import max_collision_free_step  # noqa: E402
 from .compiling import compiling  # noqa: E402
 from .constraints import Constraints  # noqa: E402
-from .energy import moebius_energy, moebius_gradient  # noqa: E402
-from .engine import ENGINES  # noqa: E402
+from .engine import ENGINES, moebius_energy, moebius_gradient  # noqa: E402
 from .flow import relax, sobolev_gradient  # noqa: E402
 from .identify import Identification, Match, identify  # noqa: E402
 from .invariants import (  # noqa: E402
@@ -43,8 +42,8 @@ from .solvers.base import IterationState, RelaxResult, Status, check_number  # n
 from .solvers.penalty import DEFAULT_PENALTY_WEIGHT  # noqa: E402
 from .warmup import warm  # noqa: E402
 
-# every kernel module is imported now (open_energy too, which energy imports when first
-# needed): their kernels look in the cache shipped with the package as well
+# every kernel module is imported now: their kernels look in the cache shipped with the
+# package as well
 use_shipped_cache(__name__)
 
 __all__ = [

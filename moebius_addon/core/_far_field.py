@@ -13,9 +13,11 @@ the clusters' moments: total length ``L``, summed edge vector ``S``, tangent dip
 
 with ``T`` the first-order term (:func:`_dipole`) and ``K4 = ∇⁴ log|d|`` contracted through
 traces and projections of the moments (:func:`_quadrupole`, :func:`_dipole_pair`); between
-components the length part ``L_A L_B k + ½ ∇²k : (…)`` alone, the O'Hara kernel of
-``energy.py``. Both parts to the same order: for two pieces of one straight line they cancel
-(the exact F is 0), and expanding the length part alone further measured larger errors.
+components the length part ``L_A L_B k + ½ ∇²k : (…)`` alone, the O'Hara kernel. Both parts
+to the same order: for two pieces of one straight line they cancel (the exact F is 0), and
+expanding the length part alone further measured larger errors. The zeroth order
+``L_A L_B k + S_Aᵀ H S_B`` is the energy's pair kernel itself (:func:`.energies.moebius.pair`
+with the clusters' ``L`` and ``S``); the higher orders are this module's.
 
 Each target cluster sums its own partners (:func:`_far`), so the sums are the same bits for
 any thread count. The partners are taken eight at a time, one per SIMD lane: a block of
@@ -28,6 +30,8 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+
+from .energies.moebius import SPLIT, pair
 
 # Targets of the far field per parallel piece: m / _FAR_CHUNKS (each target's sums are its own,
 # so any split gives the same bits; a piece reuses one work array).
@@ -412,7 +416,8 @@ def _far_lanes(W, grad, La, sa0, sa1, sa2, Da, Qa, Ta):
         Qb = _lane9(W, sb + _LANES * _MQ)
         Tb = (_lane9(W, sb + _LANES * _MT) + _lane9(W, sb + _LANES * (_MT + 9))
               + _lane9(W, sb + _LANES * (_MT + 18)))
-        inv = 1.0 / (x0 * x0 + x1 * x1 + x2 * x2)
+        r2 = x0 * x0 + x1 * x1 + x2 * x2
+        inv = 1.0 / r2
         i2 = inv * inv
         i3 = i2 * inv
         # length part, second order: ½ ∇²k : (L_B Q_A + L_A Q_B), k = 1/|d|² (the first order
@@ -431,37 +436,30 @@ def _far_lanes(W, grad, La, sa0, sa1, sa2, Da, Qa, Ta):
         e = 4.0 * i3 * xqx - i2 * trq
         # tangent part: S_Aᵀ H S_B + T(D_A, S_B) − T(D_B, S_A) + ½ K4:(T_A⊗S_B) + ½ K4:(S_A⊗T_B)
         # − K4:(D_A⊗D_B)
-        ab = sa0 * sb0 + sa1 * sb1 + sa2 * sb2
-        da = x0 * sa0 + x1 * sa1 + x2 * sa2
-        db = x0 * sb0 + x1 * sb1 + x2 * sb2
-        sv = (La * Lb + ab) * inv
-        q = da * db * inv * inv
+        # the zeroth order: the pair kernel itself with the clusters' L and S (SPLIT form: ∂/∂S
+        # and ∂/∂L apart)
+        f, fs0, fs1, fs2, _, _, _, fx0, fx1, fx2, fl, _ = pair(
+            x0, x1, x2, sa0, sa1, sa2, sb0, sb1, sb2, La, Lb, r2, SPLIT)
         d1 = _dipole(Da, sb0, sb1, sb2, x0, x1, x2, inv)
         d2 = _dipole(Db, sa0, sa1, sa2, x0, x1, x2, inv)
         q1 = _quadrupole(Ta, sb0, sb1, sb2, x0, x1, x2, inv)
         q2 = _quadrupole(Tb, sa0, sa1, sa2, x0, x1, x2, inv)
         pq = _dipole_pair(Da, Db, x0, x1, x2, inv)
-        e += sv - 2.0 * q + d1[0] - d2[0] + 0.5 * q1[0] + 0.5 * q2[0] - pq[0]
+        e += f + d1[0] - d2[0] + 0.5 * q1[0] + 0.5 * q2[0] - pq[0]
         a = _W_SUMS + j
         W[a + _LANES * _AE] += e
         if grad:
-            W[a + _LANES * _AL] += 4.0 * i3 * xqb - i2 * trqb + Lb * inv
-            tb = 2.0 * db * inv
-            ta = 2.0 * da * inv
-            cd = 8.0 * q - 2.0 * sv
+            W[a + _LANES * _AL] += 4.0 * i3 * xqb - i2 * trqb + fl
             c0 = 4.0 * i3 * trq - 24.0 * i3 * inv * xqx
-            W[a + _LANES * _AC] += (c0 * x0 + 8.0 * i3 * (Lb * va0 + La * vb0)
-                                    + (cd * x0 - tb * sa0 - ta * sb0) * inv
+            W[a + _LANES * _AC] += (c0 * x0 + 8.0 * i3 * (Lb * va0 + La * vb0) + fx0
                                     + d1[13] - d2[13] + 0.5 * (q1[10] + q2[10]) - pq[10])
-            W[a + _LANES * (_AC + 1)] += (c0 * x1 + 8.0 * i3 * (Lb * va1 + La * vb1)
-                                          + (cd * x1 - tb * sa1 - ta * sb1) * inv
+            W[a + _LANES * (_AC + 1)] += (c0 * x1 + 8.0 * i3 * (Lb * va1 + La * vb1) + fx1
                                           + d1[14] - d2[14] + 0.5 * (q1[11] + q2[11]) - pq[11])
-            W[a + _LANES * (_AC + 2)] += (c0 * x2 + 8.0 * i3 * (Lb * va2 + La * vb2)
-                                          + (cd * x2 - tb * sa2 - ta * sb2) * inv
+            W[a + _LANES * (_AC + 2)] += (c0 * x2 + 8.0 * i3 * (Lb * va2 + La * vb2) + fx2
                                           + d1[15] - d2[15] + 0.5 * (q1[12] + q2[12]) - pq[12])
-            W[a + _LANES * _AS] += (sb0 - tb * x0) * inv - d2[1] + 0.5 * q2[1]
-            W[a + _LANES * (_AS + 1)] += (sb1 - tb * x1) * inv - d2[2] + 0.5 * q2[2]
-            W[a + _LANES * (_AS + 2)] += (sb2 - tb * x2) * inv - d2[3] + 0.5 * q2[3]
+            W[a + _LANES * _AS] += fs0 - d2[1] + 0.5 * q2[1]
+            W[a + _LANES * (_AS + 1)] += fs1 - d2[2] + 0.5 * q2[2]
+            W[a + _LANES * (_AS + 2)] += fs2 - d2[3] + 0.5 * q2[3]
             W[a + _LANES * _AD] += d1[4] - pq[1]
             W[a + _LANES * (_AD + 1)] += d1[5] - pq[2]
             W[a + _LANES * (_AD + 2)] += d1[6] - pq[3]

@@ -1,5 +1,6 @@
 """The near field of the tree engine: every pair of edges in near pairs of leaves, summed exactly
-with the kernel of ``energy.py`` (private; :mod:`barnes_hut` splits the pairs).
+with the energy's pair kernel (:func:`.energies.moebius.pair`, private; :mod:`barnes_hut`
+splits the pairs).
 
 The sum is ordered: each edge of a leaf sums over the edges of the leaf's near partners (itself
 included), so every pair is computed once per side and no edge's sums depend on another's (the
@@ -11,6 +12,8 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+
+from .energies.moebius import SPLIT, pair
 
 # Pieces of the near field's parallel loop over leaves (each edge's sums are its own: any split
 # gives the same bits); a piece reuses one work array.
@@ -48,37 +51,31 @@ def _near_lanes(W, rx, ry, rz, bx0, by0, bz0, lj, r, cr, grad):
         dx = px - rx
         dy = py - ry
         dz = pz - rz
-        inv = 1.0 / (dx * dx + dy * dy + dz * dz)
+        r2 = dx * dx + dy * dy + dz * dz
         skip = r == W[_NW_ID + j] or r == W[_NW_ID + _LANES + j] or r == W[_NW_ID + 2 * _LANES + j]
-        inv = 0.0 if skip else inv
+        r2 = np.inf if skip else r2  # 1/|d|² = 0: every term 0
         same = cr == W[_NW_ID + 3 * _LANES + j]
         bx = bx0 if same else 0.0
         by = by0 if same else 0.0
         bz = bz0 if same else 0.0
-        ab = ax * bx + ay * by + az * bz
-        da = dx * ax + dy * ay + dz * az
-        db = dx * bx + dy * by + dz * bz
-        sv = (li * lj + ab) * inv
-        qq = da * db * inv * inv
-        W[_NW_SUMS + j] += sv - 2.0 * qq
+        f, fax, fay, faz, _, _, _, fdx, fdy, fdz, wi, _ = pair(
+            dx, dy, dz, ax, ay, az, bx, by, bz, li, lj, r2, SPLIT)
+        W[_NW_SUMS + j] += f
         if grad:
-            tb = 2.0 * db * inv
-            ta = 2.0 * da * inv
-            W[_NW_SUMS + _LANES + j] += lj * inv
-            W[_NW_SUMS + 2 * _LANES + j] += (bx - tb * dx) * inv
-            W[_NW_SUMS + 3 * _LANES + j] += (by - tb * dy) * inv
-            W[_NW_SUMS + 4 * _LANES + j] += (bz - tb * dz) * inv
-            cd = 8.0 * qq - 2.0 * sv
-            W[_NW_SUMS + 5 * _LANES + j] += (cd * dx - tb * ax - ta * bx) * inv
-            W[_NW_SUMS + 6 * _LANES + j] += (cd * dy - tb * ay - ta * by) * inv
-            W[_NW_SUMS + 7 * _LANES + j] += (cd * dz - tb * az - ta * bz) * inv
+            W[_NW_SUMS + _LANES + j] += wi
+            W[_NW_SUMS + 2 * _LANES + j] += fax
+            W[_NW_SUMS + 3 * _LANES + j] += fay
+            W[_NW_SUMS + 4 * _LANES + j] += faz
+            W[_NW_SUMS + 5 * _LANES + j] += fdx
+            W[_NW_SUMS + 6 * _LANES + j] += fdy
+            W[_NW_SUMS + 7 * _LANES + j] += fdz
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def _near(E, M, ln, cp, lo, hi, leaves, noff, npart, nbr, grad):
     """The near field as an ordered sum: every edge of a leaf against every edge of the leaf's
     near partners (itself included), except itself and its neighbours along the curve, with
-    the kernel of ``energy.py``. Per edge (tree order): ``rows[0]`` its share ``Σ_J f(I, J)``
+    the energy's pair kernel. Per edge (tree order): ``rows[0]`` its share ``Σ_J f(I, J)``
     of the energy and, with ``grad``, rows 1–3 and 4–6 the derivatives of the ordered sum
     (``2 Σ_J ∂f(I, J)``, ``f`` symmetric) in its edge vector and midpoint. A leaf's edges
     are the lanes (:func:`_near_lanes`), the partners' edges go by one at a time; every pair is

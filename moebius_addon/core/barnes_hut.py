@@ -43,24 +43,6 @@ THETA = 0.175
 _SPLIT_CHUNKS = 16
 
 
-ENGINE_NAMES = ("auto", "exact", "tree")
-# From this many edges on, "auto" evaluates the energy alone (moebius_energy, moebius_gradient)
-# with the tree (runs take the tree earlier, from engine.AUTO_TREE_FROM, where its metric
-# pays): at the default theta (frame included, 7_2, alternated on a shared machine) the energy
-# alone measured 0.5-0.8x the exact speed at 1 000 edges, 0.7-1.2x at 2 000, 1.6-2.2x at
-# 3 000, energy+gradient 1.4-2.3x at 1 000, 2.9-3.9x at 2 000, 4.5-6.0x at 3 000
-# (docs/benchmarks.md, "Tree engine").
-TREE_FROM = 3000
-
-
-def uses_tree(engine: str, n: int) -> bool:
-    """Whether ``engine`` ("exact", "tree" or "auto": the tree from ``TREE_FROM`` edges on)
-    evaluates a polygon of ``n`` edges with the tree; ValueError for another name."""
-    if engine not in ENGINE_NAMES:
-        raise ValueError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINE_NAMES)}")
-    return engine == "tree" or (engine == "auto" and n >= TREE_FROM)
-
-
 def check_theta(theta) -> float:
     """``theta`` as a float in (0, 2), else ValueError naming it."""
     try:
@@ -404,3 +386,13 @@ def tree_energy_gradient(X: np.ndarray, layout: Layout,
                          theta: float = THETA) -> tuple[float, np.ndarray]:
     """Barnes–Hut energy and its exact gradient with a split built at ``X``."""
     return Frame(X, layout, theta).energy_gradient(X)
+
+
+def __getattr__(name: str):
+    # ``barnes_hut.TREE_FROM``, named so in docs/benchmarks.md: the threshold of "auto" for the
+    # energy alone now lives beside the runs' one in engine.py (ENERGY_TREE_FROM)
+    if name == "TREE_FROM":
+        from .engine import ENERGY_TREE_FROM
+
+        return ENERGY_TREE_FROM
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

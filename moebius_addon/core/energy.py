@@ -5,7 +5,9 @@ Midpoint rule for the Ishizeki–Nagasawa integrand over ordered pairs of disjoi
     E(P) = 4 + Σ_{(I,J) disjoint} (l_I l_J + <e_I, e_J>) / |d|² − 2 <d, e_I> <d, e_J> / |d|⁴
 
 with ``d = m_I − m_J``; between components of a link the O'Hara kernel ``l_I l_J / |d|²``.
-The sum is symmetric, so the kernels visit each unordered pair once and double it.
+The sum is symmetric, so the kernels visit each unordered pair once and double it. The pair
+terms are :mod:`.energies.moebius`'s; the public evaluators, which choose between this exact
+sum and the tree (:mod:`.barnes_hut`) by the engine's name, are in :mod:`.engine`.
 """
 
 from __future__ import annotations
@@ -13,44 +15,13 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from . import barnes_hut
-from ._layout import OPEN_TREE_REFUSAL, Layout, as_checked_layout
-
-# Partial gradients go to a fixed number of buffers, independent of the thread count, so the
-# result is bit-for-bit the same on every machine with the same inputs.
-_CHUNKS = 8
-# Reassociation lets LLVM vectorize the pair sums (results change in the last bits only);
-# no 'nnan'/'ninf': non-finite input must stay visible.
-_FASTMATH = {"reassoc", "contract", "nsz", "arcp"}
+from ._dense import CHUNKS, FASTMATH, edge_data, row_range
+from ._layout import Layout
+from .energies.moebius import CLOSED_CONSTANT, FOLDED, VALUE, link_pair, pair
+from .open_energy import open_energy_gradient_x, open_energy_x
 
 
-def edge_data(X: np.ndarray, layout: Layout):
-    """Edge vectors, midpoints and lengths as separate contiguous coordinate arrays."""
-    E = X[layout.nxt] - X
-    M = 0.5 * (X[layout.nxt] + X)
-    lengths = np.sqrt(np.einsum("ij,ij->i", E, E))
-    return (
-        np.ascontiguousarray(E[:, 0]),
-        np.ascontiguousarray(E[:, 1]),
-        np.ascontiguousarray(E[:, 2]),
-        np.ascontiguousarray(M[:, 0]),
-        np.ascontiguousarray(M[:, 1]),
-        np.ascontiguousarray(M[:, 2]),
-        lengths,
-    )
-
-
-@nb.njit(cache=True, inline="always")
-def _row_range(i, comp_start, comp_end):
-    """Edges J > i of the same component that are disjoint from edge i: [i+2, end)."""
-    lo = i + 2
-    hi = comp_end
-    if i == comp_start:
-        hi = comp_end - 1  # the last edge of the component touches vertex comp_start
-    return lo, hi
-
-
-@nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _energy_rows(ex, ey, ez, mx, my, mz, ln, starts, comp):
     """Per-row sums Σ_{J>I, disjoint} f_IJ (unordered pairs)."""
     n = ln.shape[0]
@@ -63,7 +34,7 @@ def _energy_rows(ex, ey, ez, mx, my, mz, ln, starts, comp):
             if side == 1 and i == k:
                 break
             c = comp[i]
-            lo, hi = _row_range(i, starts[c], starts[c + 1])
+            lo, hi = row_range(i, starts[c], starts[c + 1])
             ax, ay, az, li = ex[i], ey[i], ez[i], ln[i]
             px, py, pz = mx[i], my[i], mz[i]
             s = 0.0
@@ -71,21 +42,18 @@ def _energy_rows(ex, ey, ez, mx, my, mz, ln, starts, comp):
                 dx = px - mx[j]
                 dy = py - my[j]
                 dz = pz - mz[j]
-                inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-                ab = ax * ex[j] + ay * ey[j] + az * ez[j]
-                da = dx * ax + dy * ay + dz * az
-                db = dx * ex[j] + dy * ey[j] + dz * ez[j]
-                s += ((li * ln[j] + ab) - 2.0 * da * db * inv) * inv
+                s += pair(dx, dy, dz, ax, ay, az, ex[j], ey[j], ez[j], li, ln[j],
+                          dx * dx + dy * dy + dz * dz, VALUE)[0]
             for j in range(starts[c + 1], n):
                 dx = px - mx[j]
                 dy = py - my[j]
                 dz = pz - mz[j]
-                s += li * ln[j] / (dx * dx + dy * dy + dz * dz)
+                s += link_pair(li, ln[j], dx * dx + dy * dy + dz * dz, VALUE)[0]
             rows[i] = s
     return rows
 
 
-@nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _energy_gradient_parts(ex, ey, ez, mx, my, mz, ln, starts, comp, nchunks):
     """Row sums of f and the partial derivatives of Σ_{I<J} f_IJ with respect to every edge
     vector (ga) and midpoint (gm), accumulated in ``nchunks`` fixed buffers."""
@@ -102,38 +70,23 @@ def _energy_gradient_parts(ex, ey, ez, mx, my, mz, ln, starts, comp, nchunks):
                 if side == 1 and i == k:
                     break
                 c = comp[i]
-                lo, hi = _row_range(i, starts[c], starts[c + 1])
+                lo, hi = row_range(i, starts[c], starts[c + 1])
                 ax, ay, az, li = ex[i], ey[i], ez[i], ln[i]
                 px, py, pz = mx[i], my[i], mz[i]
                 s = 0.0
                 gax = gay = gaz = gmx = gmy = gmz = 0.0
                 for j in range(lo, hi):
+                    # loads in this order: under reassociation LLVM ranks values by it (the
+                    # bits of the energy's sum depend on it)
                     bx, by, bz, lj = ex[j], ey[j], ez[j], ln[j]
                     dx = px - mx[j]
                     dy = py - my[j]
                     dz = pz - mz[j]
-                    inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-                    ab = ax * bx + ay * by + az * bz
-                    da = dx * ax + dy * ay + dz * az
-                    db = dx * bx + dy * by + dz * bz
-                    sv = (li * lj + ab) * inv
-                    q = da * db * inv * inv
-                    s += sv - 2.0 * q
-                    # ∂f/∂e_I, ∂f/∂e_J, ∂f/∂d (d = m_I − m_J); see docs/design.md for f.
-                    ci = lj / li
-                    cj = li / lj
-                    tb = 2.0 * db * inv
-                    ta = 2.0 * da * inv
-                    fax = (ci * ax + bx - tb * dx) * inv
-                    fay = (ci * ay + by - tb * dy) * inv
-                    faz = (ci * az + bz - tb * dz) * inv
-                    fbx = (cj * bx + ax - ta * dx) * inv
-                    fby = (cj * by + ay - ta * dy) * inv
-                    fbz = (cj * bz + az - ta * dz) * inv
-                    cd = 8.0 * q - 2.0 * sv
-                    fdx = (cd * dx - tb * ax - ta * bx) * inv
-                    fdy = (cd * dy - tb * ay - ta * by) * inv
-                    fdz = (cd * dz - tb * az - ta * bz) * inv
+                    # f, ∂f/∂e_I, ∂f/∂e_J, ∂f/∂d (d = m_I − m_J)
+                    f, fax, fay, faz, fbx, fby, fbz, fdx, fdy, fdz, _, _ = pair(
+                        dx, dy, dz, ax, ay, az, bx, by, bz, li, lj, dx * dx + dy * dy + dz * dz,
+                        FOLDED)
+                    s += f
                     gax += fax
                     gay += fay
                     gaz += faz
@@ -151,12 +104,8 @@ def _energy_gradient_parts(ex, ey, ez, mx, my, mz, ln, starts, comp, nchunks):
                     dx = px - mx[j]
                     dy = py - my[j]
                     dz = pz - mz[j]
-                    inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-                    f = li * lj * inv
+                    f, ci, cj, cd, _, _ = link_pair(li, lj, dx * dx + dy * dy + dz * dz, FOLDED)
                     s += f
-                    ci = lj * inv / li
-                    cj = li * inv / lj
-                    cd = -2.0 * f * inv
                     gax += ci * ax
                     gay += ci * ay
                     gaz += ci * az
@@ -181,13 +130,12 @@ def _energy_gradient_parts(ex, ey, ez, mx, my, mz, ln, starts, comp, nchunks):
 
 def _energy_from_rows(rows: np.ndarray, layout: Layout) -> float:
     # E = 4 per component + Σ over ordered pairs = 4K + 2 Σ over unordered pairs.
-    return 4.0 * layout.k + 2.0 * float(np.sum(rows))
+    return CLOSED_CONSTANT * layout.k + 2.0 * float(np.sum(rows))
 
 
 def energy_x(X: np.ndarray, layout: Layout) -> float:
     """Energy of the stacked vertex array (private fast path used by the flow)."""
     if layout.closed is not None:
-        from .open_energy import open_energy_x  # it builds on this module
         return open_energy_x(X, layout)
     ed = edge_data(X, layout)
     return _energy_from_rows(_energy_rows(*ed, layout.starts, layout.comp), layout)
@@ -196,10 +144,9 @@ def energy_x(X: np.ndarray, layout: Layout) -> float:
 def energy_gradient_x(X: np.ndarray, layout: Layout) -> tuple[float, np.ndarray]:
     """Energy and exact gradient ``(N, 3)`` of the stacked vertex array."""
     if layout.closed is not None:
-        from .open_energy import open_energy_gradient_x
         return open_energy_gradient_x(X, layout)
     ed = edge_data(X, layout)
-    rows, buf = _energy_gradient_parts(*ed, layout.starts, layout.comp, _CHUNKS)
+    rows, buf = _energy_gradient_parts(*ed, layout.starts, layout.comp, CHUNKS)
     part = buf.sum(axis=0)  # (6, N): ∂/∂e_I then ∂/∂m_I of the unordered sum
     ga = part[:3].T
     gm = part[3:].T
@@ -207,72 +154,3 @@ def energy_gradient_x(X: np.ndarray, layout: Layout) -> tuple[float, np.ndarray]
     G = 2.0 * (0.5 * gm - ga)
     G[layout.nxt] += 2.0 * (ga + 0.5 * gm)  # nxt is a permutation: no repeated index
     return _energy_from_rows(rows, layout), G
-
-
-def _engine_x(X, layout, engine, theta):
-    """The Barnes–Hut frame for ``engine``/``theta`` at X, or None for the exact sum (always
-    for open curves: "auto" takes the exact sum, "tree" is refused)."""
-    theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
-    if layout.has_open:
-        if engine == "tree":
-            raise ValueError(OPEN_TREE_REFUSAL)
-        if engine not in ("exact", "auto"):
-            barnes_hut.uses_tree(engine, layout.n)  # its message for an unknown name
-        return None
-    if not barnes_hut.uses_tree(engine, layout.n):
-        return None
-    return barnes_hut.Frame(X, layout, theta)
-
-
-def moebius_energy(P, *, engine: str = "auto", theta: float | None = None,
-                   closed=True) -> float:
-    """Discrete Möbius energy of a closed polygon or a link.
-
-    Parameters
-    ----------
-    P : (N, 3) array or list of (N_k, 3) arrays
-        Vertices of a closed polygon (vertex ``i`` joined to ``i+1``, the last to the first), or
-        the components of a link.
-    engine : {"exact", "tree", "auto"}
-        "exact": the sum over all pairs; "tree": Barnes–Hut on a hierarchy of edges with
-        admissibility ``theta`` (relative error about 1e-4 at the default, O(N log N));
-        "auto": the tree from ``barnes_hut.TREE_FROM`` edges on.
-    theta : float, optional
-        Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); smaller is more
-        accurate and slower.
-    closed : bool or sequence of bool
-        False: ``P`` is an open polyline (for a link: one flag per component, or one for
-        all), whose energy is O'Hara's regularized sum (docs/api.md, "Open curves"; exact
-        engine only).
-
-    Returns
-    -------
-    float
-        ``4 + Σ`` over ordered pairs of disjoint edges (docs/design.md); 4 for a regular polygon,
-        invariant under similarities and reversal. Scale-free (computed at a size near 1 for
-        curves spanning more than 2^64 or less than 2^-64).
-    """
-    X, layout, _ = as_checked_layout(P, closed)
-    frame = _engine_x(X, layout, engine, theta)
-    return energy_x(X, layout) if frame is None else frame.energy(X)
-
-
-def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None, closed=True):
-    """Exact derivative of :func:`moebius_energy` with respect to the vertices.
-
-    Parameters
-    ----------
-    P : (N, 3) array or list of (N_k, 3) arrays
-    engine, theta, closed
-        As in :func:`moebius_energy`; with the tree, the exact derivative of the approximated
-        sum.
-
-    Returns
-    -------
-    (N, 3) array or list of arrays
-        Same shape as ``P``; units 1/length.
-    """
-    X, layout, k = as_checked_layout(P, closed)
-    frame = _engine_x(X, layout, engine, theta)
-    g = (energy_gradient_x(X, layout) if frame is None else frame.energy_gradient(X))[1]
-    return layout.split(np.ldexp(g, -k) if k else g)  # ∇E(2^k X) = 2^-k ∇E(X)

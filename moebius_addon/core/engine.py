@@ -20,7 +20,11 @@ Engines by name (the ``engine=`` option of ``relax``, ``make_run`` and every run
   :mod:`.hs_solve`).
 * ``"auto"``: the tree from ``AUTO_TREE_FROM`` vertices on, else exact.
 
-:func:`make_engine` is the one place that maps names to classes.
+This module is the one place for engines by name: their names (:data:`ENGINE_NAMES`), what
+"auto" picks (:func:`uses_tree`, both of its thresholds), the classes (:data:`ENGINES`,
+:func:`make_engine`) and the public evaluators of the energy (:func:`moebius_energy`,
+:func:`moebius_gradient`), which pick the exact sum (:mod:`.energy`) or the tree
+(:mod:`.barnes_hut`) by the same names.
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import barnes_hut, hs_solve, hs_tree
-from ._layout import Layout
+from ._layout import OPEN_TREE_REFUSAL, Layout, as_checked_layout
 from ._memory import check_memory
 from .banded import BANDED_METRICS, BandedSaddle
 from .collision import contact_time_x
@@ -333,12 +337,41 @@ class TreeEngine(DenseEngine):
         return self._plus_obstacle_gradient(*self._frame_at(X).energy_gradient(X), X)
 
 
+# ------------------------------------------------------------------------------------------------
+# engines by name, and what "auto" picks
+
+#: The names of the ``engine=`` option (of the runs and of the evaluators), "auto" first.
+ENGINE_NAMES = ("auto", "exact", "tree")
+
+# "auto" takes the tree from a size on, and the size depends on what is evaluated: a run pays
+# for the whole iteration, where the tree's metric (no dense matrix) wins early; the energy
+# alone (moebius_energy, moebius_gradient) pays for the energy, where the frame's build costs
+# more than the exact sum up to a few thousand edges. Measurements: docs/benchmarks.md
+# ("Tree engine").
+
 #: From this many vertices on, "auto" runs on the tree engine: its whole iteration (energy,
 #: metric and solves) measured faster from about 900 edges on (FHW, median seconds per
 #: iteration exact / tree: 800: 36-40 / 41-44 ms, 1 000: 84-88 / 42-46 ms, 1 648: 248-252 /
-#: 64-76 ms; busy machine, alternated). The energy alone crosses over later
-#: (``barnes_hut.TREE_FROM``, what "auto" means for ``moebius_energy``).
+#: 64-76 ms; busy machine, alternated).
 AUTO_TREE_FROM = 1000
+#: From this many edges on, "auto" evaluates the energy alone with the tree: at the default
+#: theta (frame included, 7_2, alternated on a shared machine) the energy alone measured
+#: 0.5-0.8x the exact speed at 1 000 edges, 0.7-1.2x at 2 000, 1.6-2.2x at 3 000,
+#: energy+gradient 1.4-2.3x at 1 000, 2.9-3.9x at 2 000, 4.5-6.0x at 3 000. (Before issue 26:
+#: ``barnes_hut.TREE_FROM``, still an alias.)
+ENERGY_TREE_FROM = 3000
+
+
+def uses_tree(engine: str, n: int, *, run: bool = False) -> bool:
+    """Whether ``engine`` ("exact", "tree" or "auto") evaluates a polygon of ``n`` edges with
+    the tree: "auto" from :data:`AUTO_TREE_FROM` on for a run (``run``), from
+    :data:`ENERGY_TREE_FROM` on for the energy alone. ValueError naming the valid names for
+    another one."""
+    if engine not in ENGINE_NAMES:
+        raise ValueError(f"unknown engine {engine!r}; choose one of {', '.join(ENGINE_NAMES)}")
+    return engine == "tree" or (
+        engine == "auto" and n >= (AUTO_TREE_FROM if run else ENERGY_TREE_FROM))
+
 
 #: Engines by name; :func:`make_engine` resolves a run's ``engine=`` here ("auto" too).
 ENGINES: dict[str, type[DenseEngine]] = {"exact": DenseEngine, "tree": TreeEngine}
@@ -365,9 +398,79 @@ def engine_class(name: str, n: int) -> type[DenseEngine]:
     """The class the engine ``name`` runs for a polygon of ``n`` vertices ("auto": the tree
     from ``AUTO_TREE_FROM`` vertices on); ValueError naming the valid names for an unknown
     one."""
-    if name == "auto":
-        name = "tree" if n >= AUTO_TREE_FROM else "exact"
-    if name not in ENGINES:
-        raise ValueError(f"unknown engine {name!r}; choose one of "
-                         f"{', '.join(barnes_hut.ENGINE_NAMES)}")
+    if name not in ENGINES:  # "auto", or an unknown name (ValueError)
+        name = "tree" if uses_tree(name, n, run=True) else "exact"
     return ENGINES[name]
+
+
+# ------------------------------------------------------------------------------------------------
+# the public evaluators
+
+
+def _frame(X, layout, engine, theta):
+    """The Barnes–Hut frame for ``engine``/``theta`` at X, or None for the exact sum (always
+    for open curves: "auto" takes the exact sum, "tree" is refused)."""
+    theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
+    if layout.has_open:
+        if engine == "tree":
+            raise ValueError(OPEN_TREE_REFUSAL)
+        if engine not in ("exact", "auto"):
+            uses_tree(engine, layout.n)  # its message for an unknown name
+        return None
+    if not uses_tree(engine, layout.n):
+        return None
+    return barnes_hut.Frame(X, layout, theta)
+
+
+def moebius_energy(P, *, engine: str = "auto", theta: float | None = None,
+                   closed=True) -> float:
+    """Discrete Möbius energy of a closed polygon or a link.
+
+    Parameters
+    ----------
+    P : (N, 3) array or list of (N_k, 3) arrays
+        Vertices of a closed polygon (vertex ``i`` joined to ``i+1``, the last to the first), or
+        the components of a link.
+    engine : {"exact", "tree", "auto"}
+        "exact": the sum over all pairs; "tree": Barnes–Hut on a hierarchy of edges with
+        admissibility ``theta`` (relative error about 1e-4 at the default, O(N log N));
+        "auto": the tree from ``ENERGY_TREE_FROM`` edges on.
+    theta : float, optional
+        Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); smaller is more
+        accurate and slower.
+    closed : bool or sequence of bool
+        False: ``P`` is an open polyline (for a link: one flag per component, or one for
+        all), whose energy is O'Hara's regularized sum (docs/api.md, "Open curves"; exact
+        engine only).
+
+    Returns
+    -------
+    float
+        ``4 + Σ`` over ordered pairs of disjoint edges (docs/design.md); 4 for a regular polygon,
+        invariant under similarities and reversal. Scale-free (computed at a size near 1 for
+        curves spanning more than 2^64 or less than 2^-64).
+    """
+    X, layout, _ = as_checked_layout(P, closed)
+    frame = _frame(X, layout, engine, theta)
+    return energy_x(X, layout) if frame is None else frame.energy(X)
+
+
+def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None, closed=True):
+    """Exact derivative of :func:`moebius_energy` with respect to the vertices.
+
+    Parameters
+    ----------
+    P : (N, 3) array or list of (N_k, 3) arrays
+    engine, theta, closed
+        As in :func:`moebius_energy`; with the tree, the exact derivative of the approximated
+        sum.
+
+    Returns
+    -------
+    (N, 3) array or list of arrays
+        Same shape as ``P``; units 1/length.
+    """
+    X, layout, k = as_checked_layout(P, closed)
+    frame = _frame(X, layout, engine, theta)
+    g = (energy_gradient_x(X, layout) if frame is None else frame.energy_gradient(X))[1]
+    return layout.split(np.ldexp(g, -k) if k else g)  # ∇E(2^k X) = 2^-k ∇E(X)

@@ -24,13 +24,12 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ._dense import CHUNKS, FASTMATH, edge_data, row_range
 from ._layout import Layout
-from .energy import _FASTMATH, _row_range, edge_data
-
-_CHUNKS = 8  # fixed buffers: the same bits for any thread count
+from .energies.moebius import CLOSED_CONSTANT, FOLDED, SPLIT, link_pair, open_pair, pair
 
 
-@nb.njit(cache=True, parallel=True, fastmath=_FASTMATH)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _open_parts(ex, ey, ez, mx, my, mz, ln, arc, starts, comp, closed, real, grad, nchunks):
     """Row sums of the unordered pair sum, and with ``grad`` its partial derivatives per edge:
     rows 0–2 the edge vector (closed components' kernel), 3–5 the midpoint, 6 the length, 7 the
@@ -57,37 +56,26 @@ def _open_parts(ex, ey, ez, mx, my, mz, ln, arc, starts, comp, closed, real, gra
                 s = 0.0
                 gax = gay = gaz = gmx = gmy = gmz = gl = 0.0
                 if closed[c]:  # the Ishizeki–Nagasawa kernel of energy.py
-                    lo, hi = _row_range(i, s0, s1)
+                    lo, hi = row_range(i, s0, s1)
                     for j in range(lo, hi):
-                        bx, by, bz, lj = ex[j], ey[j], ez[j], ln[j]
+                        bx, by, bz, lj = ex[j], ey[j], ez[j], ln[j]  # loads first (energy.py)
                         dx = px - mx[j]
                         dy = py - my[j]
                         dz = pz - mz[j]
-                        inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-                        ab = ax * bx + ay * by + az * bz
-                        da = dx * ax + dy * ay + dz * az
-                        db = dx * bx + dy * by + dz * bz
-                        sv = (li * lj + ab) * inv
-                        q = da * db * inv * inv
-                        s += sv - 2.0 * q
+                        f, fax, fay, faz, fbx, fby, fbz, fdx, fdy, fdz, _, _ = pair(
+                            dx, dy, dz, ax, ay, az, bx, by, bz, li, lj,
+                            dx * dx + dy * dy + dz * dz, FOLDED)
+                        s += f
                         if grad:
-                            ci = lj / li
-                            cj = li / lj
-                            tb = 2.0 * db * inv
-                            ta = 2.0 * da * inv
-                            cd = 8.0 * q - 2.0 * sv
-                            fdx = (cd * dx - tb * ax - ta * bx) * inv
-                            fdy = (cd * dy - tb * ay - ta * by) * inv
-                            fdz = (cd * dz - tb * az - ta * bz) * inv
-                            gax += (ci * ax + bx - tb * dx) * inv
-                            gay += (ci * ay + by - tb * dy) * inv
-                            gaz += (ci * az + bz - tb * dz) * inv
+                            gax += fax
+                            gay += fay
+                            gaz += faz
                             gmx += fdx
                             gmy += fdy
                             gmz += fdz
-                            b[0, j] += (cj * bx + ax - ta * dx) * inv
-                            b[1, j] += (cj * by + ay - ta * dy) * inv
-                            b[2, j] += (cj * bz + az - ta * dz) * inv
+                            b[0, j] += fbx
+                            b[1, j] += fby
+                            b[2, j] += fbz
                             b[3, j] -= fdx
                             b[4, j] -= fdy
                             b[5, j] -= fdz
@@ -97,18 +85,14 @@ def _open_parts(ex, ey, ez, mx, my, mz, ln, arc, starts, comp, closed, real, gra
                         dx = px - mx[j]
                         dy = py - my[j]
                         dz = pz - mz[j]
-                        inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-                        dd = arc[j] - arc[i]
-                        id2 = 1.0 / (dd * dd)
-                        s += li * lj * (inv - id2)
+                        f, cd, wi, wj, h = open_pair(li, lj, dx * dx + dy * dy + dz * dz,
+                                                     arc[j] - arc[i], SPLIT)
+                        s += f
                         if grad:
-                            f0 = li * lj * inv
-                            h = li * lj * id2 / dd  # ∂(−l_I l_J / D²)/∂D = 2h
-                            gl += lj * (inv - id2) + h
-                            b[6, j] += li * (inv - id2) + h
+                            gl += wi
+                            b[6, j] += wj
                             b[7, i + 1] += 2.0 * h
                             b[7, j] -= 2.0 * h
-                            cd = -2.0 * f0 * inv
                             gmx += cd * dx
                             gmy += cd * dy
                             gmz += cd * dz
@@ -122,13 +106,11 @@ def _open_parts(ex, ey, ez, mx, my, mz, ln, arc, starts, comp, closed, real, gra
                     dx = px - mx[j]
                     dy = py - my[j]
                     dz = pz - mz[j]
-                    inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-                    f0 = li * lj * inv
-                    s += f0
+                    f, _, _, cd, wi, wj = link_pair(li, lj, dx * dx + dy * dy + dz * dz, SPLIT)
+                    s += f
                     if grad:
-                        gl += lj * inv
-                        b[6, j] += li * inv
-                        cd = -2.0 * f0 * inv
+                        gl += wi
+                        b[6, j] += wj
                         gmx += cd * dx
                         gmy += cd * dy
                         gmz += cd * dz
@@ -160,8 +142,8 @@ def _parts(X: np.ndarray, layout: Layout, grad: bool):
     ed = edge_data(X, layout)
     arc = _arc_positions(ed[6], layout)
     rows, buf = _open_parts(*ed, arc, layout.starts, layout.comp, layout.closed, layout.real,
-                            grad, _CHUNKS)
-    energy = 4.0 * int(layout.closed.sum()) + 2.0 * float(np.sum(rows))
+                            grad, CHUNKS)
+    energy = CLOSED_CONSTANT * int(layout.closed.sum()) + 2.0 * float(np.sum(rows))
     return energy, rows, buf, ed
 
 

@@ -18,7 +18,7 @@ from collections.abc import Callable
 import numpy as np
 
 from . import knots
-from .energy import moebius_energy
+from .engine import moebius_energy
 from .identify import identify
 from .invariants import knot_determinant
 from .polygon import check_polygon, contact_ratio, resample
@@ -53,7 +53,7 @@ def _exact() -> None:
 
 
 def _tree() -> None:
-    # from engine.AUTO_TREE_FROM edges on Automatic takes the tree; from barnes_hut.TREE_FROM
+    # from engine.AUTO_TREE_FROM edges on Automatic takes the tree; from engine.ENERGY_TREE_FROM
     # (3 000) the energy shown by Add Knot and Convert is the tree's too
     _knot("3_1", 3000)
     _relax(knots.named("3_1", 3000), "projected_gradient")

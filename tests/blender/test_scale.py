@@ -17,10 +17,10 @@ from bpy_helpers import (
 
 
 def _core_names(core):
-    """``barnes_hut`` and ``DENSE_MAX_VERTICES`` of the installed extension's core (the
+    """``engine`` and ``DENSE_MAX_VERTICES`` of the installed extension's core (the
     repository's core needs numba in the venv, which the Blender lines' venvs leave to the
     extension)."""
-    return (import_module(core.__name__ + ".barnes_hut"),
+    return (import_module(core.__name__ + ".engine"),
             import_module(core.__name__ + ".solvers.base").DENSE_MAX_VERTICES)
 
 
@@ -36,12 +36,13 @@ def trefoil(scene, mb):
 
 
 def test_engine_enum_is_the_cores_list(mb, core):
-    barnes_hut, _ = _core_names(core)
+    engines, _ = _core_names(core)
+    barnes_hut = import_module(core.__name__ + ".barnes_hut")
     settings = bpy.types.Scene.bl_rna.properties["moebius"].fixed_type
     engine = settings.properties["engine"]
-    assert [item.identifier for item in engine.enum_items] == list(barnes_hut.ENGINE_NAMES)
+    assert [item.identifier for item in engine.enum_items] == list(engines.ENGINE_NAMES)
     assert engine.default == "auto"
-    assert [e for e, *_ in mb.api.ENGINES] == list(barnes_hut.ENGINE_NAMES)
+    assert [e for e, *_ in mb.api.ENGINES] == list(engines.ENGINE_NAMES)
     assert settings.properties["theta"].default == pytest.approx(barnes_hut.THETA)
 
 
@@ -101,9 +102,9 @@ def test_theta_and_engine_reach_the_run_and_the_report_names_the_engine(scene, m
 
 
 def test_panel_shows_theta_only_where_the_tree_can_run(scene, mb, core):
-    barnes_hut, _ = _core_names(core)
+    engines, _ = _core_names(core)
     s = scene.moebius
-    for engine in barnes_hut.ENGINE_NAMES:
+    for engine in engines.ENGINE_NAMES:
         s.engine = engine
         acting = mb.api.acting_settings(s.method, engine)
         assert ("theta" in acting) == (engine != "exact")

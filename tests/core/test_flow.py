@@ -181,7 +181,7 @@ def test_status_codes_of_the_other_endings(trefoil300):
 
 
 def test_engine_by_name(trefoil300):
-    r = relax(trefoil300, max_iter=3)  # "auto": exact below barnes_hut.TREE_FROM edges
+    r = relax(trefoil300, max_iter=3)  # "auto": exact below engine.AUTO_TREE_FROM edges
     assert r.stats["engine"] == "exact" and ENGINES["exact"] is DenseEngine
     # theta is accepted for every engine and ignored by the exact one: the same bits
     t = relax(trefoil300, max_iter=3, engine="exact", theta=0.5)

@@ -202,10 +202,18 @@ def test_bad_engine_refused():
 
 
 def test_auto_switches_at_crossover():
-    X, layout = as_layout(ngon(100))
-    assert not bh.uses_tree("auto", bh.TREE_FROM - 1)
-    assert bh.uses_tree("auto", bh.TREE_FROM)
-    assert bh.uses_tree("tree", 10) and not bh.uses_tree("exact", 10**6)
+    from moebius_addon.core import engine
+
+    # the energy alone, and runs (earlier): both thresholds in engine.py
+    assert not engine.uses_tree("auto", engine.ENERGY_TREE_FROM - 1)
+    assert engine.uses_tree("auto", engine.ENERGY_TREE_FROM)
+    assert not engine.uses_tree("auto", engine.AUTO_TREE_FROM - 1, run=True)
+    assert engine.uses_tree("auto", engine.AUTO_TREE_FROM, run=True)
+    assert (engine.ENERGY_TREE_FROM, engine.AUTO_TREE_FROM) == (3000, 1000)
+    assert bh.TREE_FROM == engine.ENERGY_TREE_FROM  # the old name (docs/benchmarks.md)
+    assert engine.uses_tree("tree", 10) and not engine.uses_tree("exact", 10**6)
+    with pytest.raises(ValueError, match="choose one of auto, exact, tree"):
+        engine.uses_tree("fast", 10)
 
 
 def test_same_function_as_exact_where_everything_is_near():

@@ -1,0 +1,17 @@
+"""The energies the flow can minimize, one module each (private; issue 26).
+
+A module here is one energy: its name, which inputs it supports (open curves, links), how it
+scales, and its pair kernels, the only place its integrand is written. Every sum of the core
+(the dense sums of :mod:`..energy` and :mod:`..open_energy`, the tree engine's near and far
+fields) reaches the integrand through these kernels (``@nb.njit(inline="always")``: inlined
+into each sum, compiled with that sum's own options), so a second energy is a second module
+here, not a sixth copy of the formula. The sums, their order and their parallel split stay
+where they are; the kernels hold no loops.
+"""
+
+from __future__ import annotations
+
+from . import moebius
+
+#: Energies by name.
+ENERGIES = {moebius.NAME: moebius}
