@@ -387,12 +387,3 @@ def tree_energy_gradient(X: np.ndarray, layout: Layout,
     """Barnes–Hut energy and its exact gradient with a split built at ``X``."""
     return Frame(X, layout, theta).energy_gradient(X)
 
-
-def __getattr__(name: str):
-    # ``barnes_hut.TREE_FROM``, named so in docs/benchmarks.md: the threshold of "auto" for the
-    # energy alone now lives beside the runs' one in engine.py (ENERGY_TREE_FROM)
-    if name == "TREE_FROM":
-        from .engine import ENERGY_TREE_FROM
-
-        return ENERGY_TREE_FROM
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -358,7 +358,7 @@ AUTO_TREE_FROM = 1000
 #: theta (frame included, 7_2, alternated on a shared machine) the energy alone measured
 #: 0.5-0.8x the exact speed at 1 000 edges, 0.7-1.2x at 2 000, 1.6-2.2x at 3 000,
 #: energy+gradient 1.4-2.3x at 1 000, 2.9-3.9x at 2 000, 4.5-6.0x at 3 000. (Before issue 26:
-#: ``barnes_hut.TREE_FROM``, still an alias.)
+#: ``barnes_hut.TREE_FROM``.)
 ENERGY_TREE_FROM = 3000
 
 
