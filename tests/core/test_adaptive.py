@@ -297,6 +297,31 @@ def test_a_separation_stopped_half_way_ends_where_it_is(separated_run):
     np.testing.assert_array_equal(more.x, seen[steps + 2][1])
 
 
+def test_a_link_and_an_open_curve_are_pushed_apart():
+    # a Hopf link whose second circle passes 0.03 from the first (0.19 edge lengths at 40
+    # edges each; split four times still 0.65), and an open curve crossing over itself 0.03
+    # edge lengths above
+    s = np.linspace(0, 2 * np.pi, 40, endpoint=False) + 0.04
+    L = [np.c_[np.cos(s), np.sin(s), 0 * s], np.c_[1.97 + np.cos(s), 0 * s, np.sin(s)]]
+    t = np.linspace(-1, 1, 400)
+    P = core.resample(np.vstack([np.c_[t, 0 * t, 0 * t], [[1, 0.5, 0.003], [0.5, 1, 0.006]],
+                                 np.c_[0 * t, -t, 0.006 + 0 * t]]), 30, closed=False)
+    for start, closed, engine in ((L, True, "auto"), (P, False, "exact")):
+        assert core.contact_ratio(core.subdivide(start, 4, closed), closed=closed) < 1
+        seen: list = []
+        r = core.relax(start, closed=closed, engine=engine, max_iter=20,
+                       callback=lambda st, seen=seen: seen.append(st.x))
+        ref = r.refinements[0]
+        assert ref["separation_steps"] > 0 and ref["edges_after"] == ref["edges_before"]
+        assert core.contact_ratio(seen[ref["separation_steps"] - 1], closed=closed) >= 1
+        if closed:
+            assert [len(c) for c in r.x] == [40, 40]
+            assert core.identify(r.x).names == core.identify(L).names
+            assert min(_min_gap_distance(x) for x in seen) > 1e-3
+        else:
+            assert len(r.x) == 30
+
+
 def test_pins_and_obstacles_are_not_pushed_past():
     # the separation would move pinned vertices and does not see meshes: such starts are
     # split as before (here not enough within max_edges: refused)
