@@ -153,8 +153,8 @@ def test_link_relaxes_both_components(scene, mb):
     assert bpy.ops.moebius.relax() == {"FINISHED"}
     assert len(fcurves_of(link.data)) == 3 * 80
     assert scene.moebius.last_energy_end < scene.moebius.last_energy_start
-    # Automatic runs the explicit method on links and unknots (the knots' tests: the implicit)
-    assert scene.moebius.last_method == "projected_gradient"
+    # Automatic runs the implicit method on links and knots, the explicit one on unknots
+    assert scene.moebius.last_method == "projected_gradient_implicit"
 
 
 @pytest.mark.lines
