@@ -23,7 +23,7 @@ from ._layout import as_layout, as_unit_layout
 from ._pairs import segment_distance2
 from ._tridiagonal import cyclic_tridiagonal_solve
 from .collision import closest_pairs, contact_time_x
-from .polygon import CONTACT_GAP, CONTACT_RATIO, equalize
+from .polygon import CONTACT_GAP, CONTACT_RATIO, _mean_edge, equalize
 
 #: Edges closer than this many mean edge lengths repel (the barrier is 0 beyond).
 REACH = 1.4
@@ -112,11 +112,6 @@ def barrier(P, closed=True, reach: float = REACH, min_gap: int = CONTACT_GAP,
 
 def _closed_flags(layout):
     return np.ones(layout.k, bool) if layout.closed is None else layout.closed.astype(bool)
-
-
-def _mean_edge(X, layout):
-    ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
-    return float(ln[layout.real].mean())
 
 
 def _smooth(G, layout, flags):

@@ -246,12 +246,8 @@ class AdaptiveRun:
         factors = [FACTOR ** k for k in range(1, 64)
                    if edges * FACTOR ** k <= self.max_edges]
         reason = f"start too coarse (contact ratio {ratio:.2f} < {CONTACT_RATIO:g})"
-        path, found, moved = [], None, None
-        for factor in [f for f in factors if f <= SPLIT_FIRST]:
-            if contact_ratio(subdivide(P, factor, self.closed), closed=self.closed) >= (
-                    CONTACT_RATIO):
-                found = factor
-                break
+        path, moved = [], None
+        found = self._first_split(P, [f for f in factors if f <= SPLIT_FIRST])
         # pins and obstacles stay where they are: a separation would move past them unchecked
         if found is None and separable and pinned is None:
             for factor in [1, *factors]:
@@ -264,11 +260,7 @@ class AdaptiveRun:
                            f"{len(path) - 1} steps")
                 break
         if found is None:
-            for factor in [f for f in factors if f > SPLIT_FIRST]:
-                if contact_ratio(subdivide(P, factor, self.closed), closed=self.closed) >= (
-                        CONTACT_RATIO):
-                    found = factor
-                    break
+            found = self._first_split(P, [f for f in factors if f > SPLIT_FIRST])
         if found is None:
             return P, changes, []  # the run's own check refuses it, naming the count that works
         Q = path[-1] if path else subdivide(P, found, self.closed)
@@ -281,6 +273,14 @@ class AdaptiveRun:
             "reason": reason, **({} if not path else {
                 "separation_steps": len(path) - 1, "moved": moved})})
         return Q, changes, path[:-1]
+
+    def _first_split(self, P, factors):
+        """The first of ``factors`` whose split of ``P`` passes the start check, or None."""
+        for factor in factors:
+            if contact_ratio(subdivide(P, factor, self.closed), closed=self.closed) >= (
+                    CONTACT_RATIO):
+                return factor
+        return None
 
     def _refine_run(self, reason: str) -> bool:
         """Go on from the last healthy iterate of the current run (its checkpoint, the last
