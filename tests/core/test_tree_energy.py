@@ -210,7 +210,6 @@ def test_auto_switches_at_crossover():
     assert not engine.uses_tree("auto", engine.AUTO_TREE_FROM - 1, run=True)
     assert engine.uses_tree("auto", engine.AUTO_TREE_FROM, run=True)
     assert (engine.ENERGY_TREE_FROM, engine.AUTO_TREE_FROM) == (3000, 1000)
-    assert bh.TREE_FROM == engine.ENERGY_TREE_FROM  # the old name (docs/benchmarks.md)
     assert engine.uses_tree("tree", 10) and not engine.uses_tree("exact", 10**6)
     with pytest.raises(ValueError, match="choose one of auto, exact, tree"):
         engine.uses_tree("fast", 10)
