@@ -84,7 +84,7 @@ def first_reaching(hist: dict, target: float):
 def one_run(P, method, metric, budget, **options) -> tuple[dict, dict]:
     gc.collect()
     if method in FEASIBLE:  # the penalty weight means nothing with hard constraints
-        options = {"precision": PRECISION, **{k: v for k, v in options.items() if k != "alpha"}}
+        options = {"precision": PRECISION, **{k: v for k, v in options.items() if k != "penalty"}}
     else:
         options = {k: v for k, v in options.items() if k != "precision"}
     t = time.perf_counter()
@@ -162,7 +162,7 @@ def alpha_sweep(args) -> list[dict]:
     P = knots.freedman_unknot(args.n)
     rows = []
     for alpha in args.alphas:
-        row, h = one_run(P, "lbfgs", "hs", args.budget, alpha=alpha)
+        row, h = one_run(P, "lbfgs", "hs", args.budget, penalty=alpha)
         row = {"alpha": alpha, **row,
                "final_max_log_stretch": h["constraint_residual"][-1]}
         rows.append(row)
@@ -357,7 +357,7 @@ def parse(argv=None):
             p.error(f"unknown metric {m!r}; choose from {', '.join(METRICS)}")
     args.options = json.loads(args.options)
     if args.alpha is not None:
-        args.options["alpha"] = args.alpha
+        args.options["penalty"] = args.alpha
     args.alphas = [float(a) for a in args.alphas.split(",") if a]
     args.scaling_n = [int(n) for n in (args.scaling_n or ("150,300,600" if q else
                                                             "600,1200,2400")).split(",")]

@@ -38,13 +38,14 @@ from .conversion import apply_conversion, convert_object, make_curve_object, pre
 from .export import export_flow, export_suffix
 from .gradients import refresh_gradients, show_gradients
 from .identification import KNOT_TYPE_PROP, identify_object, object_curves, type_kept
-from .keyframes import ENERGY_PROP
+from .keyframes import ENERGY_NAME_PROP, ENERGY_PROP
 from .labels import (
     AUTO_METHOD,
     DEFAULT_ENGINE,
     DEFAULT_METHOD,
     DEFAULT_PENALTY,
     DEFAULT_THETA,
+    ENERGIES,
     ENGINES,
     EXPLICIT_METHOD,
     KNOT_METHOD,
@@ -77,7 +78,7 @@ __all__ = [
     "COMPONENT_COLOURS", "KNOT_TYPE_PROP", "add_notation", "colour_components",
     "identify_object", "notation_polygons", "object_curves", "search_knots", "type_kept",
     "AUTO_METHOD", "DEFAULT_ENGINE", "DEFAULT_METHOD", "DEFAULT_PENALTY", "DEFAULT_THETA",
-    "EDGE_LIMIT", "ENERGY_PROP", "ENGINES", "EXPLICIT_METHOD", "KNOT_METHOD", "METHODS", "METRICS",
+    "EDGE_LIMIT", "ENERGIES", "ENERGY_NAME_PROP", "ENERGY_PROP", "ENGINES", "EXPLICIT_METHOD", "KNOT_METHOD", "METHODS", "METRICS",
     "PENALTY_METHODS", "SPECIAL_KNOTS", "ObjectRelaxation", "acting_settings", "add_knot",
     "apply_conversion", "apply_frame", "check_edge_count", "check_knot", "check_relax_options",
     "choose_method", "clear_animation", "convert_object", "edge_limit", "energy", "export_flow",

@@ -24,6 +24,7 @@ import time
 import bpy
 
 from ..core.compiling import compiling
+from ..core.energy_choice import check_energy
 from ..core.engine import AUTO_TREE_FROM
 from . import api, geometry, keyframes
 from .labels import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
@@ -67,6 +68,13 @@ def _parser() -> argparse.ArgumentParser:
                    help="seed of --knot random and of --restarts (default %(default)s)")
     p.add_argument("--pq", type=int, nargs=2, default=(2, 3), metavar=("P", "Q"),
                    help="p and q of --knot torus")
+    p.add_argument("--energy", default="moebius", choices=[e for e, *_ in api.ENERGIES],
+                   help="the energy to minimize (default moebius; tangent_point spreads the "
+                        "strands evenly)")
+    p.add_argument("--alpha", type=float, default=None,
+                   help="tangent-point exponent α (default 2; needs α + 1 < β < 2α + 1)")
+    p.add_argument("--beta", type=float, default=None,
+                   help="tangent-point exponent β (default 4)")
     p.add_argument("--metric", default="hs", choices=[m for m, *_ in api.METRICS])
     p.add_argument("--method", default=api.DEFAULT_METHOD, choices=[m for m, *_ in api.METHODS],
                    help="optimizer (default auto: the implicit gradient for a knotted curve or "
@@ -164,7 +172,8 @@ def _run(args, run: dict, notation: str | None):
         method, why = ((api.EXPLICIT_METHOD, "an open curve")
                        if is_open and args.method == api.AUTO_METHOD
                        else api.choose_method(args.method, start))
-        result = api.relax_object(obj, metric=args.metric, method=method,
+        result = api.relax_object(obj, energy=args.energy, alpha=args.alpha, beta=args.beta,
+                                  metric=args.metric, method=method,
                                   penalty=args.penalty, engine=args.engine,
                                   theta=args.theta, max_iterations=args.max_iterations,
                                   tolerance=args.tolerance, frame_start=args.frame_start,
@@ -173,6 +182,7 @@ def _run(args, run: dict, notation: str | None):
                                   seed=args.seed, progress=_say if args.verbose else False)
         frames = keyframes.keyed_frames(obj)
         say(f"{method}{f' ({why})' if why else ''}, "
+            f"{'' if result.energy == 'moebius' else result.energy + ' energy, '}"
             f"{result.stats['engine']} engine, {result.nit} iterations in "
             f"{time.perf_counter() - t0:.2f} s, energy "
             f"{result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, keyed frames "
@@ -206,6 +216,7 @@ def main(argv: list[str]) -> int:
         api.check_relax_options(args.max_iterations, args.tolerance, args.stride,
                                 args.frame_start, args.method, args.penalty, args.engine,
                                 args.theta)
+        check_energy(args.energy, args.alpha, args.beta)  # refused by name
         if args.max_edges is not None and args.max_edges < 1:
             raise ValueError(f"--max-edges must be a positive whole number, got "
                              f"{args.max_edges}")

@@ -29,9 +29,13 @@ from collections.abc import Sequence
 import bpy
 import numpy as np
 
-#: Custom property on the object that holds (and is keyframed with) the Möbius energy.
+#: Custom property on the object that holds (and is keyframed with) the energy of the flow:
+#: the Möbius energy unless :data:`ENERGY_NAME_PROP` says otherwise.
 ENERGY_PROP = "moebius_energy"
 ENERGY_PATH = f'["{ENERGY_PROP}"]'
+#: Custom property naming the energy keyed in :data:`ENERGY_PROP` (``core.EnergyChoice.label``:
+#: "moebius" or "tangent_point(2, 4)"); also the property's tooltip.
+ENERGY_NAME_PROP = "moebius_energy_name"
 #: Curves of at most this many points are keyed per point, larger ones as shape keys (every
 #: size the add-on took before shape keys keeps its per-point keys).
 PER_POINT_MAX = 5000
@@ -185,7 +189,7 @@ def _write_channel(fcurves, data_path: str, index: int, frames: np.ndarray,
 
 def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.ndarray]],
                          energies: Sequence[float], frame_start: int = 1,
-                         shape_keys: bool | None = None) -> range:
+                         shape_keys: bool | None = None, energy_name: str | None = None) -> range:
     """Keyframe a sequence of polygons on the curve's splines and the energy on the object.
 
     Replaces keys from an earlier call (to append, pass the earlier iterates too: see
@@ -206,6 +210,10 @@ def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.n
     shape_keys : bool, optional
         Key the positions as shape keys (True) or per point (False); None (default) chooses
         by the size (shape keys above :data:`PER_POINT_MAX` points).
+    energy_name : str, optional
+        Which energy ``energies`` are (``core.EnergyChoice.label``), stored as
+        ``obj["moebius_energy_name"]`` and in the energy property's tooltip; None leaves the
+        stored name as it is.
 
     Returns
     -------
@@ -231,9 +239,20 @@ def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.n
     else:
         _write_points(obj, sizes, iterates, frames)
     obj[ENERGY_PROP] = float(energies[0])
+    if energy_name is not None:
+        obj[ENERGY_NAME_PROP] = energy_name
+        obj.id_properties_ui(ENERGY_PROP).update(description=_energy_words(energy_name))
     _write_channel(_fcurves(obj, create=True), ENERGY_PATH, 0, frames,
                    np.asarray(energies, dtype=np.float64))
     return range(frame_start, frame_start + len(iterates))
+
+
+def _energy_words(label: str) -> str:
+    """The tooltip of the keyed energy for the energy ``label``."""
+    if label == "moebius":
+        return "Möbius energy of the curve at this frame (scale-invariant)"
+    return (f"Tangent-point energy {label[len('tangent_point'):]} (α, β) of the curve at this "
+            f"frame, for the curve scaled to total length 1")
 
 
 def _write_points(obj, sizes, iterates, frames) -> None:

@@ -19,6 +19,19 @@ METRICS = (
     ("l2", "L²", "Plain L² gradient descent (needs tiny steps; for comparison only)"),
 )
 
+#: Energies the flow can minimize, as ``(core name, label, description)``
+#: (``core.ENERGY_NAMES``).
+ENERGIES = (
+    ("moebius", "Möbius",
+     "The paper's Möbius energy: scale-invariant, keeps tight clasps where strands meet"),
+    ("tangent_point", "Tangent-Point",
+     "Tangent-point energy with exponents α, β (Advanced; default 2, 4 as in Repulsive "
+     "Curves): spreads the strands evenly, opens tight clasps"),
+)
+assert tuple(key for key, _, _ in ENERGIES) == core.ENERGY_NAMES
+#: Default exponents α, β of the tangent-point energy (``core.energy_choice``).
+DEFAULT_TP_ALPHA, DEFAULT_TP_BETA = core.energy_choice.DEFAULT_EXPONENTS
+
 #: The paper's explicit projected gradient (``core.Relaxation``): best on unknots.
 EXPLICIT_METHOD = "projected_gradient"
 #: The implicit projected gradient: best on knots.

@@ -51,6 +51,7 @@ def relax_settings(settings) -> dict:
     method = settings.method
     acting = acting_settings(method, settings.engine)
     kwargs = dict(
+        energy=getattr(settings, "energy", "moebius"),
         metric=settings.metric,
         method=method,
         engine=settings.engine,
@@ -60,6 +61,8 @@ def relax_settings(settings) -> dict:
         keyframe_stride=settings.keyframe_stride,
         initial_step=settings.initial_step,
     )
+    if kwargs["energy"] == "tangent_point":  # as typed (float32 properties)
+        kwargs.update(alpha=round(settings.tp_alpha, 6), beta=round(settings.tp_beta, 6))
     if "armijo" in acting:
         kwargs["armijo"] = settings.armijo
     if "growth" in acting:
@@ -98,7 +101,7 @@ def check_relax_options(max_iterations, tolerance, keyframe_stride, frame_start,
     ``(max_iterations, tolerance, keyframe_stride, frame_start, method options)``, or
     ValueError. Every door (operator, script, command line) calls this before any work.
 
-    The method options are the extra keywords of ``core.make_run``: ``alpha`` of a penalty
+    The method options are the extra keywords of ``core.make_run``: ``penalty`` of a penalty
     method, ``engine`` and ``theta`` (refused by name as the core would: an engine not in
     ``core.engine.ENGINE_NAMES``, a θ outside (0, 2); None is the core's default θ)."""
     max_iterations = core.check_number("max_iterations", max_iterations, 0, integer=True)
@@ -182,4 +185,4 @@ def _check_method(method: str, penalty: float | None) -> dict:
             f"penalty weight must be a positive, finite number, got {penalty!r}; the default "
             f"is {DEFAULT_PENALTY:g} (larger keeps the edge lengths closer to their start)"
         )
-    return {"alpha": alpha}
+    return {"penalty": alpha}

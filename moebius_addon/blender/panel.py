@@ -133,6 +133,8 @@ class VIEW3D_PT_moebius_flow(_MoebiusPanel, bpy.types.Panel):
         layout = self.layout
         s = context.scene.moebius
         col = layout.column(align=True)
+        col.label(text="Energy")
+        col.prop(s, "energy", text="")
         col.label(text="Metric")
         col.prop(s, "metric", text="")
         col = layout.column(align=True)
@@ -180,10 +182,16 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
         col.label(text="Method")
         col.prop(s, "method", text="")
         if s.method == labels.AUTO_METHOD:  # what the automatic choice does, measured best
-            col.label(text="Knots: Implicit Gradient")
-            col.label(text="Unknots, links: Projected")
+            col.label(text="Knots, links: Implicit Gradient")
+            col.label(text="Unknots: Projected")
         if "penalty" in acting:
             col.prop(s, "penalty")
+        col = layout.column(align=True)
+        col.label(text="Tangent-Point Exponents")
+        row = col.row(align=True)
+        row.active = s.energy == "tangent_point"
+        row.prop(s, "tp_alpha")
+        row.prop(s, "tp_beta")
         col = layout.column(align=True)
         col.label(text="Engine")
         col.prop(s, "engine", text="")

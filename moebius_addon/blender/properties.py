@@ -50,6 +50,21 @@ class MoebiusSettings(bpy.types.PropertyGroup):
                     "curves (exact engine; pin the ends with Pin Selected Points to hold them)",
     )
     # Flow
+    energy: EnumProperty(
+        name="Energy", default="moebius",
+        items=[(key, label, desc) for key, label, desc in labels.ENERGIES],
+        description="The energy the flow minimizes (and keys on the object)",
+    )
+    tp_alpha: FloatProperty(
+        name="α", default=labels.DEFAULT_TP_ALPHA, min=0.01, soft_max=8.0, precision=2,
+        description="Tangent-point energy: exponent α of |T × (x − y)| (needs α + 1 < β < "
+                    "2α + 1)",
+    )
+    tp_beta: FloatProperty(
+        name="β", default=labels.DEFAULT_TP_BETA, min=0.01, soft_max=16.0, precision=2,
+        description="Tangent-point energy: exponent β of |x − y| (needs α + 1 < β < 2α + 1; "
+                    "β = α + 2 makes it scale-invariant)",
+    )
     metric: EnumProperty(
         name="Metric", default="hs",
         items=[(key, label, desc) for key, label, desc in labels.METRICS],

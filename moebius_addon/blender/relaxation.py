@@ -275,6 +275,13 @@ class ObjectRelaxation:
             max_iterations, tolerance, keyframe_stride, frame_start, method, penalty, engine,
             theta)
         options.update(extra)
+        try:  # the energy and its exponents, before any work
+            choice = core.check_energy(options.get("energy", "moebius"), options.get("alpha"),
+                                       options.get("beta"))
+        except ValueError as err:
+            raise ValueError(f"'{obj.name}': {err}") from None
+        #: which energy the flow minimizes and keys ("moebius", "tangent_point(2, 4)")
+        self.energy_label = choice.label
         polygons = geometry.curve_polygons(obj, allow_open=True)
         closed = geometry.curve_closed(obj)
         self._closed = closed
@@ -291,6 +298,11 @@ class ObjectRelaxation:
         self._cuts = np.cumsum([len(p) for p in polygons])[:-1]
         # the earlier flow keys, continued from their last iterate (read by show() otherwise)
         self._prior = keyframes.read_flow_keyframes(obj) if append else None
+        keyed = obj.get(keyframes.ENERGY_NAME_PROP, "moebius")
+        if self._prior is not None and keyed != self.energy_label:
+            raise ValueError(
+                f"'{obj.name}': its keyed flow minimized the {keyed} energy, not "
+                f"{self.energy_label}: continue with that energy, or Clear Flow first")
         if self._prior is not None:
             frames, points, _ = self._prior
             polygons = np.split(points[-1], self._cuts)
@@ -482,7 +494,8 @@ class ObjectRelaxation:
         # the curve's own (unanimated) shape: the rest shape Clear Flow goes back to
         rest = rest_shape(self.obj)
         geometry.write_polygons(self.obj.data, iterates[0] if rest is None else rest)
-        frames = keyframes.write_flow_keyframes(self.obj, iterates, energies, first)
+        frames = keyframes.write_flow_keyframes(self.obj, iterates, energies, first,
+                                                energy_name=self.energy_label)
         scene.frame_start = min(scene.frame_start, frames.start)
         scene.frame_end = max(scene.frame_end, frames.stop - 1)
         scene.frame_set(frames.stop - 1)

@@ -16,6 +16,7 @@ from ._shipped_cache import use_shipped_cache  # noqa: E402
 from .collision import max_collision_free_step  # noqa: E402
 from .compiling import compiling  # noqa: E402
 from .constraints import Constraints  # noqa: E402
+from .energy_choice import ENERGY_NAMES, EnergyChoice, check_energy  # noqa: E402
 from .engine import ENGINES, moebius_energy, moebius_gradient  # noqa: E402
 from .flow import relax, sobolev_gradient  # noqa: E402
 from .identify import Identification, Match, identify  # noqa: E402
@@ -52,6 +53,8 @@ __all__ = [
     "METHODS",
     "METRICS",
     "Constraints",
+    "ENERGY_NAMES",
+    "EnergyChoice",
     "Identification",
     "IterationState",
     "Match",
@@ -59,6 +62,7 @@ __all__ = [
     "Relaxation",
     "Status",
     "alexander_polynomial",
+    "check_energy",
     "check_number",
     "check_polygon",
     "check_size",

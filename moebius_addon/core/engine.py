@@ -38,6 +38,7 @@ from .banded import BANDED_METRICS, BandedSaddle
 from .collision import contact_time_x
 from .constraints import Jacobian
 from .energy import energy_gradient_x, energy_x
+from .energy_choice import MOEBIUS, EnergyChoice
 from .linalg import SaddlePointSolver, spd_inverse
 from .metrics import banded_parts, gram_x
 from .pinned_solve import BorderedPins, tree_borders, unpinned_jacobian
@@ -106,13 +107,16 @@ class DenseEngine:
 
     def __init__(self, layout: Layout, metric: str, *, precision: str = "auto",
                  reuse_factorization: bool = False, theta: float | None = None,
-                 krylov_rtol: float | None = None, exact_backprojection: bool = False):
+                 krylov_rtol: float | None = None, exact_backprojection: bool = False,
+                 energy: EnergyChoice = MOEBIUS):
         if precision not in ("auto", "double", "single"):
             raise ValueError("precision must be 'auto', 'double' or 'single'")
         if precision == "auto":
             precision = "single" if layout.n >= _AUTO_SINGLE_FROM else "double"
         self.layout = layout
         self.metric = metric
+        #: The energy the run minimizes (:mod:`.energy_choice`).
+        self.energy_choice = energy
         self.theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
         self.krylov_rtol = hs_solve.RTOL if krylov_rtol is None else hs_solve.check_rtol(
             krylov_rtol)
@@ -148,13 +152,14 @@ class DenseEngine:
     # -- energy, gradient, contact -------------------------------------------------------------
 
     def energy(self, X: np.ndarray) -> float:
-        """Möbius energy of ``X`` (N, 3) (plus the obstacles' weighted energy, if any)."""
-        return self._plus_obstacles(energy_x(X, self.layout), X)
+        """The run's energy of ``X`` (N, 3) (plus the obstacles' weighted energy, if any)."""
+        return self._plus_obstacles(self.energy_choice.exact(X, self.layout), X)
 
     def energy_gradient(self, X: np.ndarray) -> tuple[float, np.ndarray]:
         """``(E, ∇E)`` at ``X``; ``∇E`` is (N, 3). Its ``E`` may differ from :meth:`energy`
         in the last bits (the two kernels sum in different orders)."""
-        return self._plus_obstacle_gradient(*energy_gradient_x(X, self.layout), X)
+        return self._plus_obstacle_gradient(*self.energy_choice.exact_gradient(X, self.layout),
+                                            X)
 
     def _plus_obstacles(self, E: float, X: np.ndarray) -> float:
         return E if self.obstacles is None else E + self.obstacles.energy(X, self.layout.nxt)
@@ -327,7 +332,7 @@ class TreeEngine(DenseEngine):
     def _frame_at(self, X: np.ndarray) -> barnes_hut.Frame:
         # a trial accepted by its energy is evaluated again with the gradient: same frame
         if self._frame is None or not np.array_equal(self._frame[0], X):
-            self._frame = (X.copy(), barnes_hut.Frame(X, self.layout, self.theta))
+            self._frame = (X.copy(), self.energy_choice.frame(X, self.layout, self.theta))
         return self._frame[1]
 
     def energy(self, X: np.ndarray) -> float:

@@ -127,7 +127,7 @@ def test_callback_and_esc_stop_every_method(scene, mb, core, trefoil, method):
     assert [n for n, _ in seen] == [1, 2] and seen[-1][1] == pytest.approx(result.fun)
     assert mb.keyed_frames(trefoil) == [1.0, 2.0, 3.0]
     # the same iterates as the core run (the Blender layer keeps the stored edge lengths)
-    opts = {"alpha": 5e4} if method in INFEASIBLE else {}
+    opts = {"penalty": 5e4} if method in INFEASIBLE else {}
     ref = core.relax(start, max_iter=2, tol=0.0, method=method, target_lengths="keep", **opts)
     np.testing.assert_allclose(result.history["energy"], ref.history["energy"], rtol=1e-12)
     if method in INFEASIBLE:

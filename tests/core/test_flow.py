@@ -247,8 +247,8 @@ def test_bad_options_are_refused_by_name(trefoil300, method, option, value, says
 
 
 def test_bad_penalty_is_refused_by_name(trefoil300):
-    with pytest.raises(ValueError, match="alpha must be a finite number >= 0"):
-        relax(trefoil300, method="lbfgs", alpha=np.nan)
+    with pytest.raises(ValueError, match="penalty must be a finite number >= 0"):
+        relax(trefoil300, method="lbfgs", penalty=np.nan)
 
 
 def test_sizes_beyond_memory_are_refused_before_any_work(monkeypatch, trefoil300):

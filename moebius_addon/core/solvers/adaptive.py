@@ -536,4 +536,5 @@ class AdaptiveRun:
             x=self.x, fun=res.fun if self._current is None else self.E, nit=self.nit,
             success=self.success, message=self.message,
             status=self.status, history={k: list(v) for k, v in self.history.items()},
-            metric=res.metric, stats=stats, refinements=[dict(r) for r in self.refinements])
+            metric=res.metric, stats=stats, refinements=[dict(r) for r in self.refinements],
+            energy=res.energy)

@@ -33,6 +33,7 @@ import numpy as np
 
 from .._checks import check_number  # noqa: F401 - public as core.check_number
 from .._layout import OPEN_TREE_REFUSAL, as_unit_layout
+from ..energy_choice import check_energy
 from ..engine import make_engine
 from ..metrics import METRICS
 from ..obstacles import ObstacleField, check_obstacles
@@ -103,6 +104,9 @@ class RelaxResult:
     #: refinements of the run (``refine=``): iteration, ``edges_before``, ``edges_after``,
     #: ``reason`` (and the energies before and after for a jam); empty for a plain run
     refinements: list = field(default_factory=list)
+    #: the energy minimized: ``"moebius"`` or ``"tangent_point(α, β)"``
+    #: (``energy_choice.EnergyChoice.label``)
+    energy: str = "moebius"
 
     def __repr__(self) -> str:
         return (
@@ -199,8 +203,10 @@ class Run:
                  target_lengths: str, check: bool, equilateral: bool, engine: str = "auto",
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
                  fixed_lengths: bool = True, obstacles=None, obstacle_weight: float = 1.0,
-                 closed=True, **engine_options):
+                 closed=True, energy="moebius", alpha=None, beta=None, **engine_options):
         _check_names(metric, target_lengths)
+        #: The energy minimized (:mod:`..energy_choice`): ``energy``, ``alpha``, ``beta``.
+        self.energy_choice = check_energy(energy, alpha, beta)
         self.t0 = time.perf_counter()
         self.max_iter = check_number("max_iter", max_iter, 0, integer=True)
         self.tol = check_number("tol", tol, 0)
@@ -221,7 +227,8 @@ class Run:
             # mapping the run's copy back would round them
             self._pinned_at = np.ldexp(X[self.pinned], e2)
         # the engine is built first (cheap): it says whether its metric is a dense matrix
-        self.engine = make_engine(engine, layout, metric, theta=theta, **engine_options)
+        self.engine = make_engine(engine, layout, metric, theta=theta,
+                                  energy=self.energy_choice, **engine_options)
         if self._DENSE_METRIC:
             check_dense_size(layout.n, "method")
         elif self.engine.dense_metric:
@@ -341,6 +348,7 @@ class Run:
             history={k: list(v) for k, v in self.history.items()},
             metric=self.metric,
             stats=self._stats(),
+            energy=self.energy_choice.label,
         )
 
     # -- stopping rules ------------------------------------------------------------------------

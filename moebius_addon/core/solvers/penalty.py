@@ -56,13 +56,15 @@ class _PenaltyRun(Run):
 
     Parameters (besides ``P, metric, max_iter, tol`` as in :class:`.projected.Relaxation`)
     ----------
-    alpha : float
-        Weight of Hencky's stretch penalty, in units where the total length is 1.
+    penalty : float
+        Weight α of Hencky's stretch penalty, in units where the total length is 1 (``alpha``
+        and ``beta`` are the tangent-point energy's exponents).
     penalty_metric : {"auto", True, False}
         Add ``α DΦᵀ M DΦ`` to the metric; "auto": for every metric except ``l2`` (the paper).
     c1, c2 : float
         Weak Wolfe constants (sufficient decrease, curvature).
-    energy_target, ftol, max_seconds, initial_step, target_lengths, check, engine, theta
+    energy_target, ftol, max_seconds, initial_step, target_lengths, check, engine, theta,
+    energy, alpha, beta
         As in :class:`.projected.Relaxation`; ``ftol`` applies to the penalized energy.
     """
 
@@ -71,13 +73,13 @@ class _PenaltyRun(Run):
     _GRADIENT = "gradient norm"
 
     def __init__(self, P, metric="hs", max_iter=200, tol=1e-6, *,
-                 alpha: float = DEFAULT_PENALTY_WEIGHT, penalty_metric="auto", c1: float = 1e-4,
+                 penalty: float = DEFAULT_PENALTY_WEIGHT, penalty_metric="auto", c1: float = 1e-4,
                  c2: float = 0.9, energy_target: float | None = None, ftol: float = 1e-12,
                  max_seconds: float | None = None, initial_step: float = 1.0,
                  target_lengths: str = "equal", check: bool = True, engine: str = "auto",
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
                  obstacles=None, obstacle_weight: float = 1.0, closed=True,
-                 **ignored):
+                 energy="moebius", alpha=None, beta=None, **ignored):
         unknown = set(ignored) - _FEASIBLE_ONLY
         if unknown:
             raise TypeError(f"unknown option(s) {', '.join(sorted(unknown))}")
@@ -87,14 +89,15 @@ class _PenaltyRun(Run):
         c1, c2 = check_number("c1", c1), check_number("c2", c2)
         if not 0 < c1 < c2 < 1:
             raise ValueError("Wolfe constants need 0 < c1 < c2 < 1")
-        alpha = check_number("alpha", alpha, 0)
+        weight = check_number("penalty", penalty, 0)
         initial_step = check_number("initial_step", initial_step, 0, above=True)
         # the penalty pulls a non-equilateral start to the mean lengths: no equilateral check
         super().__init__(P, metric, max_iter, tol, energy_target=energy_target, ftol=ftol,
                          max_seconds=max_seconds, target_lengths=target_lengths, check=check,
                          equilateral=False, engine=engine, theta=theta, obstacles=obstacles,
-                         obstacle_weight=obstacle_weight, closed=closed)
-        self.alpha = float(alpha)
+                         obstacle_weight=obstacle_weight, closed=closed, energy=energy,
+                         alpha=alpha, beta=beta)
+        self.alpha = float(weight)  # α of the docs (docs/design.md, the penalty methods)
         self.penalty_in_metric = (metric != "l2") if penalty_metric == "auto" else bool(
             penalty_metric)
         self.c1, self.c2 = float(c1), float(c2)

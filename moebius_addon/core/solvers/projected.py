@@ -121,6 +121,11 @@ class Relaxation(Run):
         False: ``P`` is an open polyline (a link: one flag per component, or one for all),
         relaxed with O'Hara's regularized energy of an open polygon on the exact engine
         (docs/api.md, "Open curves").
+    energy, alpha, beta
+        The energy minimized: ``"moebius"`` (default) or ``"tangent_point"`` with exponents
+        ``alpha``, ``beta`` (default 2, 4; :mod:`..energy_choice`). The energies of the history
+        are those of the curve scaled to total length 1 (the same as the caller's curve's when
+        the energy is scale-invariant: Möbius, and tangent-point with β = α + 2).
     """
 
     _OPEN_CURVES = True
@@ -156,6 +161,9 @@ class Relaxation(Run):
         obstacles=None,
         obstacle_weight: float = 1.0,
         closed=True,
+        energy="moebius",
+        alpha: float | None = None,
+        beta: float | None = None,
     ):
         _check_names(metric, target_lengths)
         armijo, growth = check_line_search(armijo, growth)
@@ -173,7 +181,8 @@ class Relaxation(Run):
                          reuse_factorization=reuse_factorization, krylov_rtol=krylov_rtol,
                          exact_backprojection=exact_backprojection, pinned=pinned,
                          pin_tangents=pin_tangents, fixed_lengths=bool(edge_lengths),
-                         obstacles=obstacles, obstacle_weight=obstacle_weight, closed=closed)
+                         obstacles=obstacles, obstacle_weight=obstacle_weight, closed=closed,
+                         energy=energy, alpha=alpha, beta=beta)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter

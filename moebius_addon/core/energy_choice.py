@@ -1,0 +1,119 @@
+"""Which energy a run minimizes (the ``energy=``, ``alpha=``, ``beta=`` options of ``relax``).
+
+An :class:`EnergyChoice` is the energy's name and parameters, checked once, with the three
+evaluations an engine needs: the exact sum (:meth:`~EnergyChoice.exact`), the exact sum with
+its gradient (:meth:`~EnergyChoice.exact_gradient`) and the tree's frame at a polygon
+(:meth:`~EnergyChoice.frame`). The engines (:mod:`.engine`) hold one and never name an energy
+themselves; the kernels behind it live in :mod:`.energies`.
+
+* ``"moebius"``: the discrete Möbius energy (docs/design.md), scale-invariant, the paper's;
+* ``"tangent_point"``: the tangent-point energy with exponents (α, β) (docs/design.md,
+  "Tangent-point energy"), default (2, 4): ``E(λP) = λ^(2+α−β) E(P)``, scale-invariant only
+  for β = α + 2. A run works at total length 1 (``solvers.base.Run``), so the energies of
+  its history are those of the curve scaled to total length 1 (the same as the user's
+  curve's for the default exponents).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._layout import Layout
+
+#: The names of the ``energy=`` option, the default first.
+ENERGY_NAMES = ("moebius", "tangent_point")
+#: The tangent-point exponents when none are given (Repulsive Curves' choice; order 3/2,
+#: scale-invariant).
+DEFAULT_EXPONENTS = (2.0, 4.0)
+
+
+class EnergyChoice:
+    """The energy ``name`` with its exponents (tangent-point only), checked; see the module
+    docstring. Equal choices compare equal."""
+
+    def __init__(self, name: str = "moebius", alpha=None, beta=None):
+        if name not in ENERGY_NAMES:
+            raise ValueError(f"unknown energy {name!r}; choose one of {', '.join(ENERGY_NAMES)}")
+        self.name = name
+        if name == "moebius":
+            if alpha is not None or beta is not None:
+                raise ValueError("alpha and beta are the tangent-point energy's exponents: "
+                                 "pass energy='tangent_point' with them, or leave them out "
+                                 "(the penalty methods' weight is penalty=)")
+            self.alpha = self.beta = None
+        else:
+            from .energies.tangent_point import check_exponents
+            a0, b0 = DEFAULT_EXPONENTS
+            self.alpha, self.beta = check_exponents(a0 if alpha is None else alpha,
+                                                    b0 if beta is None else beta)
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, EnergyChoice) and (self.name, self.alpha, self.beta) == (
+            other.name, other.alpha, other.beta)
+
+    def __hash__(self) -> int:
+        return hash((self.name, self.alpha, self.beta))
+
+    def __repr__(self) -> str:
+        return f"EnergyChoice({self.label!r})"
+
+    @property
+    def label(self) -> str:
+        """``"moebius"`` or ``"tangent_point(2, 4)"`` (the exponents as given, shortest
+        form): what results and keyed properties call the energy."""
+        if self.name == "moebius":
+            return "moebius"
+        return f"tangent_point({self.alpha:g}, {self.beta:g})"
+
+    @property
+    def scaling(self) -> float:
+        """``k`` of ``E(λP) = λ^k E(P)``: 0 for the Möbius energy."""
+        return 0.0 if self.name == "moebius" else 2.0 + self.alpha - self.beta
+
+    @property
+    def open_curves(self) -> bool:
+        """Whether open polylines are supported (both energies, on the exact engine)."""
+        return True
+
+    # -- evaluations (X at the run's scale; layout of the run) ---------------------------------
+
+    def exact(self, X: np.ndarray, layout: Layout) -> float:
+        """The exact sum over all pairs of edges."""
+        if self.name == "moebius":
+            from .energy import energy_x  # open curves: O'Hara's regularized sum
+            return energy_x(X, layout)
+        from .tp_energy import tp_energy_x
+        return tp_energy_x(X, layout, self.alpha, self.beta)
+
+    def exact_gradient(self, X: np.ndarray, layout: Layout) -> tuple[float, np.ndarray]:
+        """``(E, ∇E)`` by the exact sum; ``∇E`` is (N, 3)."""
+        if self.name == "moebius":
+            from .energy import energy_gradient_x
+            return energy_gradient_x(X, layout)
+        from .tp_energy import tp_energy_gradient_x
+        return tp_energy_gradient_x(X, layout, self.alpha, self.beta)
+
+    def frame(self, X: np.ndarray, layout: Layout, theta: float):
+        """The tree's frame at ``X`` (closed curves and links): ``.energy(X)`` and
+        ``.energy_gradient(X)`` of the approximated sum."""
+        if self.name == "moebius":
+            from .barnes_hut import Frame
+            return Frame(X, layout, theta)
+        from .tp_tree import TangentPointFrame
+        return TangentPointFrame(X, layout, self.alpha, self.beta, theta)
+
+
+#: The Möbius energy (the default of every run).
+MOEBIUS = EnergyChoice()
+
+
+def check_energy(energy="moebius", alpha=None, beta=None) -> EnergyChoice:
+    """The :class:`EnergyChoice` for the options ``energy``, ``alpha``, ``beta`` (an
+    ``EnergyChoice`` passes as it is); ValueError naming the option that is wrong."""
+    if isinstance(energy, EnergyChoice):
+        if alpha is not None or beta is not None:
+            return EnergyChoice(energy.name, alpha, beta)
+        return energy
+    if not isinstance(energy, str):
+        raise ValueError(f"energy must be one of {', '.join(ENERGY_NAMES)}, not {energy!r}")
+    return EnergyChoice(energy, alpha, beta)
