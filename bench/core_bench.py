@@ -22,9 +22,9 @@ from moebius_addon import core
 from moebius_addon.core import knots
 from moebius_addon.core.collision import contact_time_x
 from moebius_addon.core.constraints import jacobian
-from moebius_addon.core.energy import energy_gradient_x, energy_x
 from moebius_addon.core.linalg import Factorization
 from moebius_addon.core.metrics import gram_x
+from moebius_addon.core.moebius_dense import energy_gradient_x, energy_x
 
 
 def best_of(f, repeat=5):

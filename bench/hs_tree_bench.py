@@ -32,8 +32,8 @@ from moebius_addon.core import hs_solve, hs_tree
 from moebius_addon.core._layout import as_layout
 from moebius_addon.core.banded import BandedSaddle
 from moebius_addon.core.constraints import jacobian, make_constraints
-from moebius_addon.core.energy import energy_gradient_x
 from moebius_addon.core.metrics import banded_parts_of_lengths, gram_x
+from moebius_addon.core.moebius_dense import energy_gradient_x
 
 OUT = Path("out")
 

@@ -41,9 +41,9 @@ from paper import machine
 
 from moebius_addon.core import knots
 from moebius_addon.core.constraints import jacobian
-from moebius_addon.core.energy import energy_gradient_x
 from moebius_addon.core.linalg import Factorization, field_product
 from moebius_addon.core.metrics import gram_x
+from moebius_addon.core.moebius_dense import energy_gradient_x
 from moebius_addon.core.solvers import Relaxation
 
 TOL = 1e-10

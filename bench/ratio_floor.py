@@ -28,9 +28,9 @@ from core_bench import best_of  # bench/ is on sys.path when run as a script
 
 from moebius_addon.core import Relaxation, _lapack, knots
 from moebius_addon.core.collision import contact_time_x
-from moebius_addon.core.energy import energy_gradient_x, energy_x
 from moebius_addon.core.linalg import Factorization
 from moebius_addon.core.metrics import gram_x
+from moebius_addon.core.moebius_dense import energy_gradient_x, energy_x
 
 
 class Counter:

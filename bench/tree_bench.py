@@ -32,7 +32,7 @@ from moebius_addon import core
 from moebius_addon.core import barnes_hut, bvh
 from moebius_addon.core._layout import as_layout
 from moebius_addon.core.collision import closest_pairs, contact_time_x
-from moebius_addon.core.energy import energy_gradient_x
+from moebius_addon.core.moebius_dense import energy_gradient_x
 
 EXACT_UP_TO = 20000
 THETAS = (0.0625, 0.125, 0.175, 0.2, 0.25, 0.5)

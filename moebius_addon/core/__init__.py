@@ -16,8 +16,15 @@ from ._shipped_cache import use_shipped_cache  # noqa: E402
 from .collision import max_collision_free_step  # noqa: E402
 from .compiling import compiling  # noqa: E402
 from .constraints import Constraints  # noqa: E402
-from .energy_choice import ENERGY_NAMES, EnergyChoice, check_energy  # noqa: E402
-from .engine import ENGINES, moebius_energy, moebius_gradient  # noqa: E402
+from .energy_choice import EnergyChoice, check_energy  # noqa: E402
+from .engine import (  # noqa: E402
+    ENERGY_NAMES,
+    ENGINES,
+    energy,
+    energy_gradient,
+    moebius_energy,
+    moebius_gradient,
+)
 from .flow import relax, sobolev_gradient  # noqa: E402
 from .identify import Identification, Match, identify  # noqa: E402
 from .invariants import (  # noqa: E402
@@ -49,11 +56,11 @@ use_shipped_cache(__name__)
 
 __all__ = [
     "DEFAULT_PENALTY_WEIGHT",
+    "ENERGY_NAMES",
     "ENGINES",
     "METHODS",
     "METRICS",
     "Constraints",
-    "ENERGY_NAMES",
     "EnergyChoice",
     "Identification",
     "IterationState",
@@ -69,6 +76,8 @@ __all__ = [
     "compiling",
     "contact_ratio",
     "default_max_edges",
+    "energy",
+    "energy_gradient",
     "gram_matrix",
     "identify",
     "invariants",

@@ -1,6 +1,6 @@
 """What the dense pair sums share (private): edge data as contiguous coordinate arrays, the
 range of a row's disjoint partners, and the compiler options of the sums. Below both
-:mod:`.energy` (closed curves and links) and :mod:`.open_energy` (open components), which
+:mod:`.moebius_dense` (closed curves and links) and :mod:`.open_energy` (open components), which
 import it and never each other's internals.
 """
 

@@ -1,7 +1,8 @@
 """Möbius energy and its exact derivative by Barnes–Hut on the edge hierarchy (the tree engine).
 
-The energy of docs/design.md is a sum over ordered pairs of disjoint edges (``energy.py`` sums
-all of them). Here the pairs are split by a dual traversal of the hierarchy (:mod:`bvh`) into
+The energy of docs/design.md is a sum over ordered pairs of disjoint edges
+(``moebius_dense.py`` sums all of them). Here the pairs are split by a dual traversal of the
+hierarchy (:mod:`bvh`) into
 
 * the **far field**: pairs of clusters ``(A, B)`` of one component each whose boxes are apart,
   ``max(diam A, diam B) ≤ θ · gap(A, B)``, summed by the expansion of the kernel to second
@@ -11,7 +12,7 @@ all of them). Here the pairs are split by a dual traversal of the hierarchy (:mo
   falls about like θ³.
 * the **near field**: every other pair (always the pairs close in space, and so those close
   along the curve: boxes of edges sharing a vertex touch), summed exactly with the kernel of
-  ``energy.py`` (:mod:`._near_field`).
+  ``moebius_dense.py`` (:mod:`._near_field`).
 
 The gradient is the exact derivative of this approximated sum for the fixed split: each
 cluster's derivative with respect to its moments is pushed down to its edges by the chain rule

@@ -18,13 +18,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import barnes_hut, tangent_point_tree
 from ._layout import Layout
+from .energies import ENERGIES, tangent_point
+from .moebius_dense import energy_gradient_x, energy_x
+from .tangent_point_dense import tp_energy_gradient_x, tp_energy_x
 
 #: The names of the ``energy=`` option, the default first.
-ENERGY_NAMES = ("moebius", "tangent_point")
+ENERGY_NAMES = tuple(ENERGIES)
 #: The tangent-point exponents when none are given (Repulsive Curves' choice; order 3/2,
 #: scale-invariant).
-DEFAULT_EXPONENTS = (2.0, 4.0)
+DEFAULT_EXPONENTS = (tangent_point.DEFAULT_ALPHA, tangent_point.DEFAULT_BETA)
 
 
 class EnergyChoice:
@@ -42,9 +46,8 @@ class EnergyChoice:
                                  "(the penalty methods' weight is penalty=)")
             self.alpha = self.beta = None
         else:
-            from .energies.tangent_point import check_exponents
             a0, b0 = DEFAULT_EXPONENTS
-            self.alpha, self.beta = check_exponents(a0 if alpha is None else alpha,
+            self.alpha, self.beta = tangent_point.check_exponents(a0 if alpha is None else alpha,
                                                     b0 if beta is None else beta)
 
     def __eq__(self, other) -> bool:
@@ -71,6 +74,11 @@ class EnergyChoice:
         return 0.0 if self.name == "moebius" else 2.0 + self.alpha - self.beta
 
     @property
+    def default_theta(self) -> float:
+        """The tree's admissibility when none is given (each energy measured its own)."""
+        return barnes_hut.THETA if self.name == "moebius" else tangent_point_tree.THETA
+
+    @property
     def open_curves(self) -> bool:
         """Whether open polylines are supported (both energies, on the exact engine)."""
         return True
@@ -80,27 +88,21 @@ class EnergyChoice:
     def exact(self, X: np.ndarray, layout: Layout) -> float:
         """The exact sum over all pairs of edges."""
         if self.name == "moebius":
-            from .energy import energy_x  # open curves: O'Hara's regularized sum
-            return energy_x(X, layout)
-        from .tp_energy import tp_energy_x
+            return energy_x(X, layout)  # open curves: O'Hara's regularized sum
         return tp_energy_x(X, layout, self.alpha, self.beta)
 
     def exact_gradient(self, X: np.ndarray, layout: Layout) -> tuple[float, np.ndarray]:
         """``(E, ∇E)`` by the exact sum; ``∇E`` is (N, 3)."""
         if self.name == "moebius":
-            from .energy import energy_gradient_x
             return energy_gradient_x(X, layout)
-        from .tp_energy import tp_energy_gradient_x
         return tp_energy_gradient_x(X, layout, self.alpha, self.beta)
 
     def frame(self, X: np.ndarray, layout: Layout, theta: float):
         """The tree's frame at ``X`` (closed curves and links): ``.energy(X)`` and
         ``.energy_gradient(X)`` of the approximated sum."""
         if self.name == "moebius":
-            from .barnes_hut import Frame
-            return Frame(X, layout, theta)
-        from .tp_tree import TangentPointFrame
-        return TangentPointFrame(X, layout, self.alpha, self.beta, theta)
+            return barnes_hut.Frame(X, layout, theta)
+        return tangent_point_tree.TangentPointFrame(X, layout, self.alpha, self.beta, theta)
 
 
 #: The Möbius energy (the default of every run).

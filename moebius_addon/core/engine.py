@@ -4,7 +4,7 @@ An engine is built per run from the polygon's layout and the metric. It evaluate
 energy and its gradient, the first contact along a motion, and holds the metric at the current
 iterate with the saddle-point solver of docs/design.md, step 2 (``[[G, Cᵀ], [C, 0]]``,
 ``G = A ⊗ I₃``) or, for the penalty methods, the solver of the penalized metric. The
-optimizers never call the kernels (:mod:`.energy`, :mod:`.collision`, :mod:`.metrics`,
+optimizers never call the kernels (:mod:`.moebius_dense`, :mod:`.collision`, :mod:`.metrics`,
 :mod:`.linalg`, :mod:`.banded`) themselves, so a second engine that evaluates some of these
 differently (e.g. a tree approximation of the far field) is one subclass here and one entry
 in :data:`ENGINES`.
@@ -23,7 +23,7 @@ Engines by name (the ``engine=`` option of ``relax``, ``make_run`` and every run
 This module is the one place for engines by name: their names (:data:`ENGINE_NAMES`), what
 "auto" picks (:func:`uses_tree`, both of its thresholds), the classes (:data:`ENGINES`,
 :func:`make_engine`) and the public evaluators of the energy (:func:`moebius_energy`,
-:func:`moebius_gradient`), which pick the exact sum (:mod:`.energy`) or the tree
+:func:`moebius_gradient`), which pick the exact sum (:mod:`.moebius_dense`) or the tree
 (:mod:`.barnes_hut`) by the same names.
 """
 
@@ -31,17 +31,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import barnes_hut, hs_solve, hs_tree
+from . import barnes_hut, hs_solve, hs_tree, tangent_point_tree
 from ._layout import OPEN_TREE_REFUSAL, Layout, as_checked_layout
 from ._memory import check_memory
 from .banded import BANDED_METRICS, BandedSaddle
 from .collision import contact_time_x
 from .constraints import Jacobian
-from .energy import energy_gradient_x, energy_x
+from .energies import ENERGIES, tangent_point
 from .energy_choice import MOEBIUS, EnergyChoice
 from .linalg import SaddlePointSolver, spd_inverse
 from .metrics import banded_parts, gram_x
+from .moebius_dense import energy_gradient_x, energy_x
 from .pinned_solve import BorderedPins, tree_borders, unpinned_jacobian
+from .tangent_point_dense import tp_energy_gradient_x, tp_energy_x
 
 # Deterministic refactorization rule (see SaddlePointSolver): one factorization costs about as
 # much as N / _FACTOR_PER_ITER preconditioned Krylov iterations (measured here at N = 3000:
@@ -117,7 +119,7 @@ class DenseEngine:
         self.metric = metric
         #: The energy the run minimizes (:mod:`.energy_choice`).
         self.energy_choice = energy
-        self.theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
+        self.theta = energy.default_theta if theta is None else barnes_hut.check_theta(theta)
         self.krylov_rtol = hs_solve.RTOL if krylov_rtol is None else hs_solve.check_rtol(
             krylov_rtol)
         self.exact_backprojection = bool(exact_backprojection)
@@ -479,3 +481,107 @@ def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None, clo
     frame = _frame(X, layout, engine, theta)
     g = (energy_gradient_x(X, layout) if frame is None else frame.energy_gradient(X))[1]
     return layout.split(np.ldexp(g, -k) if k else g)  # ∇E(2^k X) = 2^-k ∇E(X)
+
+
+#: The names of the ``energy=`` option of :func:`energy` and :func:`energy_gradient`.
+ENERGY_NAMES = tuple(ENERGIES)
+
+
+def _exponents(energy_name: str, alpha, beta) -> tuple[float, float]:
+    """``(α, β)`` checked for the energy ``energy_name`` (ValueError naming an unknown energy,
+    or the exponent at fault; the Möbius energy has none: anything but the defaults is
+    refused by name rather than ignored)."""
+    if energy_name not in ENERGIES:
+        raise ValueError(f"unknown energy {energy_name!r}; choose one of "
+                         f"{', '.join(ENERGY_NAMES)}")
+    if energy_name == tangent_point.NAME:
+        return tangent_point.check_exponents(alpha, beta)
+    for name, v, default in (("alpha", alpha, tangent_point.DEFAULT_ALPHA),
+                             ("beta", beta, tangent_point.DEFAULT_BETA)):
+        if not (isinstance(v, (int, float, np.integer, np.floating)) and v == default):
+            raise ValueError(f"{name} is an exponent of the tangent-point energy; the Möbius "
+                             f"energy has none: pass energy='tangent_point' or leave {name} "
+                             f"at its default {default:g}, got {v!r}")
+    return tangent_point.DEFAULT_ALPHA, tangent_point.DEFAULT_BETA
+
+
+def _tp_frame(X, layout, engine, theta, alpha, beta):
+    """The tangent-point tree frame for ``engine``/``theta`` at X, or None for the exact sum
+    (the rule of :func:`_frame`: open curves exact, "tree" refused for them)."""
+    theta = tangent_point_tree.THETA if theta is None else barnes_hut.check_theta(theta)
+    if layout.has_open:
+        if engine == "tree":
+            raise ValueError(OPEN_TREE_REFUSAL)
+        if engine not in ("exact", "auto"):
+            uses_tree(engine, layout.n)  # its message for an unknown name
+        return None
+    if not uses_tree(engine, layout.n):
+        return None
+    return tangent_point_tree.TangentPointFrame(X, layout, alpha, beta, theta)
+
+
+def _evaluate(P, energy_name, alpha, beta, engine, theta, closed, grad):
+    alpha, beta = _exponents(energy_name, alpha, beta)
+    if energy_name == "moebius":
+        if grad:
+            return moebius_energy(P, engine=engine, theta=theta, closed=closed), \
+                moebius_gradient(P, engine=engine, theta=theta, closed=closed)
+        return moebius_energy(P, engine=engine, theta=theta, closed=closed), None
+    X, layout, k = as_checked_layout(P, closed)
+    frame = _tp_frame(X, layout, engine, theta, alpha, beta)
+    if grad:
+        e, g = (tp_energy_gradient_x(X, layout, alpha, beta) if frame is None
+                else frame.energy_gradient(X))
+    else:
+        e, g = (tp_energy_x(X, layout, alpha, beta) if frame is None else frame.energy(X)), None
+    if k:  # X was scaled by 2^-k: E(2^k X) = 2^(k s) E(X), ∇E(2^k X) = 2^(k (s − 1)) ∇E(X)
+        s = tangent_point.scaling(alpha, beta)
+        e = e * 2.0 ** (k * s)
+        g = None if g is None else g * 2.0 ** (k * (s - 1.0))
+    return e, (None if g is None else layout.split(g))
+
+
+def energy(P, *, energy: str = "moebius", alpha: float = 2.0, beta: float = 4.0,
+           engine: str = "auto", theta: float | None = None, closed=True) -> float:
+    """The energy ``energy`` of a closed polygon, a link or open polylines.
+
+    Parameters
+    ----------
+    P : (N, 3) array or list of (N_k, 3) arrays
+        Vertices of a closed polygon, or the components of a link (as :func:`moebius_energy`).
+    energy : {"moebius", "tangent_point"}
+        "moebius": exactly :func:`moebius_energy`. "tangent_point": the discrete tangent-point
+        energy ``Σ_{(I, J) ordered, disjoint} l_I l_J |T_I × (m_I − m_J)|^α / |m_I − m_J|^β``
+        (docs/design.md, "Tangent-point energy").
+    alpha, beta : float
+        The tangent-point exponents: finite, ``α > 0``, ``α + 1 < β < 2α + 1`` (default 2, 4,
+        scale-invariant). With "moebius" anything but the defaults is refused (ValueError).
+    engine : {"exact", "tree", "auto"}
+        As in :func:`moebius_energy` ("auto": the tree from ``ENERGY_TREE_FROM`` edges on;
+        open curves: exact only).
+    theta : float, optional
+        Admissibility of the tree in (0, 2); default ``barnes_hut.THETA`` for "moebius",
+        ``tangent_point_tree.THETA`` for "tangent_point".
+    closed : bool or sequence of bool
+        As in :func:`moebius_energy`.
+
+    Returns
+    -------
+    float
+        The energy; the tangent-point energy scales as ``λ^(2 + α − β)`` under ``P → λP``.
+    """
+    return _evaluate(P, energy, alpha, beta, engine, theta, closed, False)[0]
+
+
+def energy_gradient(P, *, energy: str = "moebius", alpha: float = 2.0, beta: float = 4.0,
+                    engine: str = "auto", theta: float | None = None, closed=True):
+    """:func:`energy` and its exact derivative with respect to the vertices (with the tree,
+    the exact derivative of the approximated sum).
+
+    Returns
+    -------
+    (float, (N, 3) array or list of arrays)
+        The energy and the gradient, shaped like ``P``. For "moebius" exactly
+        ``(moebius_energy(P, …), moebius_gradient(P, …))``.
+    """
+    return _evaluate(P, energy, alpha, beta, engine, theta, closed, True)

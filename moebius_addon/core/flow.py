@@ -13,9 +13,9 @@ import numpy as np
 
 from ._layout import as_checked_layout
 from .constraints import jacobian, make_constraints
-from .energy import energy_gradient_x
 from .linalg import Factorization
 from .metrics import gram_x
+from .moebius_dense import energy_gradient_x
 from .solvers import make_run
 from .solvers.base import IterationState, RelaxResult, check_dense_size
 

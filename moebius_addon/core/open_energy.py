@@ -1,9 +1,9 @@
 """Möbius energy of layouts with open components (docs/api.md, "Open curves").
 
-A closed component keeps the energy of :mod:`.energy` (``4 + Σ`` of the Ishizeki–Nagasawa
-integrand over ordered pairs of disjoint edges). That form and its constant 4 come from the
-decomposition of the energy of a *closed* curve; for an open polyline the energy is O'Hara's
-regularized form itself, with the midpoint rule:
+A closed component keeps the energy of :mod:`.moebius_dense` (``4 + Σ`` of the
+Ishizeki–Nagasawa integrand over ordered pairs of disjoint edges). That form and its constant
+4 come from the decomposition of the energy of a *closed* curve; for an open polyline the
+energy is O'Hara's regularized form itself, with the midpoint rule:
 
     E_open(P) = Σ_{(I,J) ordered, disjoint} l_I l_J (1/|m_I − m_J|² − 1/D_IJ²)
 
@@ -55,10 +55,10 @@ def _open_parts(ex, ey, ez, mx, my, mz, ln, arc, starts, comp, closed, real, gra
                 px, py, pz = mx[i], my[i], mz[i]
                 s = 0.0
                 gax = gay = gaz = gmx = gmy = gmz = gl = 0.0
-                if closed[c]:  # the Ishizeki–Nagasawa kernel of energy.py
+                if closed[c]:  # the Ishizeki–Nagasawa kernel of moebius_dense.py
                     lo, hi = row_range(i, s0, s1)
                     for j in range(lo, hi):
-                        bx, by, bz, lj = ex[j], ey[j], ez[j], ln[j]  # loads first (energy.py)
+                        bx, by, bz, lj = ex[j], ey[j], ez[j], ln[j]  # loads first (moebius_dense)
                         dx = px - mx[j]
                         dy = py - my[j]
                         dz = pz - mz[j]

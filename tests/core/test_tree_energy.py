@@ -8,7 +8,7 @@ import pytest
 from moebius_addon import core
 from moebius_addon.core import barnes_hut as bh
 from moebius_addon.core._layout import as_layout
-from moebius_addon.core.energy import energy_gradient_x
+from moebius_addon.core.moebius_dense import energy_gradient_x
 from tests.conftest import ngon, out_here_and_in_one_thread, trefoil
 
 

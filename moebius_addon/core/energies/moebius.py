@@ -29,10 +29,10 @@ These kernels are inlined (``inline="always"``) and so compiled with their calle
 (fast-math in the dense sums, none in the tree engine's). Keep the order of the floating-point
 operations: the energies, gradients and iterate histories are pinned bit for bit
 (tests/core/data/unchanged_runs.json). Under fast-math even the callers' order of loads counts
-(LLVM's reassociation ranks values by it; energy.py loads ``e_J`` and ``l_J`` before the
-midpoint, as it always did). numba's cache is keyed on the caller's file alone: after editing
-this one, delete the callers' cached kernels (``__pycache__/*.nbi``, ``*.nbc`` of energy.py,
-open_energy.py, _near_field.py, _far_field.py), or they keep the old code.
+(LLVM's reassociation ranks values by it; moebius_dense.py loads ``e_J`` and ``l_J`` before
+the midpoint, as it always did). numba's cache is keyed on the caller's file alone: after
+editing this one, delete the callers' cached kernels (``__pycache__/*.nbi``, ``*.nbc`` of
+moebius_dense.py, open_energy.py, _near_field.py, _far_field.py), or they keep the old code.
 
 The far field expands ``pair`` around the clusters' centres: its zeroth order is :func:`pair`
 itself with the clusters' total lengths and summed edge vectors; the higher orders are the

@@ -1,0 +1,122 @@
+"""The discrete tangent-point energy's pair kernel (docs/design.md, "Tangent-point energy"), the
+only place its integrand is written.
+
+For an ordered pair of disjoint edges ``I, J`` (``d = m_I − m_J``, ``T_I = e_I / l_I``)::
+
+    f_IJ = l_I l_J |T_I × d|^α / |d|^β = l_I^(1−α) l_J |e_I × d|^α |d|^(−β)
+
+the midpoint rule for ``∫∫ |T(x) × (x − y)|^α / |x − y|^β`` (Buck–Orloff's tangent-point
+energy with the exponents of Blair's and Strzelecki–von der Mosel's ``(α, β)`` family, the one
+Repulsive Curves and Repulsor minimize). Not symmetric in ``I, J``: only ``I``'s tangent
+enters, ``J`` is a point of weight ``l_J``. ``|T × d|`` is the length of a cross product, never
+``|d|² − <T, d>²`` (which cancels for nearly parallel ``T`` and ``d``, the pairs along a smooth
+strand).
+
+:func:`pair` returns the value and the partials the sums need; a constant ``kind`` (inlined,
+the other branches compile away) picks ``α = 2, β = 4`` (no ``pow`` at all), ``α = 2`` (one
+``pow``, for ``|d|^−β``) or general exponents. A sum that masks a pair out passes ``r2 = inf``:
+every result is then exactly 0.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+
+#: The name of the energy (``energies.ENERGIES``).
+NAME = "tangent_point"
+#: Open polylines are supported (the same integrand; the first and last edge are disjoint).
+OPEN_CURVES = True
+#: Links are supported (every pair of edges of different components counts).
+LINKS = True
+#: The default exponents ``(α, β)`` (scale-invariant: ``2 + α − β = 0``).
+DEFAULT_ALPHA = 2.0
+DEFAULT_BETA = 4.0
+
+# what :func:`pair` computes (a constant argument at every call site)
+KIND_2_4 = 0  # α = 2, β = 4: no pow
+KIND_2 = 1  # α = 2: |T × d|² exactly, one pow for |d|^−β
+KIND_GENERAL = 2
+
+
+def scaling(alpha: float, beta: float) -> float:
+    """``s`` with ``E(λP) = λ^s E(P)``: ``2 + α − β`` (each edge length one power, the
+    integrand ``α − β``)."""
+    return 2.0 + alpha - beta
+
+
+def check_exponents(alpha, beta) -> tuple[float, float]:
+    """``(α, β)`` as floats, or ValueError naming the one at fault: both finite, ``α > 0``
+    and ``α + 1 < β < 2α + 1`` (below: the energy does not repel, a curve may pass through
+    itself at finite energy; above: it is infinite on every smooth curve)."""
+    vals = []
+    for name, v in (("alpha", alpha), ("beta", beta)):
+        try:
+            x = float(v)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be a finite number, got {v!r}") from None
+        if isinstance(v, bool) or not math.isfinite(x):
+            raise ValueError(f"{name} must be a finite number, got {v!r}")
+        vals.append(x)
+    a, b = vals
+    if a <= 0.0:
+        raise ValueError(f"alpha must be > 0, got {alpha!r} (the default is {DEFAULT_ALPHA:g})")
+    if not (a + 1.0 < b < 2.0 * a + 1.0):
+        raise ValueError(f"beta must lie in (alpha + 1, 2 alpha + 1) = ({a + 1.0:g}, "
+                         f"{2.0 * a + 1.0:g}) for alpha = {a:g}, got {beta!r} (below, the energy "
+                         f"is no barrier against self-crossing; above, it is infinite on smooth "
+                         f"curves; the default is ({DEFAULT_ALPHA:g}, {DEFAULT_BETA:g}))")
+    return a, b
+
+
+def kind_of(alpha: float, beta: float) -> int:
+    """The :func:`pair` branch for these exponents."""
+    if alpha == 2.0:
+        return KIND_2_4 if beta == 4.0 else KIND_2
+    return KIND_GENERAL
+
+
+@nb.njit(cache=True, inline="always")
+def pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
+    """The ordered pair ``(I, J)``: ``e_I = a``, lengths ``li``, ``lj``, ``d = m_I − m_J`` with
+    ``r2 = |d|²``.
+
+    Returns ``(f, ∂f/∂e_I (3), ∂f/∂d (3), ∂f/∂l_J)``: ``∂f/∂e_I`` with its length term (``l_I``
+    is ``|e_I|``); ``∂f/∂m_I = ∂f/∂d``, ``∂f/∂m_J = −∂f/∂d``; ``∂f/∂l_J = f/l_J`` (computed
+    without the division, so a weight ``l_J = 0`` gives 0)."""
+    # c = e_I × d; |c|^α = w |c|², its derivative in c: α w c
+    cx = ay * dz - az * dy
+    cy = az * dx - ax * dz
+    cz = ax * dy - ay * dx
+    c2 = cx * cx + cy * cy + cz * cz
+    inv = 1.0 / r2
+    if kind == KIND_2_4:
+        w = 1.0
+        rb = inv * inv  # |d|^−4
+        pl = 1.0 / li  # l_I^(1−α)
+    elif kind == KIND_2:
+        w = 1.0
+        rb = r2 ** (-0.5 * beta)
+        pl = 1.0 / li
+    else:
+        w = c2 ** (0.5 * alpha - 1.0) if c2 > 0.0 else 0.0
+        rb = r2 ** (-0.5 * beta)
+        pl = li ** (1.0 - alpha)
+    h = pl * w * rb  # f = lj h |c|²
+    fl = h * c2  # ∂f/∂l_J
+    f = lj * fl
+    # ∂f/∂c = lj h α c; ∂f/∂e = d × ∂f/∂c + (1 − α) f e/l_I²; ∂f/∂d = ∂f/∂c × e − β f d/|d|²
+    k = lj * h * alpha
+    gx = k * cx
+    gy = k * cy
+    gz = k * cz
+    tl = (1.0 - alpha) * f / (li * li)
+    fax = dy * gz - dz * gy + tl * ax
+    fay = dz * gx - dx * gz + tl * ay
+    faz = dx * gy - dy * gx + tl * az
+    tb = beta * f * inv
+    fdx = gy * az - gz * ay - tb * dx
+    fdy = gz * ax - gx * az - tb * dy
+    fdz = gx * ay - gy * ax - tb * dz
+    return f, fax, fay, faz, fdx, fdy, fdz, fl
