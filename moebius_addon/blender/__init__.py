@@ -33,6 +33,7 @@ from .api import (
 )
 from .geometry import curve_polygons, object_polylines, write_polygons
 from .keyframes import (
+    ENERGY_NAME_PROP,
     ENERGY_PROP,
     keyed_energies,
     keyed_frames,
@@ -41,7 +42,7 @@ from .keyframes import (
 )
 
 __all__ = [
-    "EDGE_LIMIT", "ENERGY_PROP", "KNOT_TYPE_PROP", "ObjectRelaxation", "add_knot",
+    "EDGE_LIMIT", "ENERGY_NAME_PROP", "ENERGY_PROP", "KNOT_TYPE_PROP", "ObjectRelaxation", "add_knot",
     "add_notation", "apply_conversion", "identify_object",
     "apply_frame", "check_edge_count", "clear_animation", "convert_object", "curve_polygons",
     "edge_limit", "energy", "export_flow",

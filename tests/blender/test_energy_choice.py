@@ -1,0 +1,80 @@
+"""The Energy menu: a flow of the tangent-point energy keyed like a Möbius one, the keyed energy
+saying which it is; its exponents checked before any work; the command line's --energy."""
+
+import bpy
+import numpy as np
+import pytest
+from bpy_helpers import points_at, scene_state
+
+
+@pytest.fixture
+def knot(scene, mb):
+    bpy.ops.moebius.add_knot(kind="3_1", edges=90)
+    return bpy.context.active_object
+
+
+@pytest.mark.lines
+def test_tangent_point_flow_is_keyed_with_its_name(scene, mb, core, knot):
+    s = scene.moebius
+    s.energy, s.max_iterations, s.tolerance = "tangent_point", 4, 0.0
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    assert knot[mb.ENERGY_NAME_PROP] == "tangent_point(2, 4)"
+    assert "Tangent-point" in knot.id_properties_ui(mb.ENERGY_PROP).as_dict()["description"]
+    frames = mb.keyed_frames(knot)
+    assert frames == [1, 2, 3, 4, 5]
+    keyed = []
+    for f in (1, 5):
+        scene.frame_set(f)
+        keyed.append(knot[mb.ENERGY_PROP])
+        # (2, 4) is scale-invariant: the keyed value is the energy of the frame's curve
+        assert keyed[-1] == pytest.approx(
+            core.energy(points_at(knot, f), energy="tangent_point"), rel=1e-6)
+    assert keyed[1] < keyed[0]
+    # the same flow as the core run with the same options
+    ref = core.relax(points_at(knot, 1), max_iter=4, tol=0.0, energy="tangent_point",
+                     method="projected_gradient_implicit", target_lengths="keep")
+    np.testing.assert_allclose(points_at(knot, 5), ref.x, atol=1e-5)
+
+
+def test_continue_with_another_energy_is_refused(scene, mb, knot):
+    s = scene.moebius
+    s.energy, s.max_iterations = "tangent_point", 2
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    s.energy = "moebius"
+    before = scene_state()
+    with pytest.raises(RuntimeError, match=r"tangent_point\(2, 4\) energy.*Clear Flow"):
+        bpy.ops.moebius.relax(append=True)
+    assert scene_state() == before
+
+
+@pytest.mark.parametrize("alpha, beta, word", [(2.0, 5.5, "beta"), (0.5, 1.7, "beta")])
+def test_bad_exponents_leave_the_scene(scene, mb, knot, alpha, beta, word):
+    s = scene.moebius
+    s.energy, s.tp_alpha, s.tp_beta = "tangent_point", alpha, beta
+    before = scene_state()
+    with pytest.raises(RuntimeError, match=word):
+        bpy.ops.moebius.relax()
+    assert scene_state() == before
+
+
+def test_exponents_reach_the_run_only_for_the_tangent_point_energy(scene, mb):
+    s = scene.moebius
+    s.tp_alpha, s.tp_beta = 3.0, 6.0
+    assert "alpha" not in mb.relax_settings(s)  # Möbius: no exponents passed
+    s.energy = "tangent_point"
+    kw = mb.relax_settings(s)
+    assert (kw["energy"], kw["alpha"], kw["beta"]) == ("tangent_point", 3.0, 6.0)
+
+
+def test_cli_energy(scene, mb, capfd):
+    from importlib import import_module
+
+    cli = import_module(mb.__name__ + ".cli")
+    capfd.readouterr()
+    rc = cli.main(["--knot", "3_1", "--edges", "60", "--max-iterations", "2",
+                   "--energy", "tangent_point", "--alpha", "3", "--beta", "6"])
+    assert rc == 0
+    assert "tangent_point(3, 6) energy" in capfd.readouterr().out
+    assert bpy.context.active_object[mb.ENERGY_NAME_PROP] == "tangent_point(3, 6)"
+    assert cli.main(["--knot", "3_1", "--energy", "tangent_point", "--beta", "9"]) == 1
+    assert "beta" in capfd.readouterr().err
