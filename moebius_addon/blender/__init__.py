@@ -42,7 +42,8 @@ from .keyframes import (
 )
 
 __all__ = [
-    "EDGE_LIMIT", "ENERGY_NAME_PROP", "ENERGY_PROP", "KNOT_TYPE_PROP", "ObjectRelaxation", "add_knot",
+    "EDGE_LIMIT", "ENERGY_NAME_PROP", "ENERGY_PROP", "KNOT_TYPE_PROP", "ObjectRelaxation",
+    "add_knot",
     "add_notation", "apply_conversion", "identify_object",
     "apply_frame", "check_edge_count", "clear_animation", "convert_object", "curve_polygons",
     "edge_limit", "energy", "export_flow",

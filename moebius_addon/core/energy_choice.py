@@ -74,6 +74,13 @@ class EnergyChoice:
         return 0.0 if self.name == "moebius" else 2.0 + self.alpha - self.beta
 
     @property
+    def metric_order(self) -> float:
+        """Order ``s`` of the fractional Sobolev metric that fits the energy (``hs`` and
+        ``hs_pure``): 3/2 for the Möbius energy (the paper's W^{3/2,2}), ``(β − 1)/α`` for the
+        tangent-point energy (Repulsive Curves; 3/2 at the default exponents)."""
+        return 1.5 if self.name == "moebius" else (self.beta - 1.0) / self.alpha
+
+    @property
     def default_theta(self) -> float:
         """The tree's admissibility when none is given (each energy measured its own)."""
         return barnes_hut.THETA if self.name == "moebius" else tangent_point_tree.THETA
