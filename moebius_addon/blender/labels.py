@@ -29,6 +29,14 @@ ENERGIES = (
      "Curves): spreads the strands evenly, opens tight clasps"),
 )
 assert tuple(key for key, _, _ in ENERGIES) == core.ENERGY_NAMES
+
+
+def energy_label(name: str) -> str:
+    """The *Last Run* box's row name for the energy ``name`` (``EnergyChoice.label``):
+    "Energy" for Möbius, "TP (2, 4)" for the tangent-point energy with its exponents."""
+    return "Energy" if name == "moebius" else "TP" + name[len("tangent_point"):]
+
+
 #: Default exponents α, β of the tangent-point energy (``core.energy_choice``).
 DEFAULT_TP_ALPHA, DEFAULT_TP_BETA = core.energy_choice.DEFAULT_EXPONENTS
 

@@ -84,7 +84,8 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
             col.label(text=labels.method_label(s.last_method))
             for name, value in (
                 ("Iterations", str(s.last_iterations)),
-                ("Energy", f"{s.last_energy_start:.5g} → {s.last_energy_end:.5g}"),
+                (labels.energy_label(s.last_energy_name),
+                 f"{s.last_energy_start:.5g} → {s.last_energy_end:.5g}"),
                 ("Time", f"{s.last_seconds:.2f} s"),
                 ("Keyed", f"{s.last_keyframes} frames"),
                 ("Engine", labels.engine_label(s.last_engine)),

@@ -228,6 +228,7 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     last_engine: StringProperty(name="Engine", get=_stat("engine", ""))
     last_type: StringProperty(name="Knot Type", get=_stat("type", ""))
     last_refined: StringProperty(name="Refined", get=_stat("refined", ""))
+    last_energy_name: StringProperty(name="Energy Name", get=_stat("energy_name", "moebius"))
     # Notation typed for Add from Notation (braid word or PD code)
     notation: StringProperty(
         name="Notation", default="1 -2 1 -2",
@@ -239,13 +240,14 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     def store_run(self, obj_name: str, iterations: int, energy_start: float, energy_end: float,
                   seconds: float, message: str, keyed: int,
                   method: str = labels.DEFAULT_METHOD, engine: str = "",
-                  knot_type: str = "", refined: str = "") -> None:
+                  knot_type: str = "", refined: str = "", energy_name: str = "moebius") -> None:
         """Record the statistics of a finished run (shown read-only in the panel)."""
         self["_stats"] = {
             "object": obj_name, "iterations": int(iterations),
             "energy_start": float(energy_start), "energy_end": float(energy_end),
             "seconds": float(seconds), "message": message, "keyframes": int(keyed),
             "method": method, "engine": engine, "type": knot_type, "refined": refined,
+            "energy_name": energy_name,
         }
 
 

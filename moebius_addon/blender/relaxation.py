@@ -508,7 +508,8 @@ class ObjectRelaxation:
             stats.store_run(self.obj.name, self.nit, self.energies[0], self.energies[-1],
                             time.perf_counter() - self.t0, str(result.message), len(frames),
                             self.method, self.engine, self.type_message,
-                            refined=self.refinement_text(result))
+                            refined=self.refinement_text(result),
+                            energy_name=self.energy_label)
         return result
 
 

@@ -19,6 +19,7 @@ def test_tangent_point_flow_is_keyed_with_its_name(scene, mb, core, knot):
     s.energy, s.max_iterations, s.tolerance = "tangent_point", 4, 0.0
     assert bpy.ops.moebius.relax() == {"FINISHED"}
     assert knot[mb.ENERGY_NAME_PROP] == "tangent_point(2, 4)"
+    assert s.last_energy_name == "tangent_point(2, 4)"  # the Last Run box's "TP (2, 4)" row
     assert "Tangent-point" in knot.id_properties_ui(mb.ENERGY_PROP).as_dict()["description"]
     frames = mb.keyed_frames(knot)
     assert frames == [1, 2, 3, 4, 5]
