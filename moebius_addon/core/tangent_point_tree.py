@@ -21,9 +21,9 @@ the same hierarchy, the same dual traversal, the same near and far lists), and s
 The gradient is the exact derivative of this approximated sum for the fixed split: the far
 field's derivatives in ``L_B`` and ``c_B`` go to ``B``'s edges by ``∂L_B/∂l_J = 1``,
 ``∂c_B/∂m_J = l_J/L_B``, ``∂c_B/∂l_J = (m_J − c_B)/L_B``. Every edge's own sums are
-sequential; what a far pair gives a source cluster goes to :data:`_FAR_CHUNKS` fixed buffers
-(the leaves dealt to them in fixed ranges), and a near pair's share of its second edge is
-computed again by that edge's own leaf: the same bits for every thread count.
+sequential; what a pair gives its second edge or source cluster goes to :data:`_FAR_CHUNKS`
+fixed buffers (the leaves dealt to them in fixed ranges), added in a fixed order: the same
+bits for every thread count.
 """
 
 from __future__ import annotations
@@ -48,10 +48,9 @@ from .energies.tangent_point import (
 #: Default admissibility of the tangent-point tree (see docs/benchmarks.md, "Tangent-point
 #: energy": the relative errors measured at it).
 THETA = 0.25
-# Fixed pieces of the parallel loops over leaves: the near field's and far field's per-edge
-# sums are their own (any split, the same bits); the far field's per-cluster derivatives go to
+# Fixed pieces of the parallel loops over leaves: the per-edge sums are their own (any split,
+# the same bits); what the pairs give their second edge (near) or source cluster (far) goes to
 # one buffer per piece, so their number is fixed.
-_NEAR_CHUNKS = 256
 _FAR_CHUNKS = 16
 
 
@@ -70,20 +69,24 @@ def _kernel(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
 def _near(E, M, ln, lo, hi, leaves, noff, npart, nbr, alpha, beta, kind, grad):
     """Per edge (tree order): row 0 ``Σ_J f(I, J)`` over its near partners and, with ``grad``,
     the partials of every near pair it is part of (as ``I`` or as ``J``) in its edge vector
-    (rows 1–3, without the length term), midpoint (4–6) and length (7)."""
+    (rows 1–3, without the length term), midpoint (4–6) and length (7). Each ordered pair is
+    evaluated once, by the leaf of its ``I``; what it gives its ``J`` goes to one buffer per
+    fixed piece of the leaves, added in piece order."""
     n = ln.shape[0]
     nl = leaves.shape[0]
     rows = np.zeros((8 if grad else 1, n))
-    nchunks = min(nl, _NEAR_CHUNKS)
+    nchunks = min(nl, _FAR_CHUNKS)
+    sb = np.zeros((nchunks, 4 if grad else 0, n))
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
+        b4 = sb[ch]
         for t in range(ch * nl // nchunks, (ch + 1) * nl // nchunks):
             a = leaves[t]
             for q in range(lo[a], hi[a]):
                 px, py, pz = M[q, 0], M[q, 1], M[q, 2]
                 ax, ay, az, li = E[q, 0], E[q, 1], E[q, 2], ln[q]
                 n0, n1 = nbr[q, 0], nbr[q, 1]
-                s = gax = gay = gaz = gmx = gmy = gmz = gl = 0.0
+                s = gax = gay = gaz = gmx = gmy = gmz = 0.0
                 for p in range(noff[a], noff[a + 1]):
                     b = npart[p]
                     for r in range(lo[b], hi[b]):
@@ -92,9 +95,9 @@ def _near(E, M, ln, lo, hi, leaves, noff, npart, nbr, alpha, beta, kind, grad):
                         dx = px - M[r, 0]
                         dy = py - M[r, 1]
                         dz = pz - M[r, 2]
-                        r2 = dx * dx + dy * dy + dz * dz
-                        f, fax, fay, faz, fdx, fdy, fdz, _ = _kernel(
-                            dx, dy, dz, ax, ay, az, li, ln[r], r2, alpha, beta, kind)
+                        f, fax, fay, faz, fdx, fdy, fdz, fl = _kernel(
+                            dx, dy, dz, ax, ay, az, li, ln[r], dx * dx + dy * dy + dz * dz,
+                            alpha, beta, kind)
                         s += f
                         if grad:
                             gax += fax
@@ -103,14 +106,10 @@ def _near(E, M, ln, lo, hi, leaves, noff, npart, nbr, alpha, beta, kind, grad):
                             gmx += fdx
                             gmy += fdy
                             gmz += fdz
-                            # the pair (r, q): q is its J (d = m_r − m_q)
-                            _, _, _, _, hdx, hdy, hdz, hl = _kernel(
-                                -dx, -dy, -dz, E[r, 0], E[r, 1], E[r, 2], ln[r], li, r2,
-                                alpha, beta, kind)
-                            gmx -= hdx
-                            gmy -= hdy
-                            gmz -= hdz
-                            gl += hl
+                            b4[0, r] -= fdx
+                            b4[1, r] -= fdy
+                            b4[2, r] -= fdz
+                            b4[3, r] += fl
                 rows[0, q] = s
                 if grad:
                     rows[1, q] = gax
@@ -119,7 +118,11 @@ def _near(E, M, ln, lo, hi, leaves, noff, npart, nbr, alpha, beta, kind, grad):
                     rows[4, q] = gmx
                     rows[5, q] = gmy
                     rows[6, q] = gmz
-                    rows[7, q] = gl
+    if grad:
+        for ch in range(nchunks):  # in piece order: the same bits for any thread count
+            for k in range(4):
+                for q in nb.prange(n):
+                    rows[4 + k, q] += sb[ch, k, q]
     return rows
 
 
