@@ -31,14 +31,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import barnes_hut, hs_solve, hs_tree, tangent_point_tree
+from . import barnes_hut, energy_choice, hs_solve, hs_tree, tangent_point_tree
 from ._layout import OPEN_TREE_REFUSAL, Layout, as_checked_layout
 from ._memory import check_memory
 from .banded import BANDED_METRICS, BandedSaddle
 from .collision import contact_time_x
 from .constraints import Jacobian
-from .energies import ENERGIES, tangent_point
-from .energy_choice import MOEBIUS, EnergyChoice
+from .energies import tangent_point
+from .energy_choice import MOEBIUS, EnergyChoice, check_energy
 from .linalg import SaddlePointSolver, spd_inverse
 from .metrics import banded_parts, gram_x
 from .moebius_dense import energy_gradient_x, energy_x
@@ -483,26 +483,8 @@ def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None, clo
     return layout.split(np.ldexp(g, -k) if k else g)  # ∇E(2^k X) = 2^-k ∇E(X)
 
 
-#: The names of the ``energy=`` option of :func:`energy` and :func:`energy_gradient`.
-ENERGY_NAMES = tuple(ENERGIES)
-
-
-def _exponents(energy_name: str, alpha, beta) -> tuple[float, float]:
-    """``(α, β)`` checked for the energy ``energy_name`` (ValueError naming an unknown energy,
-    or the exponent at fault; the Möbius energy has none: anything but the defaults is
-    refused by name rather than ignored)."""
-    if energy_name not in ENERGIES:
-        raise ValueError(f"unknown energy {energy_name!r}; choose one of "
-                         f"{', '.join(ENERGY_NAMES)}")
-    if energy_name == tangent_point.NAME:
-        return tangent_point.check_exponents(alpha, beta)
-    for name, v, default in (("alpha", alpha, tangent_point.DEFAULT_ALPHA),
-                             ("beta", beta, tangent_point.DEFAULT_BETA)):
-        if not (isinstance(v, (int, float, np.integer, np.floating)) and v == default):
-            raise ValueError(f"{name} is an exponent of the tangent-point energy; the Möbius "
-                             f"energy has none: pass energy='tangent_point' or leave {name} "
-                             f"at its default {default:g}, got {v!r}")
-    return tangent_point.DEFAULT_ALPHA, tangent_point.DEFAULT_BETA
+#: The names of the ``energy=`` option of :func:`energy`, :func:`energy_gradient` and the runs.
+ENERGY_NAMES = energy_choice.ENERGY_NAMES
 
 
 def _tp_frame(X, layout, engine, theta, alpha, beta):
@@ -521,8 +503,9 @@ def _tp_frame(X, layout, engine, theta, alpha, beta):
 
 
 def _evaluate(P, energy_name, alpha, beta, engine, theta, closed, grad):
-    alpha, beta = _exponents(energy_name, alpha, beta)
-    if energy_name == "moebius":
+    choice = check_energy(energy_name, alpha, beta)  # ValueError naming what is wrong
+    alpha, beta = choice.alpha, choice.beta
+    if choice.name == "moebius":
         if grad:
             return moebius_energy(P, engine=engine, theta=theta, closed=closed), \
                 moebius_gradient(P, engine=engine, theta=theta, closed=closed)
@@ -541,7 +524,7 @@ def _evaluate(P, energy_name, alpha, beta, engine, theta, closed, grad):
     return e, (None if g is None else layout.split(g))
 
 
-def energy(P, *, energy: str = "moebius", alpha: float = 2.0, beta: float = 4.0,
+def energy(P, *, energy: str = "moebius", alpha: float | None = None, beta: float | None = None,
            engine: str = "auto", theta: float | None = None, closed=True) -> float:
     """The energy ``energy`` of a closed polygon, a link or open polylines.
 
@@ -554,8 +537,9 @@ def energy(P, *, energy: str = "moebius", alpha: float = 2.0, beta: float = 4.0,
         energy ``Σ_{(I, J) ordered, disjoint} l_I l_J |T_I × (m_I − m_J)|^α / |m_I − m_J|^β``
         (docs/design.md, "Tangent-point energy").
     alpha, beta : float
-        The tangent-point exponents: finite, ``α > 0``, ``α + 1 < β < 2α + 1`` (default 2, 4,
-        scale-invariant). With "moebius" anything but the defaults is refused (ValueError).
+        The tangent-point exponents: finite, ``α > 0``, ``α + 1 < β < 2α + 1`` (None: 2, 4,
+        scale-invariant). With "moebius" they are refused (ValueError), not ignored
+        (:func:`.energy_choice.check_energy`, the runs' check).
     engine : {"exact", "tree", "auto"}
         As in :func:`moebius_energy` ("auto": the tree from ``ENERGY_TREE_FROM`` edges on;
         open curves: exact only).
@@ -573,8 +557,9 @@ def energy(P, *, energy: str = "moebius", alpha: float = 2.0, beta: float = 4.0,
     return _evaluate(P, energy, alpha, beta, engine, theta, closed, False)[0]
 
 
-def energy_gradient(P, *, energy: str = "moebius", alpha: float = 2.0, beta: float = 4.0,
-                    engine: str = "auto", theta: float | None = None, closed=True):
+def energy_gradient(P, *, energy: str = "moebius", alpha: float | None = None,
+                    beta: float | None = None, engine: str = "auto", theta: float | None = None,
+                    closed=True):
     """:func:`energy` and its exact derivative with respect to the vertices (with the tree,
     the exact derivative of the approximated sum).
 
