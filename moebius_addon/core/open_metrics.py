@@ -6,8 +6,8 @@ The same quadratic form as for closed curves, ``Σ_{I,J} w_IJ |(Du)_I − (Du)_J
 pairs are those of the polyline (``|I − J| ≥ 2``, its dummy edge left out, see
 :mod:`._layout`) and ``ρ_IJ`` is the arc length between the midpoints along it (no way round
 the ends). The order s of the metric enters as in :mod:`.metrics`: ``w_IJ = l_I l_J /
-|d|^(2s−1)``, ``v_IJ = w_IJ (1/|d|² − 1/ρ²)``. Nothing else marks the ends: the operators ``D`` and ``M`` are those of the
-polyline's edges. The matrix is built from the weights as
+|d|^(2s−1)``, ``v_IJ = w_IJ (1/|d|² − 1/ρ²)``. Nothing else marks the ends: the operators
+``D`` and ``M`` are those of the polyline's edges. The matrix is built from the weights as
 ``2 Dᵀ(diag(W1) − W)D + 2 Mᵀ(diag(V1) − V)M`` with sparse ``D`` and ``M`` in O(N²).
 """
 

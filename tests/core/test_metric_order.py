@@ -131,7 +131,7 @@ def test_open_weights_carry_the_order():
     W, V = _weights(*args, 1.75 - 0.5)
     d2 = np.sum((mid[:, None] - mid[None]) ** 2, axis=2)
     np.fill_diagonal(d2, 1.0)
-    f = d2 ** ((1.5 - 1.75))
+    f = d2 ** (1.5 - 1.75)
     assert np.count_nonzero(W0) > 0 and np.array_equal(W0 != 0, W != 0)
     assert np.allclose(W, W0 * f, rtol=1e-13, atol=0)
     assert np.allclose(V, V0 * f, rtol=1e-12, atol=1e-12 * np.abs(V).max())
