@@ -94,7 +94,8 @@ class DenseEngine:
         Components of the stacked vertex array every method below takes (``X``: (N, 3), at the
         run's scale, total length 1).
     metric : {"hs", "hs_pure", "h2", "h1", "l2"}
-        Metric of :meth:`update`, :meth:`metric_product` and :meth:`penalty_solver`.
+        Metric of :meth:`update`, :meth:`metric_product` and :meth:`penalty_solver`; ``hs``
+        and ``hs_pure`` of the order that fits the energy (``energy.metric_order``).
     precision : {"auto", "double", "single"}
         Precision of the saddle-point factorization ("auto": single from 600 vertices on,
         refined by GMRES to double-precision results).
@@ -187,7 +188,8 @@ class DenseEngine:
         """Move to the iterate ``X`` with constraint Jacobian ``jac``: assemble the metric
         there and update (refactor or keep, see ``SaddlePointSolver``) the solver."""
         # the previous iterate's Gram matrix is no longer needed: its memory takes the new one
-        self._gram = gram_x(self.metric, X, self.layout, out=self._gram)
+        self._gram = gram_x(self.metric, X, self.layout, out=self._gram,
+                            order=self.energy_choice.metric_order)
         self.solver.update(self._gram, jac)
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -218,8 +220,9 @@ class DenseEngine:
         """Solver of the penalized metric ``G + α DΦᵀ diag(l0) DΦ`` at ``X`` (``jac``: DΦ at
         X; without the penalty term unless ``penalty_in_metric``); ``.solve(g)``."""
         self._penalty_factorizations += 1
-        return PenaltyMetric(gram_x(self.metric, X, self.layout), jac, alpha, lengths0,
-                             penalty_in_metric)
+        return PenaltyMetric(gram_x(self.metric, X, self.layout,
+                                    order=self.energy_choice.metric_order),
+                             jac, alpha, lengths0, penalty_in_metric)
 
     # -- statistics ----------------------------------------------------------------------------
 
@@ -293,7 +296,9 @@ class TreeEngine(DenseEngine):
             self._saddle = BorderedPins(band, jac) if pins else band
         else:
             self._saddle = hs_solve.HsSaddle(
-                hs_tree.HsOperator(X, self.layout, self.metric), jac, rtol=self.krylov_rtol,
+                hs_tree.HsOperator(X, self.layout, self.metric,
+                                   order=self.energy_choice.metric_order),
+                jac, rtol=self.krylov_rtol,
                 exact_backprojection=self.exact_backprojection, log=self._tree_krylov,
                 recycle=old if isinstance(old, hs_solve.HsSaddle) else None, X=X)
         self._banded_factorizations += 1

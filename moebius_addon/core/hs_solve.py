@@ -28,7 +28,7 @@ from .banded import BandedSaddle
 from .constraints import Jacobian, TangentProjector, jacobian, make_constraints
 from .hs_tree import HsOperator
 from .linalg import Factorization
-from .metrics import gram_x
+from .metrics import PAPER_ORDER, gram_x
 from .pinned_solve import BorderedPins, unpinned_jacobian
 
 #: Relative tolerance of the gradient's Krylov solve (preconditioned residual norm).
@@ -83,9 +83,12 @@ class CoarseLevel:
         The fine constraint Jacobian.
     size : int
         Coarse vertices wanted in all; components keep at least 8 (or all they have).
+    order : float
+        The metric's order (the fine operator's).
     """
 
-    def __init__(self, X: np.ndarray, layout: Layout, metric: str, jac: Jacobian, size: int):
+    def __init__(self, X: np.ndarray, layout: Layout, metric: str, jac: Jacobian, size: int,
+                 order: float = PAPER_ORDER):
         self.project = TangentProjector(jac)
         m = max(1, int(round(layout.n / max(size, 1))))
         idx, sizes, a, b, f = [], [], [], [], []
@@ -113,7 +116,7 @@ class CoarseLevel:
         self.jc = jacobian(Xc, make_constraints(Xc, clay, lc))
         # double precision: a single-precision factorization of a nearly relaxed 7_2's coarse
         # polygon (1 131 vertices) made the preconditioner indefinite (rᵀz < 0)
-        self.fac = Factorization(gram_x(metric, Xc, clay), self.jc, np.float64)
+        self.fac = Factorization(gram_x(metric, Xc, clay, order=order), self.jc, np.float64)
 
     def prolong(self, Uc: np.ndarray) -> np.ndarray:
         """``P Uc``: (coarse vertices, 3) to (N, 3), linear along the curve."""
@@ -181,7 +184,7 @@ class HsSaddle:
         self.coarse = None
         # the coarse level projects with the constraints' TangentProjector, which has no pins
         if size and X is not None and size < op.layout.n and jac.con.pinned is None:
-            self.coarse = CoarseLevel(X, op.layout, op.metric, jac, size)
+            self.coarse = CoarseLevel(X, op.layout, op.metric, jac, size, op.order)
 
     def release(self) -> None:
         """Let go of the operator, the coarse level and all of the constraint preconditioner

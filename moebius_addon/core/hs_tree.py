@@ -3,18 +3,19 @@ metric for ``hs`` and ``hs_pure``; :mod:`.hs_solve` solves with it).
 
 The metric of docs/design.md ("Metrics"; the paper's "Discrete inner product") is
 
-    A = 2 Dᵀ(diag(W1) − W)D + 2 Mᵀ(diag(V1) − V)M + N b bᵀ / L⁴
+    A = 2 Dᵀ(diag(W1) − W)D + 2 Mᵀ(diag(V1) − V)M + N b bᵀ / L^(2s+1)
 
-with ``w_IJ = l_I l_J / |d|²`` and ``v_IJ = l_I l_J (1/|d|² − 1/ρ²) / |d|²`` over disjoint edge
+with ``w_IJ = l_I l_J / |d|^(2s−1)`` and ``v_IJ = w_IJ (1/|d|² − 1/ρ²)`` over disjoint edge
 pairs (``d = m_I − m_J``, ρ the arc length between the midpoints, 1/ρ² = 0 between
-components). Here ``W`` and ``V`` are replaced by ``W̃``, ``Ṽ``:
+components), ``s`` the metric's order (3/2, the paper's: ``|d|²`` and ``L⁴``; :mod:`.metrics`
+says why these powers). Here ``W`` and ``V`` are replaced by ``W̃``, ``Ṽ``:
 
 * **near** pairs of edges (pairs of leaves of the hierarchy that are not admissible, which
   always includes pairs close in space and pairs close along the curve) keep their exact
   weights, computed once per iterate and stored;
 * **far** pairs of clusters ``(A, B)`` take one weight per cluster pair from the clusters'
-  length-weighted centres ``c`` and arc-length centres ``s``: ``w = l_I l_J / |c_A − c_B|²``
-  and ``v = w (1/|c_A − c_B|² − 1/ρ(s_A, s_B)²) / |c_A − c_B|²`` (kept ≥ 0).
+  length-weighted centres ``c`` and arc-length centres ``σ``: ``w = l_I l_J / |c_A −
+  c_B|^(2s−1)`` and ``v = w (1/|c_A − c_B|² − 1/ρ(σ_A, σ_B)²)`` (kept ≥ 0).
 
 The clusters are arcs (contiguous edges of one component, :func:`arc_tree`), so that ρ is
 smooth over a cluster pair; a pair is admissible when both boxes are small against their gap,
@@ -37,7 +38,15 @@ import numpy as np
 from . import bvh
 from ._layout import Layout
 from .barnes_hut import _by_target
-from .metrics import _PURE_L2, _barycenter_weights, banded_parts_of_lengths
+from .metrics import (
+    _PURE_L2,
+    PAPER_ORDER,
+    banded_parts_of_lengths,
+    barycenter_beta,
+    check_order,
+    kernel_exponent,
+    length_power,
+)
 
 #: Admissibility of the metric's far field (its own, coarser than the energy's: the metric
 #: is any positive definite matrix close to hs, while the energy must be accurate).
@@ -240,10 +249,11 @@ def _split(left, right, bmin, bmax, nc, s0, s1, clen, theta2):
 
 @nb.njit(cache=True, parallel=True)
 def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart, rowoff,
-                  low, cross2, w, v, w1, v1, x1):
+                  low, expo, cross2, w, v, w1, v1, x1):
     """Exact weights of every near pair, stored per target edge as one row over the edges of
     its leaf's partner leaves (in partner order), their row sums, and the row sums of ``v``
-    over the folded pairs (other components, or ``ρ² ≥ cross2 · |d|²``)."""
+    over the folded pairs (other components, or ``ρ² ≥ cross2 · |d|²``). ``expo``:
+    :func:`.metrics.kernel_exponent` (None at order 3/2, pruned at compile time)."""
     for kk in nb.prange(leaves.shape[0]):
         a = leaves[np.int64(kk)]
         width = 0
@@ -268,8 +278,12 @@ def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart,
                         dx = mid[q, 0] - mid[r, 0]
                         dy = mid[q, 1] - mid[r, 1]
                         dz = mid[q, 2] - mid[r, 2]
-                        inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-                        wq = ln[q] * ln[r] * inv
+                        r2 = dx * dx + dy * dy + dz * dz
+                        inv = 1.0 / r2
+                        if expo is None:
+                            wq = ln[q] * ln[r] * inv
+                        else:
+                            wq = ln[q] * ln[r] * r2**-expo
                         if same:
                             fwd = abs(arc[r] - arc[q])
                             rho = min(fwd, clen[cq] - fwd)
@@ -290,10 +304,11 @@ def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart,
 
 
 @nb.njit(cache=True, parallel=True)
-def _far_weights(L, C, nc, s0, s1, clen, foff, fpart, low, cross2, fw, fv, rw, rv, rx):
-    """One weight pair per ordered far pair of clusters, and per target cluster the sums
-    ``Σ_B ω L_B`` (what its edges' row sums receive, times their own length), those of ``v``
-    over folded pairs (see :func:`_near_weights`) apart."""
+def _far_weights(L, C, nc, s0, s1, clen, foff, fpart, low, expo, cross2, fw, fv, rw, rv, rx):
+    """One weight pair per ordered far pair of clusters (per unit length of both: ``w`` and
+    ``v`` divided by ``l_I l_J``), and per target cluster the sums ``Σ_B ω L_B`` (what its
+    edges' row sums receive, times their own length), those of ``v`` over folded pairs (see
+    :func:`_near_weights`) apart. ``expo`` as there."""
     m = L.shape[0]
     for aa in nb.prange(m):
         a = np.int64(aa)
@@ -305,21 +320,26 @@ def _far_weights(L, C, nc, s0, s1, clen, foff, fpart, low, cross2, fw, fv, rw, r
             dx = C[a, 0] - C[b, 0]
             dy = C[a, 1] - C[b, 1]
             dz = C[a, 2] - C[b, 2]
-            inv = 1.0 / (dx * dx + dy * dy + dz * dz)
+            r2 = dx * dx + dy * dy + dz * dz
+            inv = 1.0 / r2
+            if expo is None:
+                ww = inv
+            else:
+                ww = r2**-expo
             if nc[a] == nc[b]:
                 ca = 0.5 * (s0[a] + s1[a])
                 cb = 0.5 * (s0[b] + s1[b])
                 fwd = abs(ca - cb)
                 rho = min(fwd, clen[nc[a]] - fwd)
-                vv = low * inv * max(0.0, inv - 1.0 / (rho * rho))
+                vv = low * ww * max(0.0, inv - 1.0 / (rho * rho))
                 if rho * rho * inv >= cross2:
                     sx += vv * L[b]
             else:
-                vv = low * inv * inv
+                vv = low * ww * inv
                 sx += vv * L[b]
-            fw[p] = inv
+            fw[p] = ww
             fv[p] = vv
-            sw += inv * L[b]
+            sw += ww * L[b]
             sv += vv * L[b]
         rw[a] = sw
         rv[a] = sv
@@ -459,17 +479,22 @@ class HsOperator:
     X : (N, 3) array
     layout : Layout
     metric : {"hs", "hs_pure"}
+    order : float in (1, 2)
+        The metric's order s (3/2: the paper's; :func:`.metrics.gram_matrix`).
     theta : float
         Admissibility of the far field (see the module's text).
     leaf_size : int
     """
 
     def __init__(self, X: np.ndarray, layout: Layout, metric: str = "hs",
-                 theta: float = THETA, leaf_size: int = LEAF_SIZE):
+                 order: float = PAPER_ORDER, theta: float = THETA,
+                 leaf_size: int = LEAF_SIZE):
         if metric not in ("hs", "hs_pure"):
             raise ValueError(f"{metric!r} is not computed by the tree's metric (hs, hs_pure)")
         self.layout = layout
         self.metric = metric
+        self.order = check_order(order)
+        expo = kernel_exponent(self.order)
         self.low = 1.0 if metric == "hs" else 0.0
         lay = layout
         tree = arc_tree(lay, leaf_size)
@@ -499,21 +524,24 @@ class HsOperator:
         rows = np.empty((3, lay.n))
         cross2 = FOLDED**2
         _near_weights(ln, mid, arc, clen, lay.starts, lay.comp, tree.lo, tree.hi, self.leaves,
-                      self.noff, self.npart, self.rowoff, self.low, cross2, self.w, self.v,
+                      self.noff, self.npart, self.rowoff, self.low, expo, cross2, self.w, self.v,
                       rows[0], rows[1], rows[2])
         self.fw = np.empty(self.fpart.shape[0])
         self.fv = np.empty(self.fpart.shape[0])
         rfar = np.empty((3, m))
-        _far_weights(L, C, nc, s0, s1, clen, self.foff, self.fpart, self.low, cross2, self.fw,
-                     self.fv, rfar[0], rfar[1], rfar[2])
+        _far_weights(L, C, nc, s0, s1, clen, self.foff, self.fpart, self.low, expo, cross2,
+                     self.fw, self.fv, rfar[0], rfar[1], rfar[2])
         rows = np.ascontiguousarray(rows.T)
         _push_to_edges(np.ascontiguousarray(rfar.T), ln, tree.lo, tree.hi, tree.left,
                        tree.right, rows)
         self.w1 = np.ascontiguousarray(rows[:, 0])
         self.v1 = np.ascontiguousarray(rows[:, 1])
         self.x1 = np.ascontiguousarray(rows[:, 2])  # v's row sums over folded pairs
-        # the barycenter term N b bᵀ / L⁴ as β βᵀ per component (metrics._add_barycenter_term)
-        self.beta = _barycenter_weights(ln, lay) * np.sqrt(lay.n) / self.total**2
+        # the barycenter term N b bᵀ / L^(2s+1) as β βᵀ per component (as in metrics.gram_x)
+        self.beta = barycenter_beta(ln, lay, self.total, self.order)
+        # hs_pure's small L² term, scaled like the metric (metrics._gram_hs_pure)
+        self._mass = (_PURE_L2 / self.total**length_power(self.order)
+                      if metric == "hs_pure" else 0.0)
 
     @property
     def nbytes(self) -> int:
@@ -531,9 +559,8 @@ class HsOperator:
         S = _cluster_sums(F, G, ln, tree.lo, tree.hi, tree.left, tree.right)
         acc = _far_product(S, self.foff, self.fpart, self.fw, self.fv)
         _push_to_edges(acc, ln, tree.lo, tree.hi, tree.left, tree.right, Y)
-        mass = _PURE_L2 / self.total**3 if self.metric == "hs_pure" else 0.0
         return _assemble(U, F, G, Y, self.w1, self.v1, ln, lay.prv, lay.comp, lay.starts,
-                         self.beta, mass)
+                         self.beta, self._mass)
 
     def diagonal(self) -> np.ndarray:
         """The diagonal of ``Ã`` (N,): ``2 Σ_{I ∋ p} W̃1_I / l_I² + ½ Σ_{I ∋ p} Ṽ1_I + β_p²``
@@ -542,7 +569,7 @@ class HsOperator:
         e = 2.0 * self.w1 / ln**2 + 0.5 * self.v1
         d = e + e[lay.prv] + self.beta**2
         if self.metric == "hs_pure":
-            d += _PURE_L2 / self.total**3 * (ln + ln[lay.prv]) / 3
+            d += self._mass * (ln + ln[lay.prv]) / 3
         return d
 
     def preconditioner_parts(self):

@@ -2,20 +2,29 @@
 
 Every metric is the ``N × N`` matrix ``A`` of one coordinate; the 3N × 3N Gram matrix is
 ``G = A ⊗ I₃``. With ``D`` the edge-difference operator ``(Du)_I = (u[i+1] − u[i]) / l_I``,
-``M`` the edge average ``(Mu)_I = (u[i] + u[i+1]) / 2`` and, over disjoint edge pairs,
+``M`` the edge average ``(Mu)_I = (u[i] + u[i+1]) / 2``, an order ``s`` in (1, 2) and, over
+disjoint edge pairs (``d = m_I − m_J``),
 
-    w_IJ = l_I l_J / |m_I − m_J|²
-    v_IJ = l_I l_J (1/|m_I − m_J|² − 1/ρ_IJ²) / |m_I − m_J|²
+    w_IJ = l_I l_J / |d|^(2s−1)                       (|d|² at s = 3/2)
+    v_IJ = l_I l_J (1/|d|² − 1/ρ_IJ²) / |d|^(2s−1)
 
-the geometric W^{3/2,2} matrix is ``A_hs = 2 Dᵀ(diag(W1) − W)D + 2 Mᵀ(diag(V1) − V)M``, the
-quadratic form ``Σ_{I,J} w_IJ |(Du)_I − (Du)_J|² + v_IJ |(Mu)_I − (Mu)_J|²``.
+the geometric W^{s,2} matrix is ``A_hs = 2 Dᵀ(diag(W1) − W)D + 2 Mᵀ(diag(V1) − V)M``, the
+quadratic form ``Σ_{I,J} w_IJ |(Du)_I − (Du)_J|² + v_IJ |(Mu)_I − (Mu)_J|²``: the Gagliardo
+seminorm of ``u′`` in W^{s−1,2} (kernel ``1/|x − y|^(1 + 2(s−1))``) plus its lower-order
+term, whose extra ``1/|d|²`` gives it the top part's dimension. The order is the energy's
+(:attr:`.energy_choice.EnergyChoice.metric_order`): 3/2, the paper's, for the Möbius energy,
+``(β − 1)/α`` for the tangent-point energy. At s = 3/2 the kernels run the arithmetic they
+always had (:func:`kernel_exponent`), so that order's matrices are bit for bit as before.
 
-Every matrix gets the barycenter term ``N b bᵀ / L⁴`` (``b_k = (l_{k−1} + l_k)/2`` per
-component, ``N`` the number of vertices of the whole polygon or link): the paper's
-``<∫u, ∫w>``, which makes ``A`` invertible and vanishes on the constraint tangent space; the
-factor ``N`` puts its eigenvalue beside the lowest shape modes' instead of far below them
-(better conditioning, the same tangent-space metric). Its factor N/L⁴ and the powers of ``L``
-on the lower-order metrics make every ``A`` scale as 1/c² under ``P → cP``, so steps and
+Every matrix gets the barycenter term ``N b bᵀ / L^(2s+1)`` (``L⁴`` at s = 3/2 and for the
+banded metrics; ``b_k = (l_{k−1} + l_k)/2`` per component, ``N`` the number of vertices of the
+whole polygon or link): the paper's ``<∫u, ∫w>``, which makes ``A`` invertible and vanishes on
+the constraint tangent space; the factor ``N`` puts its eigenvalue beside the lowest shape
+modes' instead of far below them (better conditioning, the same tangent-space metric). Under
+``P → λP`` the hs parts scale as ``λ^(3−2s)`` (w) times ``λ^(−2)`` (D twice, or v's
+``1/|d|²``), ``b bᵀ`` as ``λ²``; so the factor ``N/L^(2s+1)``, the L² terms of ``hs_pure``
+and open curves over ``L^(2s)``, and the powers of ``L`` on the lower-order metrics make every
+``A`` scale as ``λ^(1−2s)`` (1/λ² for the lower-order metrics and s = 3/2), and steps and
 tolerances do not depend on the curve's size.
 """
 
@@ -33,6 +42,35 @@ from .open_metrics import open_hs
 _PURE_L2 = 1e-6
 # Fixed work split (independent of the thread count) so results are reproducible everywhere.
 _CHUNKS = 16
+#: The order of the paper's metric, W^{3/2,2} (the Möbius energy's; the default).
+PAPER_ORDER = 1.5
+#: The metrics with an order s (the others ignore it).
+ORDERED_METRICS = ("hs_pure", "hs")
+
+
+def check_order(order) -> float:
+    """``order`` as a float in (1, 2), the range of ``(β − 1)/α`` over the tangent-point
+    exponents (``α + 1 < β`` gives s > 1, ``β < 2α + 1`` gives s < 2); else ValueError."""
+    try:
+        s = float(order)
+    except (TypeError, ValueError):
+        raise ValueError(f"the metric's order must be a number in (1, 2), got {order!r}") from None
+    if not 1.0 < s < 2.0:
+        raise ValueError(f"the metric's order must be a number in (1, 2), got {order!r}")
+    return s
+
+
+def kernel_exponent(order: float):
+    """What the weight kernels take as ``expo``: None at order 3/2 (``w = l l / |d|²`` by the
+    arithmetic that order always had, bit for bit), else the power ``s − 1/2`` of ``|d|²``."""
+    return None if order == PAPER_ORDER else order - 0.5
+
+
+def length_power(order: float) -> float:
+    """The power ``2s`` of the total length ``L`` that an L²-sized term (``∫u²``, of length
+    dimension 1) is divided by so that it scales like the order-``s`` metric, as ``λ^(1−2s)``
+    under ``P → λP`` (3 at order 3/2)."""
+    return 2.0 * order
 
 
 @nb.njit(cache=True, inline="always")
@@ -46,9 +84,11 @@ def _other_ranges(i, start, end):
 
 
 @nb.njit(cache=True, fastmath={"reassoc", "contract", "nsz", "arcp"})
-def _edge_row(i, mx, my, mz, ln, arc, clen, starts, comp, low, kw, kv):
+def _edge_row(i, mx, my, mz, ln, arc, clen, starts, comp, low, expo, kw, kv):
     """Weights ``w_iJ`` and ``v_iJ`` of edge ``i`` against every edge J (0 where not disjoint)
-    into ``kw``, ``kv``; returns their row sums."""
+    into ``kw``, ``kv``; returns their row sums. ``expo``: None at order 3/2 (``w = l l /
+    |d|²``, the arithmetic of that order kept as it was), else ``s − 1/2`` (``w = l l /
+    (|d|²)^expo``); the branch on it is pruned at compile time."""
     n = ln.shape[0]
     c = comp[i]
     px, py, pz, li, si, lc = mx[i], my[i], mz[i], ln[i], arc[i], clen[c]
@@ -68,8 +108,12 @@ def _edge_row(i, mx, my, mz, ln, arc, clen, starts, comp, low, kw, kv):
             dx = px - mx[j]
             dy = py - my[j]
             dz = pz - mz[j]
-            inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-            w = li * ln[j] * inv
+            r2 = dx * dx + dy * dy + dz * dz
+            inv = 1.0 / r2
+            if expo is None:
+                w = li * ln[j] * inv
+            else:
+                w = li * ln[j] * r2**-expo
             fwd = abs(arc[j] - si)
             rho = min(fwd, lc - fwd)
             v = low * w * (inv - 1.0 / (rho * rho))
@@ -81,8 +125,12 @@ def _edge_row(i, mx, my, mz, ln, arc, clen, starts, comp, low, kw, kv):
         dx = px - mx[j]
         dy = py - my[j]
         dz = pz - mz[j]
-        inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-        w = li * ln[j] * inv
+        r2 = dx * dx + dy * dy + dz * dz
+        inv = 1.0 / r2
+        if expo is None:
+            w = li * ln[j] * inv
+        else:
+            w = li * ln[j] * r2**-expo
         kw[j] = w
         kv[j] = low * w * inv  # 1/ρ² = 0 between components
         sw += w
@@ -91,8 +139,12 @@ def _edge_row(i, mx, my, mz, ln, arc, clen, starts, comp, low, kw, kv):
         dx = px - mx[j]
         dy = py - my[j]
         dz = pz - mz[j]
-        inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-        w = li * ln[j] * inv
+        r2 = dx * dx + dy * dy + dz * dz
+        inv = 1.0 / r2
+        if expo is None:
+            w = li * ln[j] * inv
+        else:
+            w = li * ln[j] * r2**-expo
         kw[j] = w
         kv[j] = low * w * inv
         sw += w
@@ -101,7 +153,7 @@ def _edge_row(i, mx, my, mz, ln, arc, clen, starts, comp, low, kw, kv):
 
 
 @nb.njit(cache=True, parallel=True, fastmath={"reassoc", "contract", "nsz", "arcp"})
-def _hs_rows(mx, my, mz, ln, arc, clen, starts, comp, nxt, prv, low, nchunks, A):
+def _hs_rows(mx, my, mz, ln, arc, clen, starts, comp, nxt, prv, low, expo, nchunks, A):
     """Rows of ``2 Dᵀ(diag(W1) − W)D + 2 Mᵀ(diag(V1) − V)M`` (the V part times ``low``).
 
     Vertex ``p`` lies on the edges ``p`` (coefficient −1/l_p in D) and ``prv[p]`` (+1/l in D);
@@ -131,8 +183,8 @@ def _hs_rows(mx, my, mz, ln, arc, clen, starts, comp, nxt, prv, low, nchunks, A)
                 qv, kv = kv, qv
                 tw, tv = sw, sv
             else:
-                tw, tv = _edge_row(q, mx, my, mz, ln, arc, clen, starts, comp, low, qw, qv)
-            sw, sv = _edge_row(p, mx, my, mz, ln, arc, clen, starts, comp, low, kw, kv)
+                tw, tv = _edge_row(q, mx, my, mz, ln, arc, clen, starts, comp, low, expo, qw, qv)
+            sw, sv = _edge_row(p, mx, my, mz, ln, arc, clen, starts, comp, low, expo, kw, kv)
             have = p
             ap = -1.0 / ln[p]
             aq = 1.0 / ln[q]
@@ -165,11 +217,19 @@ def _barycenter_weights(ln: np.ndarray, layout: Layout) -> np.ndarray:
     return 0.5 * (ln[layout.prv] + ln)
 
 
-def _add_barycenter_term(A: np.ndarray, ln: np.ndarray, layout: Layout, total: float) -> None:
-    # b bᵀ · N / L⁴: the factor N puts the constant mode's eigenvalue (|b|² ~ L²/N) next to the
-    # lowest shape modes (~1/L²) instead of far below them, which keeps A well conditioned.
-    b = _barycenter_weights(ln, layout) * np.sqrt(len(ln)) / total**2
-    _add_outer_blocks(A, b, layout.starts)
+def barycenter_beta(ln: np.ndarray, layout: Layout, total: float,
+                    order: float = PAPER_ORDER) -> np.ndarray:
+    """β with the barycenter term ``N b bᵀ / L^(2s+1)`` = ``β βᵀ`` per component (``L⁴`` at
+    order 3/2 and for the banded metrics): ``b bᵀ`` has length dimension 2, so ``L^(2s+1)``
+    makes it scale as the order-``s`` metric, ``λ^(1−2s)``. The factor N puts the constant
+    mode's eigenvalue (``N |b|² / L^(2s+1)`` ~ ``L^(1−2s)``) next to the lowest shape modes'
+    instead of far below them, which keeps A well conditioned."""
+    return _barycenter_weights(ln, layout) * np.sqrt(len(ln)) / total**(order + 0.5)
+
+
+def _add_barycenter_term(A: np.ndarray, ln: np.ndarray, layout: Layout, total: float,
+                         order: float) -> None:
+    _add_outer_blocks(A, barycenter_beta(ln, layout, total, order), layout.starts)
 
 
 @nb.njit(cache=True, parallel=True)
@@ -251,13 +311,16 @@ def _bending(ln, layout):
     return _sparse_to_dense(len(ln), *_bending_triplets(ln, layout))
 
 
-def _hs_family(X, layout, ln, total, out, low):
-    """``A_hs`` with its V part times ``low`` (1: ``hs``, 0: the top-order part alone)."""
+def _hs_family(X, layout, ln, total, out, low, order):
+    """``A_hs`` of ``order`` with its V part times ``low`` (1: ``hs``, 0: the top-order part
+    alone)."""
     if layout.closed is not None:
         # Open components: an affine field along a straight stretch is in the kernel of both
-        # seminorms (v_IJ = 0 where the chord equals the arc), so the L² term of l2 is added
-        # to keep A definite on every polyline; closed curves are never straight.
-        return open_hs(X, layout, ln, low) + _mass(ln, layout) / total**3
+        # seminorms (v_IJ = 0 where the chord equals the arc), so the L² term of l2 (at the
+        # metric's scaling) is added to keep A definite on every polyline; closed curves are
+        # never straight.
+        return (open_hs(X, layout, ln, low, kernel_exponent(order))
+                + _mass(ln, layout) / total**length_power(order))
     M = 0.5 * (X[layout.nxt] + X)
     arc = np.empty_like(ln)
     clen = np.empty(layout.k)
@@ -278,36 +341,38 @@ def _hs_family(X, layout, ln, total, out, low):
         layout.nxt,
         layout.prv,
         low,
+        kernel_exponent(order),
         _CHUNKS,
         out if out is not None and out.shape == (len(ln),) * 2 else np.empty((len(ln),) * 2),
     )
 
 
-def _gram_l2(X, layout, ln, total, out):
+def _gram_l2(X, layout, ln, total, out, order):
     return _mass(ln, layout) / total**3
 
 
-def _gram_h1(X, layout, ln, total, out):
+def _gram_h1(X, layout, ln, total, out, order):
     return (_stiffness(ln, layout) + _mass(ln, layout) / total**2) / total
 
 
-def _gram_h2(X, layout, ln, total, out):
-    return total * _bending(ln, layout) + _gram_h1(X, layout, ln, total, out)
+def _gram_h2(X, layout, ln, total, out, order):
+    return total * _bending(ln, layout) + _gram_h1(X, layout, ln, total, out, order)
 
 
-def _gram_hs_pure(X, layout, ln, total, out):
-    A = _hs_family(X, layout, ln, total, out, 0.0)
-    A += _PURE_L2 * _mass(ln, layout) / total**3
+def _gram_hs_pure(X, layout, ln, total, out, order):
+    A = _hs_family(X, layout, ln, total, out, 0.0, order)
+    A += _PURE_L2 * _mass(ln, layout) / total**length_power(order)
     return A
 
 
-def _gram_hs(X, layout, ln, total, out):
-    return _hs_family(X, layout, ln, total, out, 1.0)
+def _gram_hs(X, layout, ln, total, out, order):
+    return _hs_family(X, layout, ln, total, out, 1.0, order)
 
 
 # Builder of every metric's matrix without the barycenter term, from the vertices ``X``, their
-# edge lengths ``ln`` and total length; ``out`` is memory a builder may overwrite. The order is
-# the one of METRICS (weakest first).
+# edge lengths ``ln``, total length and ``order`` (hs, hs_pure; the others ignore it); ``out``
+# is memory a builder may overwrite. The order of the table is the one of METRICS (weakest
+# first).
 _BUILDERS = {
     "l2": _gram_l2,
     "h1": _gram_h1,
@@ -318,53 +383,65 @@ _BUILDERS = {
 METRICS = tuple(_BUILDERS)
 
 
-def gram_x(metric: str, X: np.ndarray, layout: Layout, out: np.ndarray | None = None) -> np.ndarray:
+def gram_x(metric: str, X: np.ndarray, layout: Layout, out: np.ndarray | None = None,
+           order: float = PAPER_ORDER) -> np.ndarray:
     """Gram matrix ``A`` of the stacked vertex array (private fast path used by the engine).
 
     ``out``: an (N, N) float64 array to overwrite with ``hs``/``hs_pure`` (the flow passes the
-    previous iterate's: a fresh 72 MB array at 3000 vertices costs 27 ms of page faults)."""
+    previous iterate's: a fresh 72 MB array at 3000 vertices costs 27 ms of page faults).
+    ``order``: the order s in (1, 2) of ``hs`` and ``hs_pure`` (:func:`gram_matrix`)."""
     if metric not in _BUILDERS:
         raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
+    order = check_order(order) if metric in ORDERED_METRICS else PAPER_ORDER
     E, ln = _lengths(X, layout)
     total = float(ln.sum())
-    A = _BUILDERS[metric](X, layout, ln, total, out)
-    _add_barycenter_term(A, ln, layout, total)
+    A = _BUILDERS[metric](X, layout, ln, total, out, order)
+    _add_barycenter_term(A, ln, layout, total, order)
     return A
 
 
-def gram_matrix(metric: str, P, closed=True) -> np.ndarray:
+def gram_matrix(metric: str, P, closed=True, order: float = PAPER_ORDER) -> np.ndarray:
     """Gram matrix of one coordinate for the given metric.
 
     Parameters
     ----------
     metric : {"l2", "h1", "h2", "hs_pure", "hs"}
-        ``hs`` is the paper's geometric W^{3/2,2} metric (the default of the flow), ``hs_pure``
+        ``hs`` is the paper's geometric W^{s,2} metric (the default of the flow), ``hs_pure``
         its top-order part alone; ``l2``, ``h1``, ``h2`` are the classical metrics for comparison.
     P : (N, 3) array or list of arrays
         Closed polygon or link.
     closed : bool or sequence of bool
         False for an open polyline (one flag per component of a link, or one for all):
         docs/api.md, "Open curves".
+    order : float in (1, 2)
+        The order s of ``hs`` and ``hs_pure``: 3/2 (the paper's, the Möbius energy's) or the
+        tangent-point energy's ``(β − 1)/α``; the other metrics ignore it.
 
     Returns
     -------
     (N, N) array
-        Symmetric positive definite ``A`` with ``G = A ⊗ I₃``; entries scale as 1/length².
+        Symmetric positive definite ``A`` with ``G = A ⊗ I₃``; entries scale as
+        ``length^(1−2s)`` (1/length² for all but hs and hs_pure of order s ≠ 3/2).
     """
     if metric not in METRICS:
         raise ValueError(f"unknown metric {metric!r}; choose one of {', '.join(METRICS)}")
+    order = check_order(order) if metric in ORDERED_METRICS else PAPER_ORDER
     X, layout, k = as_checked_layout(P, closed)
     n = layout.n
     # the matrix itself, and room for its assembly (measured 7.9 bytes per entry at 3 000)
     check_memory(16.0 * n * n, f"the {n} x {n} Gram matrix",
                  "resample the curve to fewer vertices (core.resample(P, n))")
-    A = gram_x(metric, X, layout)
+    A = gram_x(metric, X, layout, order=order)
     if not k:
         return A
-    out = np.ldexp(A, -2 * k)  # A(2^k X) = 4^-k A(X)
+    if order == PAPER_ORDER:
+        out = np.ldexp(A, -2 * k)  # A(2^k X) = 4^-k A(X)
+    else:
+        out = A * 2.0 ** (k * (1.0 - 2.0 * order))  # A(2^k X) = 2^(k(1−2s)) A(X)
     if not np.isfinite(out).all() or np.any((out == 0) & (A != 0)):
         raise ValueError("the Gram matrix of a curve this size is outside the float64 range "
-                         "(its entries scale as 1/length²); scale the curve towards size 1")
+                         "(its entries scale as a power of the length); scale the curve "
+                         "towards size 1")
     return out
 
 
@@ -388,5 +465,4 @@ def banded_parts_of_lengths(metric: str, ln: np.ndarray, layout: Layout):
     rows = np.concatenate([np.concatenate(r) for (r, _, _), _ in parts]).astype(np.int64)
     cols = np.concatenate([np.concatenate(c) for (_, c, _), _ in parts]).astype(np.int64)
     vals = np.concatenate([np.concatenate(v) * f for (_, _, v), f in parts])
-    beta = _barycenter_weights(ln, layout) * np.sqrt(len(ln)) / total**2
-    return rows, cols, vals, beta
+    return rows, cols, vals, barycenter_beta(ln, layout, total)

@@ -5,8 +5,9 @@ The same quadratic form as for closed curves, ``Σ_{I,J} w_IJ |(Du)_I − (Du)_J
 (Mu)_J|²`` over disjoint pairs, with the weights of docs/design.md; on an open component the
 pairs are those of the polyline (``|I − J| ≥ 2``, its dummy edge left out, see
 :mod:`._layout`) and ``ρ_IJ`` is the arc length between the midpoints along it (no way round
-the ends). Nothing else marks the ends: the operators ``D`` and ``M`` are those of the
-polyline's edges. The matrix is built from the weights as
+the ends). The order s of the metric enters as in :mod:`.metrics`: ``w_IJ = l_I l_J /
+|d|^(2s−1)``, ``v_IJ = w_IJ (1/|d|² − 1/ρ²)``. Nothing else marks the ends: the operators
+``D`` and ``M`` are those of the polyline's edges. The matrix is built from the weights as
 ``2 Dᵀ(diag(W1) − W)D + 2 Mᵀ(diag(V1) − V)M`` with sparse ``D`` and ``M`` in O(N²).
 """
 
@@ -19,8 +20,9 @@ from ._layout import Layout
 
 
 @nb.njit(cache=True, parallel=True, fastmath={"reassoc", "contract", "nsz", "arcp"})
-def _weights(mx, my, mz, ln, arc, clen, starts, comp, closed, real, low):
-    """``W`` and ``V`` (times ``low``) over every pair of edges, 0 where not disjoint."""
+def _weights(mx, my, mz, ln, arc, clen, starts, comp, closed, real, low, expo):
+    """``W`` and ``V`` (times ``low``) over every pair of edges, 0 where not disjoint;
+    ``expo`` as in :func:`.metrics.kernel_exponent` (None: order 3/2)."""
     n = ln.shape[0]
     W = np.zeros((n, n))
     V = np.zeros((n, n))
@@ -43,8 +45,12 @@ def _weights(mx, my, mz, ln, arc, clen, starts, comp, closed, real, low):
             dx = mx[i] - mx[j]
             dy = my[i] - my[j]
             dz = mz[i] - mz[j]
-            inv = 1.0 / (dx * dx + dy * dy + dz * dz)
-            w = ln[i] * ln[j] * inv
+            r2 = dx * dx + dy * dy + dz * dz
+            inv = 1.0 / r2
+            if expo is None:
+                w = ln[i] * ln[j] * inv
+            else:
+                w = ln[i] * ln[j] * r2**-expo
             W[i, j] = w
             if same:
                 rho = abs(arc[j] - arc[i])
@@ -69,9 +75,11 @@ def _sandwich(K: np.ndarray, a: np.ndarray, b: np.ndarray, nxt: np.ndarray,
     return Z
 
 
-def open_hs(X: np.ndarray, layout: Layout, ln: np.ndarray, low: float) -> np.ndarray:
+def open_hs(X: np.ndarray, layout: Layout, ln: np.ndarray, low: float,
+            expo: float | None = None) -> np.ndarray:
     """``2 Dᵀ(diag(W1) − W)D + 2 Mᵀ(diag(V1) − V)M`` (the V part times ``low``) of a layout
-    with per-component ``closed`` flags, without the barycenter term."""
+    with per-component ``closed`` flags, without the barycenter term; ``expo``: the weights'
+    power of ``|d|²``, ``s − 1/2`` (None: order 3/2, :func:`.metrics.kernel_exponent`)."""
     real = layout.real
     closed = layout.closed if layout.closed is not None else np.ones(layout.k, bool)
     M = 0.5 * (X[layout.nxt] + X)
@@ -84,7 +92,7 @@ def open_hs(X: np.ndarray, layout: Layout, ln: np.ndarray, low: float) -> np.nda
         clen[c] = cum[-1]
     W, V = _weights(np.ascontiguousarray(M[:, 0]), np.ascontiguousarray(M[:, 1]),
                     np.ascontiguousarray(M[:, 2]), ln, arc, clen, layout.starts, layout.comp,
-                    closed, real, float(low))
+                    closed, real, float(low), expo)
     inv = np.zeros_like(ln)
     inv[real] = 1.0 / ln[real]
     halves = 0.5 * real
