@@ -34,7 +34,7 @@ import numpy as np
 ENERGY_PROP = "moebius_energy"
 ENERGY_PATH = f'["{ENERGY_PROP}"]'
 #: Custom property naming the energy keyed in :data:`ENERGY_PROP` (``core.EnergyChoice.label``:
-#: "moebius" or "tangent_point(2, 4)"); also the property's tooltip.
+#: "moebius" or "tangent_point(2, 4.5)"); also the property's tooltip.
 ENERGY_NAME_PROP = "moebius_energy_name"
 #: Curves of at most this many points are keyed per point, larger ones as shape keys (every
 #: size the add-on took before shape keys keeps its per-point keys).

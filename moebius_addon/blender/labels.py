@@ -25,15 +25,15 @@ ENERGIES = (
     ("moebius", "Möbius",
      "The paper's Möbius energy: scale-invariant, keeps tight clasps where strands meet"),
     ("tangent_point", "Tangent-Point",
-     "Tangent-point energy with exponents α, β (Advanced; default 2, 4 as in Repulsive "
-     "Curves): spreads the strands evenly, opens tight clasps"),
+     "Tangent-point energy with exponents α, β (Advanced; default 2, 4.5): spreads the "
+     "strands evenly, opens tight clasps"),
 )
 assert tuple(key for key, _, _ in ENERGIES) == core.ENERGY_NAMES
 
 
 def energy_label(name: str) -> str:
     """The *Last Run* box's row name for the energy ``name`` (``EnergyChoice.label``):
-    "Energy" for Möbius, "TP (2, 4)" for the tangent-point energy with its exponents."""
+    "Energy" for Möbius, "TP (2, 4.5)" for the tangent-point energy with its exponents."""
     return "Energy" if name == "moebius" else "TP" + name[len("tangent_point"):]
 
 

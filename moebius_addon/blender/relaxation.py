@@ -280,7 +280,7 @@ class ObjectRelaxation:
                                        options.get("beta"))
         except ValueError as err:
             raise ValueError(f"'{obj.name}': {err}") from None
-        #: which energy the flow minimizes and keys ("moebius", "tangent_point(2, 4)")
+        #: which energy the flow minimizes and keys ("moebius", "tangent_point(2, 4.5)")
         self.energy_label = choice.label
         polygons = geometry.curve_polygons(obj, allow_open=True)
         closed = geometry.curve_closed(obj)

@@ -8,7 +8,7 @@ themselves; the kernels behind it live in :mod:`.energies`.
 
 * ``"moebius"``: the discrete Möbius energy (docs/design.md), scale-invariant, the paper's;
 * ``"tangent_point"``: the tangent-point energy with exponents (α, β) (docs/design.md,
-  "Tangent-point energy"), default (2, 4): ``E(λP) = λ^(2+α−β) E(P)``, scale-invariant only
+  "Tangent-point energy"), default (2, 4.5): ``E(λP) = λ^(2+α−β) E(P)``, scale-invariant only
   for β = α + 2. A run works at total length 1 (``solvers.base.Run``), so the energies of
   its history are those of the curve scaled to total length 1 (the same as the user's
   curve's for the default exponents).
@@ -62,7 +62,7 @@ class EnergyChoice:
 
     @property
     def label(self) -> str:
-        """``"moebius"`` or ``"tangent_point(2, 4)"`` (the exponents as given, shortest
+        """``"moebius"`` or ``"tangent_point(2, 4.5)"`` (the exponents as given, shortest
         form): what results and keyed properties call the energy."""
         if self.name == "moebius":
             return "moebius"

@@ -20,6 +20,8 @@ import numpy as np
 from ._dense import CHUNKS, FASTMATH, edge_data
 from ._layout import Layout
 from .energies.tangent_point import (
+    DEFAULT_ALPHA,
+    DEFAULT_BETA,
     KIND_2,
     KIND_2_4,
     KIND_GENERAL,
@@ -120,13 +122,14 @@ def _parts(X: np.ndarray, layout: Layout, alpha: float, beta: float, grad: bool)
     return float(np.sum(rows)), buf, ed
 
 
-def tp_energy_x(X: np.ndarray, layout: Layout, alpha: float = 2.0, beta: float = 4.0) -> float:
+def tp_energy_x(X: np.ndarray, layout: Layout, alpha: float = DEFAULT_ALPHA,
+                beta: float = DEFAULT_BETA) -> float:
     """Tangent-point energy of the stacked vertex array (closed, link or open components)."""
     return _parts(X, layout, alpha, beta, False)[0]
 
 
-def tp_energy_gradient_x(X: np.ndarray, layout: Layout, alpha: float = 2.0,
-                         beta: float = 4.0) -> tuple[float, np.ndarray]:
+def tp_energy_gradient_x(X: np.ndarray, layout: Layout, alpha: float = DEFAULT_ALPHA,
+                         beta: float = DEFAULT_BETA) -> tuple[float, np.ndarray]:
     """Tangent-point energy and its exact gradient ``(N, 3)`` of the stacked vertex array."""
     energy, buf, ed = _parts(X, layout, alpha, beta, True)
     part = buf.sum(axis=0)  # (7, N)

@@ -37,6 +37,8 @@ from ._layout import Layout
 from ._near_field import _to_vertices
 from .barnes_hut import Frame, _edge_arrays, check_theta
 from .energies.tangent_point import (
+    DEFAULT_ALPHA,
+    DEFAULT_BETA,
     KIND_2,
     KIND_2_4,
     KIND_GENERAL,
@@ -226,7 +228,8 @@ class TangentPointFrame(Frame):
         Edges per leaf at most.
     """
 
-    def __init__(self, X: np.ndarray, layout: Layout, alpha: float = 2.0, beta: float = 4.0,
+    def __init__(self, X: np.ndarray, layout: Layout, alpha: float = DEFAULT_ALPHA,
+                 beta: float = DEFAULT_BETA,
                  theta: float = THETA, leaf_size: int = bvh.LEAF_SIZE):
         self.alpha, self.beta = check_exponents(alpha, beta)
         self.kind = kind_of(self.alpha, self.beta)
@@ -260,13 +263,14 @@ class TangentPointFrame(Frame):
         return energy, _to_vertices(rows, lay.prv, self._at)
 
 
-def tp_tree_energy(X: np.ndarray, layout: Layout, alpha: float = 2.0, beta: float = 4.0,
+def tp_tree_energy(X: np.ndarray, layout: Layout, alpha: float = DEFAULT_ALPHA,
+                   beta: float = DEFAULT_BETA,
                    theta: float = THETA) -> float:
     """Barnes–Hut tangent-point energy of the stacked vertex array, split built at ``X``."""
     return TangentPointFrame(X, layout, alpha, beta, theta).energy(X)
 
 
-def tp_tree_energy_gradient(X: np.ndarray, layout: Layout, alpha: float = 2.0,
-                            beta: float = 4.0, theta: float = THETA):
+def tp_tree_energy_gradient(X: np.ndarray, layout: Layout, alpha: float = DEFAULT_ALPHA,
+                            beta: float = DEFAULT_BETA, theta: float = THETA):
     """Barnes–Hut tangent-point energy and its exact gradient, split built at ``X``."""
     return TangentPointFrame(X, layout, alpha, beta, theta).energy_gradient(X)

@@ -18,8 +18,8 @@ def test_tangent_point_flow_is_keyed_with_its_name(scene, mb, core, knot):
     s = scene.moebius
     s.energy, s.max_iterations, s.tolerance = "tangent_point", 4, 0.0
     assert bpy.ops.moebius.relax() == {"FINISHED"}
-    assert knot[mb.ENERGY_NAME_PROP] == "tangent_point(2, 4)"
-    assert s.last_energy_name == "tangent_point(2, 4)"  # the Last Run box's "TP (2, 4)" row
+    assert knot[mb.ENERGY_NAME_PROP] == "tangent_point(2, 4.5)"  # the default exponents
+    assert s.last_energy_name == "tangent_point(2, 4.5)"  # the Last Run box's "TP (2, 4.5)"
     assert "Tangent-point" in knot.id_properties_ui(mb.ENERGY_PROP).as_dict()["description"]
     frames = mb.keyed_frames(knot)
     assert frames == [1, 2, 3, 4, 5]
@@ -27,9 +27,11 @@ def test_tangent_point_flow_is_keyed_with_its_name(scene, mb, core, knot):
     for f in (1, 5):
         scene.frame_set(f)
         keyed.append(knot[mb.ENERGY_PROP])
-        # (2, 4) is scale-invariant: the keyed value is the energy of the frame's curve
-        assert keyed[-1] == pytest.approx(
-            core.energy(points_at(knot, f), energy="tangent_point"), rel=1e-6)
+        # (2, 4.5) scales as λ^-0.5: the keyed value is the energy of the frame's curve scaled
+        # to total length 1
+        P = points_at(knot, f)
+        P = P / np.linalg.norm(np.roll(P, -1, axis=0) - P, axis=1).sum()
+        assert keyed[-1] == pytest.approx(core.energy(P, energy="tangent_point"), rel=1e-6)
     assert keyed[1] < keyed[0]
     # the same flow as the core run with the same options
     ref = core.relax(points_at(knot, 1), max_iter=4, tol=0.0, energy="tangent_point",
@@ -43,7 +45,7 @@ def test_continue_with_another_energy_is_refused(scene, mb, knot):
     assert bpy.ops.moebius.relax() == {"FINISHED"}
     s.energy = "moebius"
     before = scene_state()
-    with pytest.raises(RuntimeError, match=r"tangent_point\(2, 4\) energy.*Clear Flow"):
+    with pytest.raises(RuntimeError, match=r"tangent_point\(2, 4.5\) energy.*Clear Flow"):
         bpy.ops.moebius.relax(append=True)
     assert scene_state() == before
 

@@ -239,7 +239,10 @@ class Run:
         self.metric = metric
         ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
         shift = X.mean(axis=0)
-        scale = float(ln.sum())
+        # total length 1; an energy that is not scale-invariant reports its values there, so
+        # for it an open curve's closing chord (the dummy edge of ._layout) is left out
+        scale = float((ln[layout.real] if layout.has_open and self.energy_choice.scaling
+                       else ln).sum())
         self.X = (X - shift) / scale
         ln = ln / scale
         self._check_reach(ln, layout)

@@ -123,7 +123,7 @@ class Relaxation(Run):
         (docs/api.md, "Open curves").
     energy, alpha, beta
         The energy minimized: ``"moebius"`` (default) or ``"tangent_point"`` with exponents
-        ``alpha``, ``beta`` (default 2, 4; :mod:`..energy_choice`). The energies of the history
+        ``alpha``, ``beta`` (default 2, 4.5; :mod:`..energy_choice`). The energies of the history
         are those of the curve scaled to total length 1 (the same as the caller's curve's when
         the energy is scale-invariant: Möbius, and tangent-point with β = α + 2).
     """
