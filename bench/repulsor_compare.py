@@ -12,7 +12,8 @@ freedman_unknot_1184.obj) resampled with ``core.resample(P, n)``. Per size and t
 one round runs four processes in turn, k rounds: Repulsor E+g, our E+g, Repulsor iteration, our
 iteration; each process times one measurement with its own clock (Repulsor: std::chrono::
 steady_clock; ours: time.perf_counter, after a warm-up on a small curve so that no numba compile
-is timed) and reports its peak resident memory (getrusage ru_maxrss). Both sides run with the
+is timed) and reports its peak resident memory (VmHWM of /proc/self/status: getrusage's
+ru_maxrss would carry the Python parent's peak across the exec). Both sides run with the
 same thread count T: Repulsor's ``thread_count`` and ``OPENBLAS_NUM_THREADS=T``; ours
 ``NUMBA_NUM_THREADS=T`` and ``OPENBLAS_NUM_THREADS=T``.
 
@@ -39,7 +40,9 @@ Repulsor is never a dependency of the add-on and nothing of it is in this reposi
 binary (``--driver``, default /work/repulsor-build/driver/driver) is a small C++ program that
 calls Repulsor's API, built outside the repository against Repulsor 5db79ff19cd8bbd17dafdd256017
 aa690d70b392 (submodules Tensors 6de11784d4d54403091410d9b622281c28e5f211, Tools dfa339a6d599fb
-166d543329a6b718a328a0d384); docs/benchmarks.md, "Tangent-point energy against Repulsor", says
+166d543329a6b718a328a0d384, with upstream's later fix of ``Tools::Accumulate``, Tools 0525a91,
+applied: without it the block cluster tree reads uninitialised memory and the energy comes out
+NaN in most runs); docs/benchmarks.md, "Tangent-point energy against Repulsor", says
 with what it was compiled and what was measured. Without the binary, only our side runs.
 Results also go to ``out/repulsor_compare.json``.
 """
@@ -74,6 +77,16 @@ def _core(core_from: str | None):
         sys.path.insert(0, core_from)
     from moebius_addon import core
     return core
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process image: VmHWM. getrusage's ru_maxrss is kept across
+    execve on Linux, so a process started from a large parent reports the parent's peak."""
+    try:
+        with open("/proc/self/status") as f:
+            return next(float(line.split()[1]) / 1024 for line in f if line.startswith("VmHWM:"))
+    except (OSError, StopIteration):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def _tp_available(core) -> bool:
@@ -111,7 +124,7 @@ def worker(args) -> None:
     _ours_relax(core, small, theta)
     if args.worker == "error":
         _ours_eg(core, small, "exact", theta)
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    before = peak_rss_mb()
     head = f"ours {args.worker} edges={n} threads={args.threads}"
     if args.worker == "eg":
         t0 = time.perf_counter()
@@ -137,7 +150,7 @@ def worker(args) -> None:
               f"energy_rel_error={abs(E1 - E0) / abs(E0):.3e} "
               f"diff_rel_error={np.linalg.norm(G1 - G0) / np.linalg.norm(G0):.3e} "
               f"tree_seconds={s:.6f}", flush=True)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    peak = peak_rss_mb()
     print(f"ours memory mode={args.worker} edges={n} threads={args.threads} peak_rss_mb={peak:.1f} "
           f"after_warm_up_mb={before:.1f}", flush=True)
 
@@ -191,6 +204,7 @@ def run(cmd: list[str], env: dict) -> list[dict]:
         row = {"side": words[0], "mode": words[1]}
         for w in words[2:]:
             k, _, v = w.partition("=")
+            k = "of" if k == "mode" else k  # a memory line names the mode it measured
             try:
                 row[k] = float(v) if any(ch in v for ch in ".e") or not v.isdigit() else int(v)
             except ValueError:
@@ -216,7 +230,7 @@ def summary(rows: list[dict], side: str, mode: str, n: int, threads: int, key="s
             and r["edges"] == n and r["threads"] == threads]
     mem = [r["peak_rss_mb"] for r in rows if r["side"] == side and r["mode"] == "memory"
            and r.get("edges") == n and r.get("threads") == threads
-           and r.get("mode_of") == mode]
+           and r.get("of") == mode]
     if not vals:
         return None
     return {"best": min(vals), "median": statistics.median(vals), "k": len(vals),
@@ -245,10 +259,10 @@ def main() -> None:
         worker(args)
         return
 
+    core = _core(args.core_from)  # before bench/paper.py, which imports the core too
     sys.path.insert(0, str(HERE))
     from paper import machine
 
-    core = _core(args.core_from)
     sizes = args.sizes + ([1000000] if args.million else [])
     driver = Path(args.driver)
     have_driver = driver.exists()
@@ -271,10 +285,8 @@ def main() -> None:
     extra = (["--theta", str(args.theta)] if args.theta is not None else []) + \
         (["--core-from", args.core_from] if args.core_from else [])
 
-    def measure(cmd, env, mode):
+    def measure(cmd, env):
         for r in run(cmd, env):
-            if r["mode"] == "memory":
-                r["mode_of"] = mode
             show(r)
             rows.append(r)
 
@@ -293,15 +305,15 @@ def main() -> None:
                 for mode in ("eg", "iter"):
                     if have_driver:
                         measure([str(driver), str(path), mode, str(t), "--theta",
-                                 str(args.repulsor_theta)], env, mode)
+                                 str(args.repulsor_theta)], env)
                     measure(me + ["--worker", mode, "--curve", str(path), "--threads-of-worker",
-                                  str(t)] + extra, env, mode)
+                                  str(t)] + extra, env)
             if have_driver:
                 measure([str(driver), str(path), "error", str(t), "--theta",
-                         str(args.repulsor_theta)], env, "error")
+                         str(args.repulsor_theta)], env)
             if n <= EXACT_UP_TO:
                 measure(me + ["--worker", "error", "--curve", str(path), "--threads-of-worker",
-                              str(t)] + extra, env, "error")
+                              str(t)] + extra, env)
             for side in ("repulsor", "ours"):
                 for mode in ("eg", "iter"):
                     s = summary(rows, side, mode, n, t)
