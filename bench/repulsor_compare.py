@@ -308,10 +308,10 @@ def main() -> None:
                                  str(args.repulsor_theta)], env)
                     measure(me + ["--worker", mode, "--curve", str(path), "--threads-of-worker",
                                   str(t)] + extra, env)
-            if have_driver:
-                measure([str(driver), str(path), "error", str(t), "--theta",
-                         str(args.repulsor_theta)], env)
-            if n <= EXACT_UP_TO:
+            if n <= EXACT_UP_TO:  # both sides' all-pairs sums (Repulsor's: 300 s at 10^5)
+                if have_driver:
+                    measure([str(driver), str(path), "error", str(t), "--theta",
+                             str(args.repulsor_theta)], env)
                 measure(me + ["--worker", "error", "--curve", str(path), "--threads-of-worker",
                               str(t)] + extra, env)
             for side in ("repulsor", "ours"):
