@@ -50,7 +50,7 @@ def test_continue_with_another_energy_is_refused(scene, mb, knot):
     assert scene_state() == before
 
 
-@pytest.mark.parametrize("alpha, beta, word", [(2.0, 5.5, "beta"), (0.5, 1.7, "beta")])
+@pytest.mark.parametrize("alpha, beta, word", [(2.0, 5.5, "beta"), (0.5, 2.2, "beta")])
 def test_bad_exponents_leave_the_scene(scene, mb, knot, alpha, beta, word):
     s = scene.moebius
     s.energy, s.tp_alpha, s.tp_beta = "tangent_point", alpha, beta

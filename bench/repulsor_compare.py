@@ -1,0 +1,329 @@
+"""Same-energy comparison with Henrik Schumacher's Repulsor (issue 26). Prints measurements.
+
+    python bench/repulsor_compare.py                        # 2 400 and 10 000 edges, 1 and 2
+                                                            # threads, 5 alternated rounds
+    python bench/repulsor_compare.py --sizes 100000 --reps 2
+    python bench/repulsor_compare.py --million              # adds 10^6 edges (slow)
+    python bench/repulsor_compare.py --core-from DIR        # our side imported from DIR (e.g. an
+                                                            # export of another branch)
+
+The curve is the Freedman–He–Wang unknot (/work/shared/data/repulsive-curves/
+freedman_unknot_1184.obj) resampled with ``core.resample(P, n)``. Per size and thread count,
+one round runs four processes in turn, k rounds: Repulsor E+g, our E+g, Repulsor iteration, our
+iteration; each process times one measurement with its own clock (Repulsor: std::chrono::
+steady_clock; ours: time.perf_counter, after a warm-up on a small curve so that no numba compile
+is timed) and reports its peak resident memory (VmHWM of /proc/self/status: getrusage's
+ru_maxrss would carry the Python parent's peak across the exec). Both sides run with the
+same thread count T: Repulsor's ``thread_count`` and ``OPENBLAS_NUM_THREADS=T``; ours
+``NUMBA_NUM_THREADS=T`` and ``OPENBLAS_NUM_THREADS=T``.
+
+Energy. Repulsor's ``TangentPointEnergy0(q, p)`` for curves sums, over ordered pairs of distinct
+edges, ``l_I l_J |P_I (m_J − m_I)|^q / |m_J − m_I|^p`` with ``P_I`` the projection onto the
+normal plane of edge I (so ``|P_I d| = |T_I × d|``), far pairs by its cluster tree. Ours (branch
+tangent-point) is ``Σ l_I l_J |T_I × (m_I − m_J)|^α / |m_I − m_J|^β`` over ordered pairs of
+*disjoint* edges. So ``(q, p) = (α, β) = (2, 4)``, and the two differ by the adjacent pairs,
+which Repulsor counts and we do not; the ``mapping`` line checks this with a numpy sum.
+
+Iterations. Repulsor's, as its Example/ and Example2/ do it: a new mesh (cluster tree, block
+cluster tree), energy and differential, the tangent-point metric solved for the gradient
+(GMRES, at most 100 iterations, relative tolerance 1e-5, preconditioned by H^1-solve,
+pseudo-Laplacian, H^1-solve), a collision-free step size in [0, 1] along minus the gradient
+(``MaximumSafeStepSize``), the move (``SemiStaticUpdate``, the hierarchy kept) and the energy
+of the moved curve. No constraints, no line search. Ours: ``core.relax(P, max_iter=1,
+engine="tree")``, the seconds of its one iteration from the run's history (``history
+["seconds"][1] − [0]``; ``[0]`` is the setup with the first energy, gradient and solve): the
+projected Sobolev (hs) gradient under edge-length and barycenter constraints, Armijo line
+search with a collision-free step bound, back-projection onto the constraints, and the next
+energy, gradient and solve.
+
+Repulsor is never a dependency of the add-on and nothing of it is in this repository: the driver
+binary (``--driver``, default /work/repulsor-build/driver/driver) is a small C++ program that
+calls Repulsor's API, built outside the repository against Repulsor 5db79ff19cd8bbd17dafdd256017
+aa690d70b392 (submodules Tensors 6de11784d4d54403091410d9b622281c28e5f211, Tools dfa339a6d599fb
+166d543329a6b718a328a0d384, with upstream's later fix of ``Tools::Accumulate``, Tools 0525a91,
+applied: without it the block cluster tree reads uninitialised memory and the energy comes out
+NaN in most runs); docs/benchmarks.md, "Tangent-point energy against Repulsor", says
+with what it was compiled and what was measured. Without the binary, only our side runs.
+Results also go to ``out/repulsor_compare.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+FHW = Path("/work/shared/data/repulsive-curves/freedman_unknot_1184.obj")
+DRIVER = Path("/work/repulsor-build/driver/driver")
+CACHE = ROOT / "out" / "repulsor_curves"
+EXACT_UP_TO = 10000
+ALPHA, BETA = 2.0, 4.0
+
+
+# -- our side, in a process of its own -------------------------------------------------------------
+
+def _core(core_from: str | None):
+    if core_from:
+        sys.path.insert(0, core_from)
+    from moebius_addon import core
+    return core
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process image: VmHWM. getrusage's ru_maxrss is kept across
+    execve on Linux, so a process started from a large parent reports the parent's peak."""
+    try:
+        with open("/proc/self/status") as f:
+            return next(float(line.split()[1]) / 1024 for line in f if line.startswith("VmHWM:"))
+    except (OSError, StopIteration):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _tp_available(core) -> bool:
+    return hasattr(core, "energy_gradient")
+
+
+def _ours_eg(core, P: np.ndarray, engine: str, theta: float | None):
+    """(energy name, E, G) of one energy+gradient: the tangent-point energy where the core has
+    it, else the Möbius energy as a stand-in."""
+    if _tp_available(core):
+        E, G = core.energy_gradient(P, energy="tangent_point", alpha=ALPHA, beta=BETA,
+                                    engine=engine, theta=theta)
+        return "tangent_point", E, np.asarray(G)
+    G = core.moebius_gradient(P, engine=engine, theta=theta)
+    E = core.moebius_energy(P, engine=engine, theta=theta)
+    return "moebius(stand-in)", E, np.asarray(G)
+
+
+def _ours_relax(core, P: np.ndarray, theta: float | None):
+    try:
+        return "tangent_point", core.relax(P, max_iter=1, engine="tree", theta=theta,
+                                           energy="tangent_point")
+    except TypeError:  # relax has no tangent-point energy yet: the Möbius flow, labelled
+        return "moebius(stand-in)", core.relax(P, max_iter=1, engine="tree", theta=theta)
+
+
+def worker(args) -> None:
+    """One measurement of ours; prints one ``ours ...`` line and one ``ours memory`` line."""
+    core = _core(args.core_from)
+    P = np.fromfile(args.curve, dtype=np.float64).reshape(-1, 3)
+    n = len(P)
+    theta = args.theta
+    small = core.resample(P, 600)  # warm-up: load (or compile) every kernel used below
+    _ours_eg(core, small, "tree", theta)
+    _ours_relax(core, small, theta)
+    if args.worker == "error":
+        _ours_eg(core, small, "exact", theta)
+    before = peak_rss_mb()
+    head = f"ours {args.worker} edges={n} threads={args.threads}"
+    if args.worker == "eg":
+        t0 = time.perf_counter()
+        name, E, G = _ours_eg(core, P, "tree", theta)
+        s = time.perf_counter() - t0
+        print(f"{head} energy_name={name} seconds={s:.6f} energy={E:.12e} "
+              f"diff_norm={np.linalg.norm(G):.12e}", flush=True)
+    elif args.worker == "iter":
+        t0 = time.perf_counter()
+        name, r = _ours_relax(core, P, theta)
+        wall = time.perf_counter() - t0
+        sec = r.history["seconds"]
+        print(f"{head} energy_name={name} seconds={sec[1] - sec[0]:.6f} "
+              f"setup_seconds={sec[0]:.6f} wall_seconds={wall:.6f} "
+              f"energy={r.history['energy'][0]:.12e} energy_new={r.history['energy'][1]:.12e} "
+              f"step={r.history['step'][1]:.6e}", flush=True)
+    elif args.worker == "error":
+        name, E0, G0 = _ours_eg(core, P, "exact", theta)
+        t0 = time.perf_counter()
+        _, E1, G1 = _ours_eg(core, P, "tree", theta)
+        s = time.perf_counter() - t0
+        print(f"{head} energy_name={name} energy_tree={E1:.12e} energy_exact={E0:.12e} "
+              f"energy_rel_error={abs(E1 - E0) / abs(E0):.3e} "
+              f"diff_rel_error={np.linalg.norm(G1 - G0) / np.linalg.norm(G0):.3e} "
+              f"tree_seconds={s:.6f}", flush=True)
+    peak = peak_rss_mb()
+    print(f"ours memory mode={args.worker} edges={n} threads={args.threads} peak_rss_mb={peak:.1f} "
+          f"after_warm_up_mb={before:.1f}", flush=True)
+
+
+# -- the curves, the mapping check, the driver -----------------------------------------------------
+
+def curve(core, n: int) -> Path:
+    """The FHW unknot resampled to n edges, as raw float64 (N, 3) for both sides."""
+    CACHE.mkdir(parents=True, exist_ok=True)
+    path = CACHE / f"fhw_{n}.bin"
+    if not path.exists():
+        (P,) = core.read_obj(FHW)
+        np.ascontiguousarray(core.resample(P, n), dtype=np.float64).tofile(path)
+    return path
+
+
+def tp_sums(P: np.ndarray, alpha: float = ALPHA, beta: float = BETA) -> tuple[float, float]:
+    """(sum over ordered pairs of distinct edges, over ordered pairs of disjoint edges) of
+    ``l_I l_J |T_I × (m_I − m_J)|^α / |m_I − m_J|^β``, in numpy (Repulsor's and our
+    conventions)."""
+    e = np.roll(P, -1, axis=0) - P
+    m = P + 0.5 * e
+    lengths = np.linalg.norm(e, axis=1)
+    T = e / lengths[:, None]
+    n = len(P)
+    total = disjoint = 0.0
+    for i0 in range(0, n, 256):
+        i = np.arange(i0, min(n, i0 + 256))
+        d = m[i, None, :] - m[None, :, :]
+        r2 = np.einsum("ijk,ijk->ij", d, d)
+        r2[np.arange(len(i)), i] = np.inf
+        c = np.linalg.norm(np.cross(T[i, None, :], d), axis=2)
+        f = lengths[i, None] * lengths[None, :] * c ** alpha / r2 ** (beta / 2)
+        total += f.sum()
+        f[np.arange(len(i)), (i + 1) % n] = 0.0
+        f[np.arange(len(i)), (i - 1) % n] = 0.0
+        disjoint += f.sum()
+    return float(total), float(disjoint)
+
+
+def run(cmd: list[str], env: dict) -> list[dict]:
+    """Run one measuring process; its ``side mode key=value ...`` lines as dicts."""
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)} failed ({out.returncode}):\n{out.stderr[-2000:]}")
+    rows = []
+    for line in out.stdout.splitlines():
+        words = line.split()
+        if len(words) < 2 or words[0] not in ("repulsor", "ours") or words[1] == "info":
+            continue
+        row = {"side": words[0], "mode": words[1]}
+        for w in words[2:]:
+            k, _, v = w.partition("=")
+            k = "of" if k == "mode" else k  # a memory line names the mode it measured
+            try:
+                row[k] = float(v) if any(ch in v for ch in ".e") or not v.isdigit() else int(v)
+            except ValueError:
+                row[k] = v
+        rows.append(row)
+    return rows
+
+
+def env_for(threads: int) -> dict:
+    env = dict(os.environ)
+    env["OPENBLAS_NUM_THREADS"] = str(threads)
+    env["NUMBA_NUM_THREADS"] = str(threads)
+    return env
+
+
+def show(row: dict) -> None:
+    print(" ".join([row["side"], row["mode"]] + [f"{k}={v}" for k, v in row.items()
+                                                  if k not in ("side", "mode")]), flush=True)
+
+
+def summary(rows: list[dict], side: str, mode: str, n: int, threads: int, key="seconds"):
+    vals = [r[key] for r in rows if r["side"] == side and r["mode"] == mode
+            and r["edges"] == n and r["threads"] == threads]
+    mem = [r["peak_rss_mb"] for r in rows if r["side"] == side and r["mode"] == "memory"
+           and r.get("edges") == n and r.get("threads") == threads
+           and r.get("of") == mode]
+    if not vals:
+        return None
+    return {"best": min(vals), "median": statistics.median(vals), "k": len(vals),
+            "peak_rss_mb": max(mem) if mem else None}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--sizes", type=int, nargs="*", default=[2400, 10000])
+    ap.add_argument("--million", action="store_true", help="add 10^6 edges (slow)")
+    ap.add_argument("--threads", type=int, nargs="*", default=[1, 2])
+    ap.add_argument("--reps", type=int, default=5, help="alternated rounds k per size")
+    ap.add_argument("--driver", default=str(DRIVER))
+    ap.add_argument("--theta", type=float, default=None,
+                    help="our tree's admissibility (default: the core's)")
+    ap.add_argument("--repulsor-theta", type=float, default=0.5,
+                    help="Repulsor's far_field_separation_parameter (its default 0.5)")
+    ap.add_argument("--core-from", default=None)
+    ap.add_argument("--json", default=str(ROOT / "out" / "repulsor_compare.json"))
+    ap.add_argument("--worker", choices=("eg", "iter", "error"), help=argparse.SUPPRESS)
+    ap.add_argument("--curve", help=argparse.SUPPRESS)
+    ap.add_argument("--threads-of-worker", type=int, dest="worker_threads", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.worker:
+        args.threads = args.worker_threads
+        worker(args)
+        return
+
+    core = _core(args.core_from)  # before bench/paper.py, which imports the core too
+    sys.path.insert(0, str(HERE))
+    from paper import machine
+
+    sizes = args.sizes + ([1000000] if args.million else [])
+    driver = Path(args.driver)
+    have_driver = driver.exists()
+    out: dict = {"machine": machine(), "driver": str(driver) if have_driver else None,
+                 "ours_energy": "tangent_point" if _tp_available(core) else "moebius(stand-in)",
+                 "repulsor_theta": args.repulsor_theta, "theta": args.theta, "rows": []}
+    print(out["machine"], flush=True)
+    print(f"ours: E+g of {out['ours_energy']}; iteration: core.relax(max_iter=1, engine='tree'): "
+          "projected hs gradient, edge-length and barycenter constraints, Armijo line search, "
+          "collision-free step bound, back-projection", flush=True)
+    if have_driver:
+        print("repulsor: E+g = mesh + TangentPointEnergy0(q=2, p=4) Value and Differential; "
+              "iteration = mesh, E+g, TangentPointMetric0 GMRES solve (<= 100 its, rtol 1e-5), "
+              "MaximumSafeStepSize along -gradient in [0, 1], SemiStaticUpdate, new energy; "
+              "no constraints, no line search", flush=True)
+    else:
+        print(f"repulsor: no driver at {driver}; our side only", flush=True)
+    rows = out["rows"]
+    me = [sys.executable, str(Path(__file__).resolve())]
+    extra = (["--theta", str(args.theta)] if args.theta is not None else []) + \
+        (["--core-from", args.core_from] if args.core_from else [])
+
+    def measure(cmd, env):
+        for r in run(cmd, env):
+            show(r)
+            rows.append(r)
+
+    for n in sizes:
+        path = curve(core, n)
+        if n <= EXACT_UP_TO:
+            total, disjoint = tp_sums(np.fromfile(path).reshape(-1, 3))
+            row = {"side": "numpy", "mode": "mapping", "edges": n, "threads": 0,
+                   "all_distinct_pairs": total, "disjoint_pairs": disjoint,
+                   "adjacent_share": (total - disjoint) / total}
+            show(row)
+            rows.append(row)
+        for t in args.threads:
+            env = env_for(t)
+            for _ in range(args.reps):
+                for mode in ("eg", "iter"):
+                    if have_driver:
+                        measure([str(driver), str(path), mode, str(t), "--theta",
+                                 str(args.repulsor_theta)], env)
+                    measure(me + ["--worker", mode, "--curve", str(path), "--threads-of-worker",
+                                  str(t)] + extra, env)
+            if n <= EXACT_UP_TO:  # both sides' all-pairs sums (Repulsor's: 300 s at 10^5)
+                if have_driver:
+                    measure([str(driver), str(path), "error", str(t), "--theta",
+                             str(args.repulsor_theta)], env)
+                measure(me + ["--worker", "error", "--curve", str(path), "--threads-of-worker",
+                              str(t)] + extra, env)
+            for side in ("repulsor", "ours"):
+                for mode in ("eg", "iter"):
+                    s = summary(rows, side, mode, n, t)
+                    if s:
+                        print(f"summary side={side} mode={mode} edges={n} threads={t} "
+                              f"best={s['best']:.4f} median={s['median']:.4f} k={s['k']} "
+                              f"peak_rss_mb={s['peak_rss_mb']}", flush=True)
+    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.json).write_text(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()
