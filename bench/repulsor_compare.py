@@ -89,28 +89,17 @@ def peak_rss_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def _tp_available(core) -> bool:
-    return hasattr(core, "energy_gradient")
-
-
 def _ours_eg(core, P: np.ndarray, engine: str, theta: float | None):
-    """(energy name, E, G) of one energy+gradient: the tangent-point energy where the core has
-    it, else the Möbius energy as a stand-in."""
-    if _tp_available(core):
-        E, G = core.energy_gradient(P, energy="tangent_point", alpha=ALPHA, beta=BETA,
-                                    engine=engine, theta=theta)
-        return "tangent_point", E, np.asarray(G)
-    G = core.moebius_gradient(P, engine=engine, theta=theta)
-    E = core.moebius_energy(P, engine=engine, theta=theta)
-    return "moebius(stand-in)", E, np.asarray(G)
+    """(energy name, E, G) of one tangent-point energy+gradient."""
+    E, G = core.energy_gradient(P, energy="tangent_point", alpha=ALPHA, beta=BETA,
+                                engine=engine, theta=theta)
+    return "tangent_point", E, np.asarray(G)
 
 
 def _ours_relax(core, P: np.ndarray, theta: float | None):
-    try:
-        return "tangent_point", core.relax(P, max_iter=1, engine="tree", theta=theta,
-                                           energy="tangent_point")
-    except TypeError:  # relax has no tangent-point energy yet: the Möbius flow, labelled
-        return "moebius(stand-in)", core.relax(P, max_iter=1, engine="tree", theta=theta)
+    """(energy name, result) of one iteration of the tangent-point flow on the tree."""
+    return "tangent_point", core.relax(P, max_iter=1, engine="tree", theta=theta,
+                                       energy="tangent_point", alpha=ALPHA, beta=BETA)
 
 
 def worker(args) -> None:
@@ -267,7 +256,7 @@ def main() -> None:
     driver = Path(args.driver)
     have_driver = driver.exists()
     out: dict = {"machine": machine(), "driver": str(driver) if have_driver else None,
-                 "ours_energy": "tangent_point" if _tp_available(core) else "moebius(stand-in)",
+                 "ours_energy": "tangent_point",
                  "repulsor_theta": args.repulsor_theta, "theta": args.theta, "rows": []}
     print(out["machine"], flush=True)
     print(f"ours: E+g of {out['ours_energy']}; iteration: core.relax(max_iter=1, engine='tree'): "
