@@ -18,7 +18,7 @@ from collections.abc import Callable
 import numpy as np
 
 from . import knots
-from .engine import moebius_energy
+from .engine import energy, moebius_energy
 from .identify import identify
 from .invariants import knot_determinant
 from .polygon import check_polygon, contact_ratio, resample
@@ -59,6 +59,15 @@ def _tree() -> None:
     _relax(knots.named("3_1", 3000), "projected_gradient")
 
 
+def _tangent_point() -> None:
+    # Energy ▸ Tangent-Point: its sums, the metric of its order (7/4 at the default exponents),
+    # on the exact engine and, from engine.AUTO_TREE_FROM edges on, the tree
+    for n in (100, 3000):
+        P = knots.named("3_1", n)
+        energy(P, energy="tangent_point")
+        _relax(P, "projected_gradient_implicit", energy="tangent_point")
+
+
 def _convert() -> None:
     t = np.linspace(0.0, 2.0 * np.pi, 400, endpoint=False)
     drawn = np.c_[np.sin(t) + 2 * np.sin(2 * t), np.cos(t) - 2 * np.cos(2 * t), -np.sin(3 * t)]
@@ -86,6 +95,7 @@ PATHS: dict[str, Callable[[], None]] = {
     "identify": _identify,
     "open": _open,
     "tree": _tree,
+    "tangent_point": _tangent_point,
 }
 
 
