@@ -124,8 +124,10 @@ def test_open_hs_agrees_with_closed_kernel_on_closed_components():
     flagged = Layout(lay.starts, lay.nxt, lay.prv, lay.comp, lay.is_link, np.ones(2, bool))
     ln = np.linalg.norm(X[lay.nxt] - X, axis=1)
     for low in (1.0, 0.0):
-        A = metrics._hs_family(X, lay, ln, ln.sum(), None, low)
-        assert np.abs(open_hs(X, flagged, ln, low) - A).max() <= 1e-12 * np.abs(A).max()
+        for order in (1.5, 1.75):  # the paper's, and the tangent-point default's
+            A = metrics._hs_family(X, lay, ln, ln.sum(), None, low, order)
+            B = open_hs(X, flagged, ln, low, metrics.kernel_exponent(order))
+            assert np.abs(B - A).max() <= 1e-12 * np.abs(A).max()
 
 
 @pytest.mark.parametrize("metric", metrics.METRICS)
