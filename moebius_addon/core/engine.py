@@ -31,19 +31,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import barnes_hut, energy_choice, hs_solve, hs_tree, tangent_point_tree
+from . import barnes_hut, energy_choice, hs_solve, hs_tree
 from ._layout import OPEN_TREE_REFUSAL, Layout, as_checked_layout
 from ._memory import check_memory
 from .banded import BANDED_METRICS, BandedSaddle
 from .collision import contact_time_x
 from .constraints import Jacobian
-from .energies import tangent_point
 from .energy_choice import MOEBIUS, EnergyChoice, check_energy
 from .linalg import SaddlePointSolver, spd_inverse
 from .metrics import banded_parts, gram_x
 from .moebius_dense import energy_gradient_x, energy_x
 from .pinned_solve import BorderedPins, tree_borders, unpinned_jacobian
-from .tangent_point_dense import tp_energy_gradient_x, tp_energy_x
 
 # Deterministic refactorization rule (see SaddlePointSolver): one factorization costs about as
 # much as N / _FACTOR_PER_ITER preconditioned Krylov iterations (measured here at N = 3000:
@@ -419,10 +417,11 @@ def engine_class(name: str, n: int) -> type[DenseEngine]:
 # the public evaluators
 
 
-def _frame(X, layout, engine, theta):
-    """The Barnes–Hut frame for ``engine``/``theta`` at X, or None for the exact sum (always
-    for open curves: "auto" takes the exact sum, "tree" is refused)."""
-    theta = barnes_hut.THETA if theta is None else barnes_hut.check_theta(theta)
+def _frame(X, layout, engine, theta, choice: EnergyChoice = MOEBIUS):
+    """The Barnes–Hut frame of the energy ``choice`` for ``engine``/``theta`` at X (θ None:
+    the energy's own default), or None for the exact sum (always for open curves: "auto"
+    takes the exact sum, "tree" is refused)."""
+    theta = choice.default_theta if theta is None else barnes_hut.check_theta(theta)
     if layout.has_open:
         if engine == "tree":
             raise ValueError(OPEN_TREE_REFUSAL)
@@ -431,7 +430,7 @@ def _frame(X, layout, engine, theta):
         return None
     if not uses_tree(engine, layout.n):
         return None
-    return barnes_hut.Frame(X, layout, theta)
+    return choice.frame(X, layout, theta)
 
 
 def moebius_energy(P, *, engine: str = "auto", theta: float | None = None,
@@ -492,38 +491,21 @@ def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None, clo
 ENERGY_NAMES = energy_choice.ENERGY_NAMES
 
 
-def _tp_frame(X, layout, engine, theta, alpha, beta):
-    """The tangent-point tree frame for ``engine``/``theta`` at X, or None for the exact sum
-    (the rule of :func:`_frame`: open curves exact, "tree" refused for them)."""
-    theta = tangent_point_tree.THETA if theta is None else barnes_hut.check_theta(theta)
-    if layout.has_open:
-        if engine == "tree":
-            raise ValueError(OPEN_TREE_REFUSAL)
-        if engine not in ("exact", "auto"):
-            uses_tree(engine, layout.n)  # its message for an unknown name
-        return None
-    if not uses_tree(engine, layout.n):
-        return None
-    return tangent_point_tree.TangentPointFrame(X, layout, alpha, beta, theta)
-
-
 def _evaluate(P, energy_name, alpha, beta, engine, theta, closed, grad):
     choice = check_energy(energy_name, alpha, beta)  # ValueError naming what is wrong
-    alpha, beta = choice.alpha, choice.beta
     if choice.name == "moebius":
         if grad:
             return moebius_energy(P, engine=engine, theta=theta, closed=closed), \
                 moebius_gradient(P, engine=engine, theta=theta, closed=closed)
         return moebius_energy(P, engine=engine, theta=theta, closed=closed), None
     X, layout, k = as_checked_layout(P, closed)
-    frame = _tp_frame(X, layout, engine, theta, alpha, beta)
+    frame = _frame(X, layout, engine, theta, choice)
     if grad:
-        e, g = (tp_energy_gradient_x(X, layout, alpha, beta) if frame is None
-                else frame.energy_gradient(X))
+        e, g = choice.exact_gradient(X, layout) if frame is None else frame.energy_gradient(X)
     else:
-        e, g = (tp_energy_x(X, layout, alpha, beta) if frame is None else frame.energy(X)), None
+        e, g = (choice.exact(X, layout) if frame is None else frame.energy(X)), None
     if k:  # X was scaled by 2^-k: E(2^k X) = 2^(k s) E(X), ∇E(2^k X) = 2^(k (s − 1)) ∇E(X)
-        s = tangent_point.scaling(alpha, beta)
+        s = choice.scaling
         e = e * 2.0 ** (k * s)
         g = None if g is None else g * 2.0 ** (k * (s - 1.0))
     return e, (None if g is None else layout.split(g))
