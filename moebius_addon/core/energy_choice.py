@@ -33,7 +33,7 @@ DEFAULT_EXPONENTS = (tangent_point.DEFAULT_ALPHA, tangent_point.DEFAULT_BETA)
 
 class EnergyChoice:
     """The energy ``name`` with its exponents (tangent-point only), checked; see the module
-    docstring. Equal choices compare equal."""
+    docstring."""
 
     def __init__(self, name: str = "moebius", alpha=None, beta=None):
         if name not in ENERGY_NAMES:
@@ -50,13 +50,6 @@ class EnergyChoice:
             self.alpha, self.beta = tangent_point.check_exponents(a0 if alpha is None else alpha,
                                                     b0 if beta is None else beta)
 
-    def __eq__(self, other) -> bool:
-        return isinstance(other, EnergyChoice) and (self.name, self.alpha, self.beta) == (
-            other.name, other.alpha, other.beta)
-
-    def __hash__(self) -> int:
-        return hash((self.name, self.alpha, self.beta))
-
     def __repr__(self) -> str:
         return f"EnergyChoice({self.label!r})"
 
@@ -71,7 +64,7 @@ class EnergyChoice:
     @property
     def scaling(self) -> float:
         """``k`` of ``E(λP) = λ^k E(P)``: 0 for the Möbius energy."""
-        return 0.0 if self.name == "moebius" else 2.0 + self.alpha - self.beta
+        return 0.0 if self.name == "moebius" else tangent_point.scaling(self.alpha, self.beta)
 
     @property
     def metric_order(self) -> float:
@@ -84,11 +77,6 @@ class EnergyChoice:
     def default_theta(self) -> float:
         """The tree's admissibility when none is given (each energy measured its own)."""
         return barnes_hut.THETA if self.name == "moebius" else tangent_point_tree.THETA
-
-    @property
-    def open_curves(self) -> bool:
-        """Whether open polylines are supported (both energies, on the exact engine)."""
-        return True
 
     # -- evaluations (X at the run's scale; layout of the run) ---------------------------------
 

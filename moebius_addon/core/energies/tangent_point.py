@@ -33,7 +33,7 @@ LINKS = True
 #: The default exponents ``(α, β)``: β − α > 2, where the energy repels strands strongly
 #: enough that relaxed knots come out evenly spread (measured, docs/gallery.md, "Two
 #: energies"): from the same 300-edge starts (2, 4.5) converged on all six knots tried at
-#: 300 edges in 23–47 iterations, while (2, 4) — scale-invariant, β − α = 2, the borderline
+#: 300 edges in 24–38 iterations, while (2, 4) — scale-invariant, β − α = 2, the borderline
 #: of self-avoidance — pulled the crossings into a tangle an edge length wide, jammed and was
 #: refined to 1 200 edges on all six (7_4: 6.2 against 59.5 CPU s, stalled).
 DEFAULT_ALPHA = 2.0
