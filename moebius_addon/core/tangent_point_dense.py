@@ -24,6 +24,7 @@ from .energies.tangent_point import (
     DEFAULT_BETA,
     KIND_2,
     KIND_2_4,
+    KIND_2_45,
     KIND_GENERAL,
     check_exponents,
     kind_of,
@@ -99,6 +100,9 @@ def _tp_parts(ex, ey, ez, mx, my, mz, ln, starts, comp, closed, alpha, beta, kin
                     if kind == KIND_2_4:
                         _segment(i, lo, hi, ex, ey, ez, mx, my, mz, ln, b, alpha, beta,
                                  KIND_2_4, grad, acc)
+                    elif kind == KIND_2_45:
+                        _segment(i, lo, hi, ex, ey, ez, mx, my, mz, ln, b, alpha, beta,
+                                 KIND_2_45, grad, acc)
                     elif kind == KIND_2:
                         _segment(i, lo, hi, ex, ey, ez, mx, my, mz, ln, b, alpha, beta, KIND_2,
                                  grad, acc)

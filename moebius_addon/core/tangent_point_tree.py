@@ -41,6 +41,7 @@ from .energies.tangent_point import (
     DEFAULT_BETA,
     KIND_2,
     KIND_2_4,
+    KIND_2_45,
     KIND_GENERAL,
     check_exponents,
     kind_of,
@@ -58,13 +59,80 @@ _FAR_CHUNKS = 16
 
 @nb.njit(cache=True, inline="always")
 def _kernel(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
-    """:func:`pair` with ``kind`` made a constant at each of the three call sites (the
-    branches inside fold away)."""
+    """:func:`pair` with ``kind`` made a constant at each call site (the branches inside fold
+    away)."""
     if kind == KIND_2_4:
         return pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, KIND_2_4)
+    if kind == KIND_2_45:
+        return pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, KIND_2_45)
     if kind == KIND_2:
         return pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, KIND_2)
     return pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, KIND_GENERAL)
+
+
+# The near field's lanes (the idea of ``_near_field``): up to this many edges ``I`` of a leaf
+# against one partner edge ``J`` at a time. One work array per parallel piece: lane j's edge at
+# W[_LANES k + j] (k: midpoint, edge vector, length, then its tree position and neighbours' as
+# floats, position −1 past the leaf's end), its sums at W[_NW_SUMS + _LANES k + j] (f,
+# ∂f/∂e_I, ∂f/∂d) and what its pair gives J at W[_NW_OUT + _LANES k + j] (−∂f/∂d, ∂f/∂l_J),
+# added over the lanes in lane order. Constant offsets plus j: the lane loop vectorizes. No
+# fast-math (see ``_near_field``).
+_LANES = 8
+_NW_ID = 7 * _LANES
+_NW_SUMS = 10 * _LANES
+_NW_OUT = 17 * _LANES
+_NW_SIZE = 21 * _LANES
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _near_lanes(W, rx, ry, rz, lj, r, alpha, beta, kind, grad):
+    """Partner edge ``r`` (midpoint, length, tree position as a float) against every lane's
+    edge, added to the lane's sums; what each pair gives ``r`` in the lane's ``_NW_OUT``
+    slots. The edge itself, its neighbours and the lanes past the leaf's end count zero: by a
+    select (``|d|² = ∞``), no branch."""
+    for j in range(_LANES):
+        dx = W[j] - rx
+        dy = W[_LANES + j] - ry
+        dz = W[2 * _LANES + j] - rz
+        q = W[_NW_ID + j]
+        r2 = dx * dx + dy * dy + dz * dz
+        skip = (r == q or r == W[_NW_ID + _LANES + j] or r == W[_NW_ID + 2 * _LANES + j]
+                or q < 0.0)
+        r2 = np.inf if skip else r2
+        f, fax, fay, faz, fdx, fdy, fdz, fl = _kernel(
+            dx, dy, dz, W[3 * _LANES + j], W[4 * _LANES + j], W[5 * _LANES + j],
+            W[6 * _LANES + j], lj, r2, alpha, beta, kind)
+        W[_NW_SUMS + j] += f
+        if grad:
+            W[_NW_SUMS + _LANES + j] += fax
+            W[_NW_SUMS + 2 * _LANES + j] += fay
+            W[_NW_SUMS + 3 * _LANES + j] += faz
+            W[_NW_SUMS + 4 * _LANES + j] += fdx
+            W[_NW_SUMS + 5 * _LANES + j] += fdy
+            W[_NW_SUMS + 6 * _LANES + j] += fdz
+            W[_NW_OUT + j] = fdx
+            W[_NW_OUT + _LANES + j] = fdy
+            W[_NW_OUT + 2 * _LANES + j] = fdz
+            W[_NW_OUT + 3 * _LANES + j] = fl
+
+
+@nb.njit(cache=True, inline="always")
+def _near_partner(W, b4, M, ln, lo_b, hi_b, alpha, beta, kind, grad):
+    """The lanes against every edge of one partner leaf, what the pairs give each of its edges
+    added to ``b4`` (the lanes in order)."""
+    for r in range(lo_b, hi_b):
+        _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], ln[r], float(r), alpha, beta, kind, grad)
+        if grad:
+            sx = sy = sz = sl = 0.0
+            for j in range(_LANES):
+                sx += W[_NW_OUT + j]
+                sy += W[_NW_OUT + _LANES + j]
+                sz += W[_NW_OUT + 2 * _LANES + j]
+                sl += W[_NW_OUT + 3 * _LANES + j]
+            b4[0, r] -= sx
+            b4[1, r] -= sy
+            b4[2, r] -= sz
+            b4[3, r] += sl
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
@@ -72,8 +140,9 @@ def _near(E, M, ln, lo, hi, leaves, noff, npart, nbr, alpha, beta, kind, grad):
     """Per edge (tree order): row 0 ``Σ_J f(I, J)`` over its near partners and, with ``grad``,
     the partials of every near pair it is part of (as ``I`` or as ``J``) in its edge vector
     (rows 1–3, without the length term), midpoint (4–6) and length (7). Each ordered pair is
-    evaluated once, by the leaf of its ``I``; what it gives its ``J`` goes to one buffer per
-    fixed piece of the leaves, added in piece order."""
+    evaluated once, by the leaf of its ``I``: the leaf's edges are the lanes
+    (:func:`_near_lanes`), the partners' edges go by one at a time; what a pair gives ``J``
+    goes to one buffer per fixed piece of the leaves, added in piece order."""
     n = ln.shape[0]
     nl = leaves.shape[0]
     rows = np.zeros((8 if grad else 1, n))
@@ -82,44 +151,56 @@ def _near(E, M, ln, lo, hi, leaves, noff, npart, nbr, alpha, beta, kind, grad):
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
         b4 = sb[ch]
+        W = np.zeros(_NW_SIZE)
         for t in range(ch * nl // nchunks, (ch + 1) * nl // nchunks):
             a = leaves[t]
-            for q in range(lo[a], hi[a]):
-                px, py, pz = M[q, 0], M[q, 1], M[q, 2]
-                ax, ay, az, li = E[q, 0], E[q, 1], E[q, 2], ln[q]
-                n0, n1 = nbr[q, 0], nbr[q, 1]
-                s = gax = gay = gaz = gmx = gmy = gmz = 0.0
+            for q0 in range(lo[a], hi[a], _LANES):
+                count = min(_LANES, hi[a] - q0)
+                for j in range(_LANES):
+                    q = q0 + min(j, count - 1)  # lanes past the leaf's end: its last edge, off
+                    W[j] = M[q, 0]
+                    W[_LANES + j] = M[q, 1]
+                    W[2 * _LANES + j] = M[q, 2]
+                    W[3 * _LANES + j] = E[q, 0]
+                    W[4 * _LANES + j] = E[q, 1]
+                    W[5 * _LANES + j] = E[q, 2]
+                    W[6 * _LANES + j] = ln[q]
+                    W[_NW_ID + j] = q if j < count else -1.0
+                    W[_NW_ID + _LANES + j] = nbr[q, 0]
+                    W[_NW_ID + 2 * _LANES + j] = nbr[q, 1]
+                W[_NW_SUMS:] = 0.0
                 for p in range(noff[a], noff[a + 1]):
                     b = npart[p]
-                    for r in range(lo[b], hi[b]):
-                        if r == q or r == n0 or r == n1:
-                            continue
-                        dx = px - M[r, 0]
-                        dy = py - M[r, 1]
-                        dz = pz - M[r, 2]
-                        f, fax, fay, faz, fdx, fdy, fdz, fl = _kernel(
-                            dx, dy, dz, ax, ay, az, li, ln[r], dx * dx + dy * dy + dz * dz,
-                            alpha, beta, kind)
-                        s += f
-                        if grad:
-                            gax += fax
-                            gay += fay
-                            gaz += faz
-                            gmx += fdx
-                            gmy += fdy
-                            gmz += fdz
-                            b4[0, r] -= fdx
-                            b4[1, r] -= fdy
-                            b4[2, r] -= fdz
-                            b4[3, r] += fl
-                rows[0, q] = s
-                if grad:
-                    rows[1, q] = gax
-                    rows[2, q] = gay
-                    rows[3, q] = gaz
-                    rows[4, q] = gmx
-                    rows[5, q] = gmy
-                    rows[6, q] = gmz
+                    # kind and grad constants at each call (the branches fold away)
+                    if grad:
+                        if kind == KIND_2_4:
+                            _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2_4, True)
+                        elif kind == KIND_2_45:
+                            _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2_45,
+                                          True)
+                        elif kind == KIND_2:
+                            _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2, True)
+                        else:
+                            _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_GENERAL,
+                                          True)
+                    else:
+                        if kind == KIND_2_4:
+                            _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2_4,
+                                          False)
+                        elif kind == KIND_2_45:
+                            _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2_45,
+                                          False)
+                        elif kind == KIND_2:
+                            _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2, False)
+                        else:
+                            _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_GENERAL,
+                                          False)
+                for j in range(count):
+                    q = q0 + j
+                    rows[0, q] = W[_NW_SUMS + j]
+                    if grad:
+                        for k in range(1, 7):
+                            rows[k, q] = W[_NW_SUMS + k * _LANES + j]
     if grad:
         for ch in range(nchunks):  # in piece order: the same bits for any thread count
             for k in range(4):

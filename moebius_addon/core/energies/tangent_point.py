@@ -13,9 +13,9 @@ enters, ``J`` is a point of weight ``l_J``. ``|T × d|`` is the length of a cros
 strand).
 
 :func:`pair` returns the value and the partials the sums need; a constant ``kind`` (inlined,
-the other branches compile away) picks ``α = 2, β = 4`` (no ``pow`` at all), ``α = 2`` (one
-``pow``, for ``|d|^−β``) or general exponents. A sum that masks a pair out passes ``r2 = inf``:
-every result is then exactly 0.
+the other branches compile away) picks ``α = 2, β = 4`` (no ``pow`` at all), ``α = 2, β = 4.5``
+(two square roots), ``α = 2`` (one ``pow``, for ``|d|^−β``) or general exponents. A sum
+that masks a pair out passes ``r2 = inf``: every result is then exactly 0.
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ DEFAULT_BETA = 4.5
 KIND_2_4 = 0  # α = 2, β = 4: no pow
 KIND_2 = 1  # α = 2: |T × d|² exactly, one pow for |d|^−β
 KIND_GENERAL = 2
+KIND_2_45 = 3  # α = 2, β = 4.5 (the default): |d|^−4.5 by a square root, no pow
 
 
 def scaling(alpha: float, beta: float) -> float:
@@ -78,7 +79,9 @@ def check_exponents(alpha, beta) -> tuple[float, float]:
 def kind_of(alpha: float, beta: float) -> int:
     """The :func:`pair` branch for these exponents."""
     if alpha == 2.0:
-        return KIND_2_4 if beta == 4.0 else KIND_2
+        if beta == 4.0:
+            return KIND_2_4
+        return KIND_2_45 if beta == 4.5 else KIND_2
     return KIND_GENERAL
 
 
@@ -100,6 +103,10 @@ def pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
         w = 1.0
         rb = inv * inv  # |d|^−4
         pl = 1.0 / li  # l_I^(1−α)
+    elif kind == KIND_2_45:
+        w = 1.0
+        rb = inv * inv * math.sqrt(math.sqrt(inv))  # r2^−2 r2^−¼, no pow
+        pl = 1.0 / li
     elif kind == KIND_2:
         w = 1.0
         rb = r2 ** (-0.5 * beta)
