@@ -6,14 +6,19 @@ No bpy: the properties, the panel, the operators and the command line all read t
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 from .. import core
 from ..core import barnes_hut
 from ..core.engine import AUTO_TREE_FROM, ENGINE_NAMES
 
 #: Metrics offered for the flow, as ``(core name, label, description)``.
 METRICS = (
-    ("hs", "W^{3/2,2} (geometric)", "Geometric Sobolev metric of the paper: fastest, scale-aware"),
-    ("hs_pure", "W^{3/2,2} (pure)", "Fractional Sobolev metric without the lower-order terms"),
+    ("hs", "W^{s,2} (geometric)",
+     "Geometric fractional Sobolev metric of the paper, of the order that fits the energy "
+     "(s = 3/2 for Möbius, (β − 1)/α for tangent-point): fastest, scale-aware"),
+    ("hs_pure", "W^{s,2} (pure)",
+     "Fractional Sobolev metric of order s without the lower-order terms"),
     ("h2", "H²", "Second-order Sobolev metric (too strong: slow for fine polygons)"),
     ("h1", "H¹", "First-order Sobolev metric (too weak: step sizes shrink with N)"),
     ("l2", "L²", "Plain L² gradient descent (needs tiny steps; for comparison only)"),
@@ -35,6 +40,18 @@ def energy_label(name: str) -> str:
     """The *Last Run* box's row name for the energy ``name`` (``EnergyChoice.label``):
     "Energy" for Möbius, "TP (2, 4.5)" for the tangent-point energy with its exponents."""
     return "Energy" if name == "moebius" else "TP" + name[len("tangent_point"):]
+
+
+def metric_order_text(energy: str, alpha: float, beta: float) -> str:
+    """The order ``s`` of the ``hs`` metrics for ``energy`` (``alpha``, ``beta``: the
+    tangent-point exponents, ignored for Möbius) as the panel shows it under the metric:
+    "s = 3/2" (Möbius, and tangent-point at (2, 4)), "s = 7/4" (tangent-point at the default
+    (2, 4.5)); ValueError (naming the exponent) for exponents the energy refuses."""
+    tp = energy == "tangent_point"  # the exponents (the panel's α, β) are only its own
+    s = core.check_energy(energy, alpha if tp else None, beta if tp else None).metric_order
+    # a small fraction where it is one (the panel's α, β are single-precision floats)
+    f = Fraction(s).limit_denominator(12)
+    return f"s = {f.numerator}/{f.denominator}" if abs(float(f) - s) < 1e-6 else f"s = {s:.4g}"
 
 
 #: Default exponents α, β of the tangent-point energy (``core.energy_choice``).

@@ -138,6 +138,12 @@ class VIEW3D_PT_moebius_flow(_MoebiusPanel, bpy.types.Panel):
         col.prop(s, "energy", text="")
         col.label(text="Metric")
         col.prop(s, "metric", text="")
+        if s.metric in ("hs", "hs_pure"):  # its order depends on the energy (api.md)
+            try:
+                col.label(text="Order " + labels.metric_order_text(s.energy, s.tp_alpha,
+                                                                    s.tp_beta))
+            except ValueError:  # Relax reports the whole message
+                col.label(text="α, β out of range (Advanced)", icon="ERROR")
         col = layout.column(align=True)
         col.prop(s, "max_iterations")
         col.prop(s, "tolerance")

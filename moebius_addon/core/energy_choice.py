@@ -70,7 +70,7 @@ class EnergyChoice:
     def metric_order(self) -> float:
         """Order ``s`` of the fractional Sobolev metric that fits the energy (``hs`` and
         ``hs_pure``): 3/2 for the Möbius energy (the paper's W^{3/2,2}), ``(β − 1)/α`` for the
-        tangent-point energy (Repulsive Curves; 3/2 at the default exponents)."""
+        tangent-point energy (Repulsive Curves; 7/4 at the default (2, 4.5), 3/2 at (2, 4))."""
         return 1.5 if self.name == "moebius" else (self.beta - 1.0) / self.alpha
 
     @property

@@ -69,6 +69,26 @@ def test_exponents_reach_the_run_only_for_the_tangent_point_energy(scene, mb):
     assert (kw["energy"], kw["alpha"], kw["beta"]) == ("tangent_point", 3.0, 6.0)
 
 
+def test_the_metric_order_shown_follows_the_energy(scene, mb):
+    from importlib import import_module
+
+    labels = import_module(mb.__name__ + ".labels")
+    s = scene.moebius
+    shown = lambda: labels.metric_order_text(s.energy, s.tp_alpha, s.tp_beta)  # noqa: E731
+    s.tp_alpha, s.tp_beta = 3.0, 6.0
+    assert shown() == "s = 3/2"  # Möbius: the paper's order, whatever the exponents say
+    s.energy = "tangent_point"
+    assert shown() == "s = 5/3"  # (β − 1)/α
+    s.tp_alpha, s.tp_beta = 2.0, 4.5
+    assert shown() == "s = 7/4"
+    s.tp_alpha, s.tp_beta = 2.5, 4.2
+    assert shown() == "s = 1.28"  # not a small fraction
+    s.tp_beta = 7.0  # outside (α + 1, 2α + 1): the panel says so instead of an order
+    with pytest.raises(ValueError, match="beta"):
+        shown()
+    assert all("W^{s,2}" in label for key, label, _ in labels.METRICS if key.startswith("hs"))
+
+
 def test_cli_energy(scene, mb, capfd):
     from importlib import import_module
 
