@@ -505,7 +505,8 @@ class ObjectRelaxation:
             self.open) else type_kept(self.start, as_link(result.x))
         stats = getattr(scene, "moebius", None)
         if stats is not None:
-            stats.store_run(self.obj.name, self.nit, self.energies[0], self.energies[-1],
+            # the end as the result reports it (on the tree: its exact energy, core.engine)
+            stats.store_run(self.obj.name, self.nit, self.energies[0], float(result.fun),
                             time.perf_counter() - self.t0, str(result.message), len(frames),
                             self.method, self.engine, self.type_message,
                             refined=self.refinement_text(result),

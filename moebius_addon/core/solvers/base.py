@@ -93,6 +93,9 @@ class RelaxResult:
     why it stopped in words, ``status`` (a :class:`Status`) in a number to decide on."""
 
     x: object
+    #: the energy of ``x``: on the tree engine up to ``engine.EXACT_RESULT_MAX`` vertices the
+    #: exact sum (the tree's value, which the run saw, is ``stats["run_energy"]`` and the
+    #: history's last); on the exact engine the run's own value
     fun: float
     nit: int
     success: bool
@@ -341,16 +344,20 @@ class Run:
     def result(self) -> RelaxResult:
         if not self.done:
             self.stop("not finished (result taken early)", Status.NOT_FINISHED)
+        E = self.engine.result_energy(self.X, self.E)
+        stats = self._stats()
+        if E != self.E:  # the tree's value, which the run's stopping tests saw
+            stats["run_energy"] = self.E
         return RelaxResult(
             x=self.x,
-            fun=self.E,
+            fun=E,
             nit=self.nit,
             success=self.success,
             message=self.message,
             status=self.status,
             history={k: list(v) for k, v in self.history.items()},
             metric=self.metric,
-            stats=self._stats(),
+            stats=stats,
             energy=self.energy_choice.label,
         )
 
