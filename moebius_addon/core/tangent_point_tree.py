@@ -7,23 +7,28 @@ the same hierarchy, the same dual traversal, the same near and far lists), and s
 
 * **near pairs** (leaves close to each other): every ordered pair of edges exactly, except an
   edge with itself and its neighbours along the curve;
-* **far pairs** ``(A, B)`` (clusters apart, ``max(diam) ≤ θ · gap``): every *edge* ``I`` of
-  ``A`` against the cluster ``B`` as one point, the pair kernel with ``l_J = L_B`` (total
-  length) and ``m_J = c_B`` (length-weighted centre). The kernel depends on ``J`` only
-  through ``l_J`` and ``m_J``, so this is the monopole of ``B`` and its first order vanishes
-  (``Σ_J l_J (m_J − c_B) = 0``): the error is second order in ``diam B / |m_I − c_B|``. The
-  target side is not expanded at all, so the tangents enter exactly for every ``α`` (no
-  projector tensor is needed, and none could make ``|T × d|^α`` separable for ``α ≠ 2``).
-  The price: the far field costs one kernel per edge of ``A`` rather than one per pair of
-  clusters, O(N log N) rather than O(N); measured against the Möbius tree in
-  docs/benchmarks.md.
+* **far pairs** ``(A, B)`` (clusters apart, ``max(diam) ≤ θ · gap``), for ``α = 2``: **cluster
+  against cluster**, one kernel per ordered pair of clusters (O(N) kernels). With ``α = 2``,
+  ``f_IJ = l_I l_J dᵀ P_I d / |d|^β`` (``P_I = 1 − T_I T_Iᵀ``), so ``A`` enters through its
+  projector moments ``G = Σ e eᵀ/l`` and ``W = Σ (e eᵀ/l) ⊗ δ`` (``δ = m − c_A``), ``B`` through
+  ``L_B``, ``c_B``; the pair sum is expanded to first order on both sides around ``d = c_A −
+  c_B`` (B's first order vanishes), error second order in ``diam / |d|`` on both sides (the
+  formula in the block comment above :func:`_cc_node`).
+* far pairs for other ``α`` (``|T × d|^α`` is no polynomial in ``T``, no moments make it
+  separable): every *edge* ``I`` of ``A`` against ``B`` as one point, the pair kernel with
+  ``l_J = L_B`` and ``m_J = c_B`` (the monopole of ``B``, its first order vanishes; the
+  target side exact), one kernel per edge of ``A``, O(N log N).
+
+Errors and times of both measured in docs/benchmarks.md ("Tangent-point energy: cluster
+against cluster").
 
 The gradient is the exact derivative of this approximated sum for the fixed split: the far
-field's derivatives in ``L_B`` and ``c_B`` go to ``B``'s edges by ``∂L_B/∂l_J = 1``,
-``∂c_B/∂m_J = l_J/L_B``, ``∂c_B/∂l_J = (m_J − c_B)/L_B``. Every edge's own sums are
-sequential; what a pair gives its second edge or source cluster goes to :data:`_FAR_CHUNKS`
-fixed buffers (the leaves dealt to them in fixed ranges), added in a fixed order: the same
-bits for every thread count.
+field's derivatives in the clusters' moments go to their edges by the chain rule
+(``∂L/∂l_J = 1``, ``∂c/∂m_J = l_J/L``, ``∂c/∂l_J = (m_J − c)/L``, ``G`` and ``W`` through
+``e eᵀ/l`` and ``δ``, ``∂W_abk/∂c_k = −G_ab``), each edge walking up its ancestors. Every
+edge's and every target cluster's own sums are sequential; what a pair gives its second edge
+or source cluster goes to fixed buffers per fixed piece of the leaves or nodes, added in a
+fixed order: the same bits for every thread count.
 """
 
 from __future__ import annotations
@@ -50,9 +55,11 @@ from .energies.tangent_point import (
     pair,
 )
 
-#: Default admissibility of the tangent-point tree (see docs/benchmarks.md, "Tangent-point
-#: energy": the relative errors measured at it).
-THETA = 0.25
+#: Default admissibility of the tangent-point tree: relative errors (energy / gradient) at most
+#: 1.7e-3 / 2.0e-2 on FHW at 2 400–10 000 edges, about 5× / 30× below Repulsor's at its
+#: default (docs/benchmarks.md, "Tangent-point energy: cluster against cluster"); 0.25 cost
+#: 1.1–1.5× the time for errors about 1.5× smaller.
+THETA = 0.3
 # Fixed pieces of the parallel loops over leaves: the per-edge sums are their own (any split,
 # the same bits); what the pairs give their second edge (near) or source cluster (far) goes to
 # one buffer per piece, so their number is fixed.
