@@ -9,7 +9,7 @@ import pytest
 from moebius_addon import core
 from moebius_addon.core._layout import as_layout
 from moebius_addon.core.tangent_point_dense import tp_energy_gradient_x, tp_energy_x
-from moebius_addon.core.tangent_point_tree import TangentPointFrame
+from moebius_addon.core.tangent_point_tree import THETA, TangentPointFrame
 from tests.conftest import out_here_and_in_one_thread, trefoil
 
 EXPONENTS = [(2.0, 4.0), (3.0, 6.0), (2.5, 5.0)]
@@ -113,29 +113,31 @@ def test_moebius_is_unchanged_through_the_new_door():
 
 @pytest.mark.parametrize("alpha, beta", [(2.0, 4.0), (2.5, 5.0)])
 def test_tree_against_exact(alpha, beta):
-    # the tolerance documented in docs/benchmarks.md ("Tangent-point energy"): at the default
-    # theta (0.25) relative errors below 2e-3 (energy) and 5e-3 (gradient, 2-norm); at 0.1
-    # below 3e-4 and 1e-3; smaller theta, smaller error
+    # the tolerances documented in docs/benchmarks.md ("Tangent-point energy: cluster against
+    # cluster"): at the default theta (0.3) relative errors below 1e-3 (energy) and 2e-3
+    # (gradient, 2-norm) on this trefoil; at 0.1 below 3e-4 and 1e-3, at 0.5 5e-3 and 1e-2;
+    # smaller theta, smaller error. alpha = 2 is the cluster-cluster far field, 2.5 the
+    # edge-vs-cluster one
     P = trefoil(1200) + 0.002 * np.random.default_rng(4).standard_normal((1200, 3))
     X, lay = as_layout(P)
     e, g = tp_energy_gradient_x(X, lay, alpha, beta)
     errs = []
-    for theta in (0.1, 0.25, 0.5):
+    for theta in (0.1, THETA, 0.5):
         frame = TangentPointFrame(X, lay, alpha, beta, theta)
         et, gt = frame.energy_gradient(X)
         assert frame.energy(X) == et
         assert frame.far_pairs > 0
         eg = np.linalg.norm(gt - g) / np.linalg.norm(g)
         errs.append(eg)
-        assert abs(et - e) <= {0.1: 3e-4, 0.25: 2e-3, 0.5: 5e-3}[theta] * e, theta
-        assert eg <= {0.1: 1e-3, 0.25: 5e-3, 0.5: 1e-2}[theta], theta
+        assert abs(et - e) <= {0.1: 3e-4, THETA: 1e-3, 0.5: 5e-3}[theta] * e, theta
+        assert eg <= {0.1: 1e-3, THETA: 2e-3, 0.5: 1e-2}[theta], theta
     assert errs[0] < errs[1] < errs[2]
     assert core.energy(P, energy="tangent_point", alpha=alpha, beta=beta, engine="tree") == (
         TangentPointFrame(X, lay, alpha, beta).energy(X))
     # a chain of three rings (bench/tree_bench.py's link3): far pairs between components too.
-    # Round rings are nearly critical: the gradient is a small sum of large terms, and the
-    # monopole far field's error relative to it is larger (docs/benchmarks.md: 3.7 % at the
-    # default theta, 0.5 % at 0.1)
+    # Round rings are nearly critical: the gradient is a small sum of large terms (a single
+    # round ring's is 0), and the far field's error relative to it is large (measured: 11.7 %
+    # at the default theta with alpha = 2, 1.0 % at 0.1)
     s = np.linspace(0, 2 * np.pi, 400, endpoint=False)
     ring = np.stack([np.cos(s), np.sin(s), 0 * s], axis=1)
     link = [ring, ring[:, [0, 2, 1]] + np.array([1.2, 0.0, 0.0]), ring + np.array([2.4, 0, 0])]
@@ -143,10 +145,10 @@ def test_tree_against_exact(alpha, beta):
     e, g = tp_energy_gradient_x(X, lay, alpha, beta)
     et, gt = TangentPointFrame(X, lay, alpha, beta).energy_gradient(X)
     assert abs(et - e) <= 2e-3 * e
-    assert np.linalg.norm(gt - g) <= 5e-2 * np.linalg.norm(g)
+    assert np.linalg.norm(gt - g) <= 0.15 * np.linalg.norm(g)
     et, gt = TangentPointFrame(X, lay, alpha, beta, 0.1).energy_gradient(X)
     assert abs(et - e) <= 3e-4 * e
-    assert np.linalg.norm(gt - g) <= 1e-2 * np.linalg.norm(g)
+    assert np.linalg.norm(gt - g) <= 2e-2 * np.linalg.norm(g)
 
 
 @pytest.mark.parametrize("alpha, beta", [(2.0, 4.0), (3.0, 6.0)])
