@@ -150,7 +150,22 @@ def write_doc(rows: list[dict], sheets: list) -> None:
              ""]
     for title, file, count in sheets:
         lines += [f"## {title}", "", f"![{count} relaxed knots, {title}](img/{file})", ""]
-    DOC.write_text("\n".join(lines))
+    DOC.write_text("\n".join(lines) + kept_sections(sheets))
+
+
+def kept_sections(sheets: list) -> str:
+    """What docs/gallery.md has after the sheets (sections other scripts write, e.g. "Two
+    energies" of bench/energy_compare_gallery.py), from its first "## " heading that is not a
+    sheet's, kept as it is."""
+    if not DOC.exists():
+        return ""
+    titles = {title for title, _, _ in sheets} | {title for title, _, _ in GROUPS}
+    text = DOC.read_text().split("\n")
+    for k, line in enumerate(text):
+        if line.startswith("## ") and line[3:] not in titles and not line[3:].startswith(
+                "10 crossings ("):
+            return "\n" + "\n".join(text[k:])
+    return ""
 
 
 if __name__ == "__main__":
