@@ -152,8 +152,8 @@ class CoarseLevel:
 #: components, in mean edge lengths) stays at least ``MIN_CONTACT``; its coarsest level is
 #: solved densely when it has at most ``DENSE_MAX`` vertices, else by its banded ``H``.
 COARSEST = 400
-MIN_CONTACT = 2.0
-DENSE_MAX = 2600
+MIN_CONTACT = 0.5
+DENSE_MAX = 1200
 
 
 def _halve(layout: Layout) -> tuple[np.ndarray, Layout, sparse.csr_matrix]:
@@ -201,13 +201,18 @@ class Multilevel:
     (every second vertex per component, :func:`_halve`) down to at most ``COARSEST`` vertices,
     each level with its own constraints and its own constraint preconditioner (the banded
     ``H`` of its own hs operator, :meth:`HsOperator.preconditioner_parts`), the coarsest
-    solved densely. Applied to a residual ``R`` it returns ``Π P₁ (z₁ + P₂ (z₂ + …))`` with
-    ``R₁ = P₁ᵀ Π R``, ``R_l = P_lᵀ R_{l−1}`` and ``z_l`` level ``l``'s constrained solve of
+    solved densely. Applied to a residual ``R`` it returns ``Π_H P₁ (z₁ + P₂ (z₂ + …))`` with
+    ``R₁ = P₁ᵀ Π_Hᵀ R``, ``R_l = P_lᵀ R_{l−1}`` and ``z_l`` level ``l``'s constrained solve of
     ``R_l``: added to the fine constraint preconditioner, an additive multilevel (BPX)
     preconditioner. Each level's banded ``H`` matches the hs operator near its own grid's
     frequency and is too stiff below it (h1 grows as k², hs as k^{2s}); the sum over the levels
     covers every frequency, which one coarse level cannot do once N/COARSE_MAX grows.
-    Symmetric and positive semi-definite, into ``ker C`` (``Π``, as :class:`CoarseLevel`).
+    The interpolated sum leaves ``ker C``; it is brought back by ``Π_H = I − H⁻¹Cᵀ(CH⁻¹Cᵀ)⁻¹C``
+    (the fine constraint preconditioner's projection) and the residual enters as ``Π_Hᵀ R``, so
+    the correction stays symmetric positive semi-definite, into ``ker C``. The Euclidean
+    projection of :class:`CoarseLevel` instead made coarse levels far below the fine one correct
+    wrongly (5_2 at 8 000 vertices, one dense level of 63 vertices: 200 iterations, the cap,
+    against 10 with ``Π_H``; docs/benchmarks.md).
     Pins are not supported (the caller leaves it out). No level (:attr:`levels` 0) when the
     first halving already comes too close or the curve has at most ``COARSEST`` vertices.
 
@@ -219,11 +224,14 @@ class Multilevel:
     jac : Jacobian
         The fine constraint Jacobian.
     order : float
+    fine : BandedSaddle, optional
+        The fine constraint preconditioner (built from ``X`` if not given).
     """
 
     def __init__(self, X: np.ndarray, layout: Layout, metric: str, jac: Jacobian,
-                 order: float = PAPER_ORDER):
-        self.project = TangentProjector(jac)
+                 order: float = PAPER_ORDER, fine: BandedSaddle | None = None):
+        self.jac = jac
+        self.fine = BandedSaddle(_parts(X, layout, metric, order), jac) if fine is None else fine
         self.transfers: list[tuple[sparse.csr_matrix, sparse.csr_matrix]] = []
         polygons = []
         Xl, lay = X, layout
@@ -233,9 +241,9 @@ class Multilevel:
                 break
             Xc = Xl[idx]
             ln = np.linalg.norm(Xc[clay.nxt] - Xc, axis=1)
-            # a level whose strands come closer than its edges is not the curve's shape: its
-            # operator corrected the fine one wrongly (FHW at 20 000 vertices down to 312:
-            # 24 iterations per solve, down to 625: 8)
+            # a level whose strands cross is not the curve's shape (FHW at 100 000 vertices,
+            # levels down to 390 vertices with this rule: 10 iterations per solve; with ratio
+            # ≥ 2, down to 1 562 vertices and that level banded: 19)
             if closest_pairs(Xc, clay, CONTACT_GAP)[0][0] < MIN_CONTACT * ln.mean():
                 break
             self.transfers.append((P, P.T.tocsr()))
@@ -259,8 +267,11 @@ class Multilevel:
         return len(self.solves)
 
     def __call__(self, R: np.ndarray) -> np.ndarray:
+        """The correction for a residual ``R`` already free of its ``range Cᵀ`` part in the
+        fine ``H``'s metric (``R − Cᵀμ`` with ``μ`` the multipliers of the fine constraint
+        preconditioner's solve of ``R``, :meth:`HsSaddle._precondition`)."""
         rs = []
-        r = self.project(R)
+        r = R
         for _, Pt in self.transfers:
             r = Pt @ r
             rs.append(r)
@@ -269,7 +280,13 @@ class Multilevel:
             solve, m = self.solves[lvl]
             z = solve(rs[lvl], np.zeros(m))[0]
             y = z if y is None else z + self.transfers[lvl + 1][0] @ y
-        return self.project(self.transfers[0][0] @ y)
+        v = self.transfers[0][0] @ y
+        # back onto C v = 0 by the H-smallest change (one more band solve)
+        return v - self.fine._solve(np.zeros_like(v), self.jac.matvec(v))[0]
+
+
+def _parts(X, layout, metric, order):
+    return HsOperator(X, layout, metric, order=order).preconditioner_parts()
 
 
 class HsSaddle:
@@ -326,7 +343,7 @@ class HsSaddle:
         n = op.layout.n
         if coarse is None and PRECONDITIONER == "multilevel":
             if n >= MULTILEVEL_FROM:
-                levels = Multilevel(X, op.layout, op.metric, jac, op.order)
+                levels = Multilevel(X, op.layout, op.metric, jac, op.order, self.K)
                 self.coarse = levels if levels.levels else None
             return
         size = coarse_size(n) if coarse is None else int(coarse)
@@ -344,7 +361,9 @@ class HsSaddle:
         """``(z, μ)``: the constraint preconditioner's ``H z + Cᵀμ = R``, ``C z = 0``, plus the
         coarse level's correction."""
         z, mu = self.K._solve(R, np.zeros(self.jac.con.size))
-        if self.coarse is not None:
+        if isinstance(self.coarse, Multilevel):
+            z += self.coarse(R - self.jac.rmatvec(mu))
+        elif self.coarse is not None:
             z += self.coarse(R)
         return z, mu
 
