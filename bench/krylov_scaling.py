@@ -6,6 +6,8 @@ docs/img/krylov_scaling.png; not a test.
     python bench/krylov_scaling.py --n 1000 10000 100000 --iterations 3
     python bench/krylov_scaling.py --plot out/krylov_scaling.json   # plot a saved table only
 
+The multilevel preconditioner is measured from 1 000 vertices on (``MULTILEVEL_FROM`` 0).
+
 Every (curve, N) runs ``core.make_run("projected_gradient", P, engine="tree", metric="hs")``
 for ``--iterations`` iterations with each preconditioner of ``hs_solve.PRECONDITIONERS``, the
 two alternated (``two_level``: today's banded constraint preconditioner plus, from

@@ -46,9 +46,9 @@ COARSE_FROM = 20000
 #: Which preconditioner :class:`HsSaddle` builds: "two_level" (the banded constraint
 #: preconditioner plus :class:`CoarseLevel`) or "multilevel" (plus :class:`Multilevel`).
 PRECONDITIONERS = ("two_level", "multilevel")
-#: "two_level" stays the default: "multilevel" saved Krylov iterations at 10 000 vertices but
-#: cost more seconds there, and at 100 000 it needed more iterations than the dense coarse level
-#: (docs/benchmarks.md, "Krylov iterations against N").
+#: "two_level" stays the default until "multilevel" is measured at 10⁶ and on an idle machine:
+#: at 10⁵ it needed 8–17 iterations per solve where two_level needed 14–37, at 10³–10⁴ its
+#: set-up cost more seconds than it saved (docs/benchmarks.md, "Krylov iterations against N").
 PRECONDITIONER = "two_level"
 #: "multilevel" from this many vertices on (below, the banded constraint preconditioner alone).
 MULTILEVEL_FROM = COARSE_FROM
