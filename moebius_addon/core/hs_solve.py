@@ -22,14 +22,17 @@ Every iterate stays on ``C u = r`` to rounding, whatever the tolerance. Measured
 from __future__ import annotations
 
 import numpy as np
+from scipy import sparse
 
 from ._layout import Layout, layout_from_sizes
 from .banded import BandedSaddle
+from .collision import closest_pairs
 from .constraints import Jacobian, TangentProjector, jacobian, make_constraints
 from .hs_tree import HsOperator
 from .linalg import Factorization
 from .metrics import PAPER_ORDER, gram_x
 from .pinned_solve import BorderedPins, unpinned_jacobian
+from .polygon import CONTACT_GAP
 
 #: Relative tolerance of the gradient's Krylov solve (preconditioned residual norm).
 RTOL = 1e-2
@@ -40,6 +43,15 @@ RTOL = 1e-2
 COARSE_PER_ROOT = 8.0
 COARSE_MAX = 2500
 COARSE_FROM = 20000
+#: Which preconditioner :class:`HsSaddle` builds: "two_level" (the banded constraint
+#: preconditioner plus :class:`CoarseLevel`) or "multilevel" (plus :class:`Multilevel`).
+PRECONDITIONERS = ("two_level", "multilevel")
+#: "two_level" stays the default until "multilevel" is measured at 10⁶ and on an idle machine:
+#: at 10⁵ it needed 8–17 iterations per solve where two_level needed 14–37, at 10³–10⁴ its
+#: set-up cost more seconds than it saved (docs/benchmarks.md, "Krylov iterations against N").
+PRECONDITIONER = "two_level"
+#: "multilevel" from this many vertices on (below, the banded constraint preconditioner alone).
+MULTILEVEL_FROM = COARSE_FROM
 
 
 def check_rtol(rtol) -> float:
@@ -135,6 +147,148 @@ class CoarseLevel:
         return self.project(self.prolong(uc))
 
 
+#: The multilevel preconditioner halves the curve down to at most ``COARSEST`` vertices,
+#: while every level's contact ratio (closest vertices ``CONTACT_GAP`` edges apart or on other
+#: components, in mean edge lengths) stays at least ``MIN_CONTACT``; its coarsest level is
+#: solved densely when it has at most ``DENSE_MAX`` vertices, else by its banded ``H``.
+COARSEST = 400
+MIN_CONTACT = 0.5
+DENSE_MAX = 1200
+
+
+def _halve(layout: Layout) -> tuple[np.ndarray, Layout, sparse.csr_matrix]:
+    """Every second vertex of each component with at least 16 vertices (the others kept
+    whole): the kept indices, the coarse layout and the interpolation ``P`` (fine × coarse)
+    from the coarse vertices to the fine ones, by the four-point subdivision scheme (Dubuc;
+    Deslauriers & Dubuc): the kept vertices stay, a dropped one is
+    ``(−c_{j−1} + 9 c_j + 9 c_{j+1} − c_{j+2}) / 16``. Its limit fields are C¹, so the
+    interpolated fields of a coarse level have about the hs energy of the coarse level's own
+    operator; linear interpolation's kinks do not (a kink's W^{3/2,2} energy grows like the
+    log of the fine vertices per coarse edge, and faster above order 3/2)."""
+    idx, sizes, rows, cols, vals = [], [], [], [], []
+    offset = 0
+    for c in range(layout.k):
+        s0, s1 = int(layout.starts[c]), int(layout.starts[c + 1])
+        local = np.arange(s1 - s0)
+        if s1 - s0 < 16:
+            k = s1 - s0
+            rows.append(s0 + local)
+            cols.append(offset + local)
+            vals.append(np.ones(k))
+        else:
+            kept = local[::2]
+            k = len(kept)
+            j = np.arange(k)
+            rows.append(s0 + kept)
+            cols.append(offset + j)
+            vals.append(np.ones(k))
+            odd = local[1::2]
+            jo = odd // 2
+            for shift, w in ((-1, -1 / 16), (0, 9 / 16), (1, 9 / 16), (2, -1 / 16)):
+                rows.append(s0 + odd)
+                cols.append(offset + (jo + shift) % k)
+                vals.append(np.full(len(odd), w))
+        idx.append(s0 + local[::2] if s1 - s0 >= 16 else s0 + local)
+        sizes.append(k)
+        offset += k
+    P = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                          shape=(layout.n, offset))
+    return np.concatenate(idx), layout_from_sizes(sizes, layout.is_link), P
+
+
+class Multilevel:
+    """The coarse levels of the multilevel preconditioner: the curve halved again and again
+    (every second vertex per component, :func:`_halve`) down to at most ``COARSEST`` vertices,
+    each level with its own constraints and its own constraint preconditioner (the banded
+    ``H`` of its own hs operator, :meth:`HsOperator.preconditioner_parts`), the coarsest
+    solved densely. Applied to a residual ``R`` it returns ``Π_H P₁ (z₁ + P₂ (z₂ + …))`` with
+    ``R₁ = P₁ᵀ Π_Hᵀ R``, ``R_l = P_lᵀ R_{l−1}`` and ``z_l`` level ``l``'s constrained solve of
+    ``R_l``: added to the fine constraint preconditioner, an additive multilevel (BPX)
+    preconditioner. Each level's banded ``H`` matches the hs operator near its own grid's
+    frequency and is too stiff below it (h1 grows as k², hs as k^{2s}); the sum over the levels
+    covers every frequency, which one coarse level cannot do once N/COARSE_MAX grows.
+    The interpolated sum leaves ``ker C``; it is brought back by ``Π_H = I − H⁻¹Cᵀ(CH⁻¹Cᵀ)⁻¹C``
+    (the fine constraint preconditioner's projection) and the residual enters as ``Π_Hᵀ R``, so
+    the correction stays symmetric positive semi-definite, into ``ker C``. The Euclidean
+    projection of :class:`CoarseLevel` instead made coarse levels far below the fine one correct
+    wrongly (5_2 at 8 000 vertices, one dense level of 63 vertices: 200 iterations, the cap,
+    against 10 with ``Π_H``; docs/benchmarks.md).
+    Pins are not supported (the caller leaves it out). No level (:attr:`levels` 0) when the
+    first halving already comes too close or the curve has at most ``COARSEST`` vertices.
+
+    Parameters
+    ----------
+    X : (N, 3) array
+    layout : Layout
+    metric : {"hs", "hs_pure"}
+    jac : Jacobian
+        The fine constraint Jacobian.
+    order : float
+    fine : BandedSaddle, optional
+        The fine constraint preconditioner (built from ``X`` if not given).
+    """
+
+    def __init__(self, X: np.ndarray, layout: Layout, metric: str, jac: Jacobian,
+                 order: float = PAPER_ORDER, fine: BandedSaddle | None = None):
+        self.jac = jac
+        self.fine = BandedSaddle(_parts(X, layout, metric, order), jac) if fine is None else fine
+        self.transfers: list[tuple[sparse.csr_matrix, sparse.csr_matrix]] = []
+        polygons = []
+        Xl, lay = X, layout
+        while lay.n > COARSEST:
+            idx, clay, P = _halve(lay)
+            if clay.n == lay.n:
+                break
+            Xc = Xl[idx]
+            ln = np.linalg.norm(Xc[clay.nxt] - Xc, axis=1)
+            # a level whose strands cross is not the curve's shape (FHW at 100 000 vertices,
+            # levels down to 390 vertices with this rule: 10 iterations per solve; with ratio
+            # ≥ 2, down to 1 562 vertices and that level banded: 19)
+            if closest_pairs(Xc, clay, CONTACT_GAP)[0][0] < MIN_CONTACT * ln.mean():
+                break
+            self.transfers.append((P, P.T.tocsr()))
+            polygons.append((Xc, clay, ln))
+            Xl, lay = Xc, clay
+        self.solves = []
+        for i, (Xl, lay, ln) in enumerate(polygons):
+            jc = jacobian(Xl, make_constraints(Xl, lay, ln))
+            if i == len(polygons) - 1 and lay.n <= DENSE_MAX:
+                # double precision, as CoarseLevel's
+                fac = Factorization(gram_x(metric, Xl, lay, order=order), jc, np.float64)
+                self.solves.append((fac.solve, jc.con.size))
+            else:
+                op = HsOperator(Xl, lay, metric, order=order)
+                self.solves.append((BandedSaddle(op.preconditioner_parts(), jc)._solve,
+                                    jc.con.size))
+
+    @property
+    def levels(self) -> int:
+        """Coarse levels (the fine one not counted)."""
+        return len(self.solves)
+
+    def __call__(self, R: np.ndarray) -> np.ndarray:
+        """The correction for a residual ``R`` already free of its ``range Cᵀ`` part in the
+        fine ``H``'s metric (``R − Cᵀμ`` with ``μ`` the multipliers of the fine constraint
+        preconditioner's solve of ``R``, :meth:`HsSaddle._precondition`)."""
+        rs = []
+        r = R
+        for _, Pt in self.transfers:
+            r = Pt @ r
+            rs.append(r)
+        y = None
+        for lvl in range(len(self.solves) - 1, -1, -1):
+            solve, m = self.solves[lvl]
+            z = solve(rs[lvl], np.zeros(m))[0]
+            y = z if y is None else z + self.transfers[lvl + 1][0] @ y
+        v = self.transfers[0][0] @ y
+        # back onto C v = 0 by the H-smallest change (one more band solve)
+        return v - self.fine._solve(np.zeros_like(v), self.jac.matvec(v))[0]
+
+
+def _parts(X, layout, metric, order):
+    return HsOperator(X, layout, metric, order=order).preconditioner_parts()
+
+
 class HsSaddle:
     """Saddle-point solves with ``Ã`` (:class:`HsOperator`) at one iterate, by projected
     preconditioned conjugate gradients (see the module's text).
@@ -159,9 +313,11 @@ class HsSaddle:
     recycle : HsSaddle, optional
         The previous iterate's solver, whose band memory this one takes over.
     X : (N, 3) array, optional
-        The polygon (needed for the coarse level).
+        The polygon (needed for the coarse levels).
     coarse : int, optional
-        Vertices of the coarse level (default :func:`coarse_size`; 0: none).
+        Vertices of a single coarse level (:class:`CoarseLevel`; 0: none). Default: the
+        preconditioner ``PRECONDITIONER`` names, :class:`Multilevel` from ``MULTILEVEL_FROM``
+        vertices on ("multilevel"), or :func:`coarse_size` vertices ("two_level").
     """
 
     def __init__(self, op: HsOperator, jac: Jacobian, rtol: float = RTOL, max_iter: int = 200,
@@ -180,10 +336,18 @@ class HsSaddle:
             self.K = BorderedPins(BandedSaddle(op.preconditioner_parts(),
                                                unpinned_jacobian(jac), old), jac)
         self.iterations: list[int] = [] if log is None else log
-        size = coarse_size(op.layout.n) if coarse is None else int(coarse)
         self.coarse = None
-        # the coarse level projects with the constraints' TangentProjector, which has no pins
-        if size and X is not None and size < op.layout.n and jac.con.pinned is None:
+        # the coarse levels project with the constraints' TangentProjector, which has no pins
+        if X is None or jac.con.pinned is not None:
+            return
+        n = op.layout.n
+        if coarse is None and PRECONDITIONER == "multilevel":
+            if n >= MULTILEVEL_FROM:
+                levels = Multilevel(X, op.layout, op.metric, jac, op.order, self.K)
+                self.coarse = levels if levels.levels else None
+            return
+        size = coarse_size(n) if coarse is None else int(coarse)
+        if size and size < n:
             self.coarse = CoarseLevel(X, op.layout, op.metric, jac, size, op.order)
 
     def release(self) -> None:
@@ -197,7 +361,9 @@ class HsSaddle:
         """``(z, μ)``: the constraint preconditioner's ``H z + Cᵀμ = R``, ``C z = 0``, plus the
         coarse level's correction."""
         z, mu = self.K._solve(R, np.zeros(self.jac.con.size))
-        if self.coarse is not None:
+        if isinstance(self.coarse, Multilevel):
+            z += self.coarse(R - self.jac.rmatvec(mu))
+        elif self.coarse is not None:
             z += self.coarse(R)
         return z, mu
 
