@@ -342,8 +342,14 @@ class _Writer:
         if path.exists():
             with path.open(newline="") as f:
                 self.fields = next(csv.reader(f), None) or _fields(n_stages)
-            if sum(f.startswith("status") for f in self.fields) < n_stages:
-                raise ValueError(f"{path} has fewer stages than these tasks; use another --out")
+            old = sum(f.startswith("status") for f in self.fields)
+            if old < n_stages:  # these tasks have more stages: widen the header
+                rows = list(read_results(out).values())
+                self.fields = _fields(n_stages)
+                with path.open("w", newline="") as f:
+                    w = csv.DictWriter(f, fieldnames=self.fields)
+                    w.writeheader()
+                    w.writerows(rows)
         else:
             self.fields = _fields(n_stages)
             with path.open("w", newline="") as f:
