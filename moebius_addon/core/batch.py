@@ -500,12 +500,14 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
                 # __pycache__, or NUMBA_CACHE_DIR, which the workers inherit)
                 from .warmup import warm
 
-                warm(("exact",) + (("tangent_point",) if any(
-                    t.energy != "moebius" for t in todo) else ()), say=None)
+                warm(_warm_paths(todo), say=None)
                 cluster = distributed.LocalCluster(
                     n_workers=workers, threads_per_worker=1, processes=True,
                     dashboard_address=dashboard, env=thread_env(threads))
                 client = distributed.Client(cluster)
+            # every worker loads its kernels before the first task, so that a task's seconds
+            # are its relaxation's (on a cluster without a shared cache each compiles here)
+            client.run(_warm_worker, _warm_paths(todo), threads)
             report["dashboard"] = _dashboard(client)
             say(f"Dask: {len(client.scheduler_info()['workers'])} workers at "
                 f"{client.scheduler.address}; dashboard {report['dashboard'] or 'none'}")
@@ -529,6 +531,20 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
     say(f"{len(report['done'])} done, {len(report['failed'])} failed in "
         f"{report['seconds']:.1f} s")
     return report
+
+
+def _warm_paths(todo: list[Task]) -> tuple[str, ...]:
+    return ("exact",) + (("tangent_point",) if any(t.energy != "moebius" for t in todo)
+                         else ())
+
+
+def _warm_worker(paths: tuple[str, ...], threads: int) -> None:
+    import numba
+
+    from .warmup import warm
+
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    warm(paths, say=None)
 
 
 def thread_env(threads: int) -> dict[str, str]:
