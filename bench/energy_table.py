@@ -11,16 +11,21 @@ trefoil by ``--order-study``) Richardson extrapolation gives
 ``E_∞ = E(n2) + (E(n2) − E(n1)) / (2^p − 1)``. The relaxed curve is identified
 (``core.identify``) to check it is still the knot it started as.
 
-Rows go to ``docs/data/energy_table.csv`` (name, crossings, n1, E1, iterations, seconds, status,
-n2, E2, iterations, seconds, status, extrapolated, identified); relaxed polygons to
-``out/energy_table/<name>_<n>.obj``. Knots already in the CSV are skipped, so the run can be
-stopped and started again. ``--pack`` gathers the relaxed polygons at ``n2`` edges of every row
-into ``docs/data/energy_table_curves.npz`` (one float32 array per knot, centred and scaled to
-unit edge length; ``--check-pack`` recomputes their energies against the CSV);
+The knots run as one ``core.batch`` job (one task per knot, ``stages=(1, 2)``, largest first;
+``--workers``/``--threads`` a local Dask cluster, ``--scheduler`` a running one, ``--workers 0``
+this process; docs/api.md "Batch runs"), resumable in ``out/energy_table/batch``. Finished
+knots become rows of ``docs/data/energy_table.csv`` (name, crossings, n1, E1, iterations,
+seconds, status, n2, E2, iterations, seconds, status, extrapolated, identified), their relaxed
+polygons at ``n2`` ``out/energy_table/<name>_<n2>.obj``. Knots already in the CSV are skipped,
+so the run can be stopped and started again. ``--pack`` gathers the relaxed polygons at ``n2``
+edges of every row into ``docs/data/energy_table_curves.npz`` (one float32 array per knot,
+centred and scaled to unit edge length; ``--check-pack`` recomputes their energies against the CSV);
 ``--reidentify`` names every relaxed curve again with the current ``core.identify``::
 
     .venv/bin/python bench/energy_table.py                     # all 250, hours
     .venv/bin/python bench/energy_table.py --names 3_1 4_1     # some
+    .venv/bin/python bench/energy_table.py --min-crossings 11 --max-crossings 11 --limit 20 \
+        --csv docs/data/energy_table_11.csv --workers 2          # a slice of 11 crossings
     .venv/bin/python bench/energy_table.py --order-study 3_1   # E(n) at n, 2n, 4n
     .venv/bin/python bench/energy_table.py --pack              # the curves, for the docs
 """
