@@ -551,11 +551,14 @@ def _warm_worker(paths: tuple[str, ...], threads: int) -> None:
 
 
 def thread_env(threads: int) -> dict[str, str]:
-    """The environment of a local worker: ``threads`` for numba and for the BLAS under numpy
-    (Dask's default gives BLAS one thread). The BLAS thread count changes the last bits of
-    its products, so a run here gives the same bits only with the same counts."""
+    """The environment of a local worker: ``threads`` for the BLAS under numpy (Dask's
+    default gives it one). The BLAS thread count changes the last bits of its products, so a
+    run here gives the same bits only with the same count. numba's count is set per task
+    (``numba.set_num_threads``), not here: a worker that inherited another
+    ``NUMBA_NUM_THREADS`` failed every task that compiled a kernel ("Cannot set
+    NUMBA_NUM_THREADS to a different value once the threads have been launched")."""
     return {name: str(threads) for name in
-            ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+            ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
 
 
 def _dashboard(client) -> str | None:
