@@ -216,10 +216,11 @@ def main() -> None:
         with args.csv.open() as f:
             done = {row["name"] for row in csv.DictReader(f)}
     todo = [n for n in names if n not in done]
+    print(f"{len(names)} knots, {len(names) - len(todo)} done before, {len(todo)} to go"
+          f"{'' if args.limit is None else f' ({args.limit} now)'}; "
+          f"load {os.getloadavg()[0]:.2f}", flush=True)
     if args.limit is not None:
         todo = todo[:args.limit]
-    print(f"{len(names)} knots, {len(names) - len(todo)} done before, {len(todo)} to go; "
-          f"load {os.getloadavg()[0]:.2f}", flush=True)
     tasks = table_tasks(todo, args)
     # the batch folder is the resumable record of each task; the table gets the finished ones
     batch.run(tasks, args.out, workers=args.workers, threads=args.threads,
