@@ -11,16 +11,21 @@ trefoil by ``--order-study``) Richardson extrapolation gives
 ``E_∞ = E(n2) + (E(n2) − E(n1)) / (2^p − 1)``. The relaxed curve is identified
 (``core.identify``) to check it is still the knot it started as.
 
-Rows go to ``docs/data/energy_table.csv`` (name, crossings, n1, E1, iterations, seconds, status,
-n2, E2, iterations, seconds, status, extrapolated, identified); relaxed polygons to
-``out/energy_table/<name>_<n>.obj``. Knots already in the CSV are skipped, so the run can be
-stopped and started again. ``--pack`` gathers the relaxed polygons at ``n2`` edges of every row
-into ``docs/data/energy_table_curves.npz`` (one float32 array per knot, centred and scaled to
-unit edge length; ``--check-pack`` recomputes their energies against the CSV);
+The knots run as one ``core.batch`` job (one task per knot, ``stages=(1, 2)``, largest first;
+``--workers``/``--threads`` a local Dask cluster, ``--scheduler`` a running one, ``--workers 0``
+this process; docs/api.md "Batch runs"), resumable in ``out/energy_table/batch``. Finished
+knots become rows of ``docs/data/energy_table.csv`` (name, crossings, n1, E1, iterations,
+seconds, status, n2, E2, iterations, seconds, status, extrapolated, identified), their relaxed
+polygons at ``n2`` ``out/energy_table/<name>_<n2>.obj``. Knots already in the CSV are skipped,
+so the run can be stopped and started again. ``--pack`` gathers the relaxed polygons at ``n2``
+edges of every row into ``docs/data/energy_table_curves.npz`` (one float32 array per knot,
+centred and scaled to unit edge length; ``--check-pack`` recomputes their energies against the CSV);
 ``--reidentify`` names every relaxed curve again with the current ``core.identify``::
 
     .venv/bin/python bench/energy_table.py                     # all 250, hours
     .venv/bin/python bench/energy_table.py --names 3_1 4_1     # some
+    .venv/bin/python bench/energy_table.py --min-crossings 11 --max-crossings 11 --limit 20 \
+        --csv docs/data/energy_table_11.csv --workers 2          # a slice of 11 crossings
     .venv/bin/python bench/energy_table.py --order-study 3_1   # E(n) at n, 2n, 4n
     .venv/bin/python bench/energy_table.py --pack              # the curves, for the docs
 """
@@ -40,11 +45,12 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from moebius_addon import core  # noqa: E402
-from moebius_addon.core import knots  # noqa: E402
+from moebius_addon.core import batch, knots  # noqa: E402
 
 CSV = ROOT / "docs" / "data" / "energy_table.csv"
 CURVES = ROOT / "docs" / "data" / "energy_table_curves.npz"
 OBJ = ROOT / "out" / "energy_table"
+BATCH = OBJ / "batch"
 FIELDS = ["name", "crossings", "n1", "energy1", "iterations1", "seconds1", "status1", "n2",
           "energy2", "iterations2", "seconds2", "status2", "extrapolated", "identified"]
 METHOD = "projected_gradient_implicit"
@@ -57,30 +63,29 @@ def relax(P, args):
     return r, time.perf_counter() - t0
 
 
-def table_names(max_crossings: int) -> list[str]:
-    return [n for n in knots.names("knot") if knots.info(n)["crossings"] <= max_crossings]
+def table_names(max_crossings: int, min_crossings: int = 0) -> list[str]:
+    return [n for n in knots.names("knot")
+            if min_crossings <= knots.info(n)["crossings"] <= max_crossings]
 
 
-def run_one(name: str, args) -> dict:
-    P = knots.named(name)
-    n1 = len(P)
-    if knots.info(name)["crossings"] == 0:
-        P = knots.circle(100)
-        n1 = 100
-    r1, s1 = relax(P, args)
-    n2 = 2 * n1
-    r2, s2 = relax(core.resample(r1.x, n2), args)
-    e1, e2 = float(r1.fun), float(r2.fun)
-    extrapolated = e2 + (e2 - e1) / (2.0 ** args.order - 1.0)
-    found = core.identify(r2.x)
-    OBJ.mkdir(parents=True, exist_ok=True)
-    core.write_obj(OBJ / f"{name}_{n1}.obj", r1.x, name=name)
-    core.write_obj(OBJ / f"{name}_{n2}.obj", r2.x, name=name)
-    return {"name": name, "crossings": knots.info(name)["crossings"], "n1": n1,
-            "energy1": f"{e1:.6f}", "iterations1": r1.nit, "seconds1": f"{s1:.1f}",
-            "status1": r1.status.name, "n2": n2, "energy2": f"{e2:.6f}",
-            "iterations2": r2.nit, "seconds2": f"{s2:.1f}", "status2": r2.status.name,
-            "extrapolated": f"{extrapolated:.4f}", "identified": " | ".join(found.names)}
+def table_tasks(names: list[str], args) -> list[batch.Task]:
+    """One batch task per knot: its table default ``n1`` edges (the unknot 100), relaxed, then
+    resampled to ``2 n1`` and relaxed again (``stages=(1, 2)``), identified at the end."""
+    return [batch.Task(name, "knot", name, batch.default_edges(name), (1.0, 2.0),
+                       method=METHOD, tol=args.tol, max_iter=args.max_iter,
+                       max_seconds=args.max_seconds, identify=True) for name in names]
+
+
+def table_row(r: dict, order: float) -> dict:
+    """The table's row from a batch row (results.csv of ``core.batch``)."""
+    e1, e2 = float(r["energy1"]), float(r["energy2"])
+    extrapolated = e2 + (e2 - e1) / (2.0 ** order - 1.0)
+    return {"name": r["name"], "crossings": knots.info(r["name"])["crossings"], "n1": r["n1"],
+            "energy1": f"{e1:.6f}", "iterations1": r["iterations1"],
+            "seconds1": f"{float(r['seconds1']):.1f}", "status1": r["status1"], "n2": r["n2"],
+            "energy2": f"{e2:.6f}", "iterations2": r["iterations2"],
+            "seconds2": f"{float(r['seconds2']):.1f}", "status2": r["status2"],
+            "extrapolated": f"{extrapolated:.4f}", "identified": r["identified"]}
 
 
 def order_study(name: str, args) -> None:
@@ -174,6 +179,14 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--names", nargs="*", default=None)
     ap.add_argument("--max-crossings", type=int, default=10)
+    ap.add_argument("--min-crossings", type=int, default=0)
+    ap.add_argument("--limit", type=int, default=None, help="at most this many knots")
+    ap.add_argument("--out", type=Path, default=BATCH, help="the batch folder (resumable)")
+    ap.add_argument("--workers", type=int, default=None,
+                    help="Dask worker processes (0: this process; default cores // threads)")
+    ap.add_argument("--threads", type=int, default=1, help="numba threads per worker")
+    ap.add_argument("--scheduler", default=None, help="address of a running Dask scheduler")
+    ap.add_argument("--dashboard", default=":8787")
     ap.add_argument("--tol", type=float, default=1e-4)
     ap.add_argument("--max-iter", type=int, default=1500)
     ap.add_argument("--max-seconds", type=float, default=600.0)
@@ -197,31 +210,40 @@ def main() -> None:
             pack(rows)
         check_pack(rows)
         return
-    names = args.names or table_names(args.max_crossings)
+    names = args.names or table_names(args.max_crossings, args.min_crossings)
     done = set()
     if args.csv.exists():
         with args.csv.open() as f:
             done = {row["name"] for row in csv.DictReader(f)}
     todo = [n for n in names if n not in done]
-    print(f"{len(names)} knots, {len(names) - len(todo)} done before, {len(todo)} to go; "
+    print(f"{len(names)} knots, {len(names) - len(todo)} done before, {len(todo)} to go"
+          f"{'' if args.limit is None else f' ({args.limit} now)'}; "
           f"load {os.getloadavg()[0]:.2f}", flush=True)
+    if args.limit is not None:
+        todo = todo[:args.limit]
+    tasks = table_tasks(todo, args)
+    # the batch folder is the resumable record of each task; the table gets the finished ones
+    batch.run(tasks, args.out, workers=args.workers, threads=args.threads,
+              scheduler=args.scheduler, dashboard=args.dashboard or None,
+              say=lambda line: print(line, flush=True))
+    results = batch.read_results(args.out)
     args.csv.parent.mkdir(parents=True, exist_ok=True)
     new = not args.csv.exists()
+    OBJ.mkdir(parents=True, exist_ok=True)
+    added = 0
     with args.csv.open("a", newline="") as f:
         w = csv.DictWriter(f, fieldnames=FIELDS)
         if new:
             w.writeheader()
-        for k, name in enumerate(todo, 1):
-            row = run_one(name, args)
-            w.writerow(row)
-            f.flush()
-            print(f"[{k}/{len(todo)}] {name}: E({row['n1']}) = {row['energy1']} "
-                  f"({row['iterations1']} it, {row['seconds1']} s, {row['status1']}), "
-                  f"E({row['n2']}) = {row['energy2']} ({row['iterations2']} it, "
-                  f"{row['seconds2']} s, {row['status2']}), extrapolated "
-                  f"{row['extrapolated']}, identified {row['identified']}; "
-                  f"load {os.getloadavg()[0]:.2f}", flush=True)
-
+        for t in tasks:
+            r = results.get(t.id)
+            if r is None or r["error"] or not (args.out / "curves" / f"{t.id}.npz").exists():
+                continue
+            core.write_obj(OBJ / f"{r['name']}_{r['n2']}.obj", batch.load_curve(args.out, t.id),
+                           name=r["name"])
+            w.writerow(table_row(r, args.order))
+            added += 1
+    print(f"{added} rows added to {args.csv}; load {os.getloadavg()[0]:.2f}", flush=True)
 
 if __name__ == "__main__":
     main()

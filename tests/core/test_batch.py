@@ -1,0 +1,204 @@
+"""core.batch: tasks from what a user types, runs here and on a LocalCluster, resume, failures,
+refusals before any work. Tasks are tiny (40 edges, a few iterations)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from moebius_addon.core import batch, write_obj
+
+ROOT = Path(__file__).resolve().parents[2]
+SMALL = {"edges": [40], "max_iter": 4, "identify": False}
+
+
+def small(*inputs, **kw):
+    return batch.tasks(inputs, **{**SMALL, **kw})
+
+
+def rows(out) -> list[dict]:
+    with (Path(out) / "results.csv").open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def quiet(_):
+    pass
+
+
+def lemniscate_obj(path: Path) -> Path:
+    """A closed planar polygon through itself: read_obj takes it, relax refuses it."""
+    t = np.linspace(0.0, 2.0 * np.pi, 40, endpoint=False)
+    write_obj(path, np.c_[np.sin(t), np.sin(2.0 * t), 0.0 * t])
+    return path
+
+
+def test_tasks_from_names_patterns_ranges_and_files(tmp_path):
+    (tmp_path / "braids.txt").write_text("# two braids\nmy trefoil: 1 1 1\n[[1,5,2,4],[3,1,4,6],"
+                                         "[5,3,6,2]]\n")
+    (tmp_path / "objs").mkdir()
+    lemniscate_obj(tmp_path / "objs" / "eight.obj")
+    got = batch.tasks(["trefoil", "5_*", str(tmp_path / "braids.txt"), str(tmp_path / "objs")],
+                      crossings="4", edges=None)
+    names = [t.name for t in got]
+    assert names[:3] == ["3_1", "5_1", "5_2"]
+    assert "4_1" in names and "my trefoil" in names and "braids-3" in names
+    assert "eight" in names
+    eight = got[names.index("eight")]
+    assert eight.kind == "file" and eight.edges == 40 and len(eight.curve) == 1
+    assert got[0].edges == len(batch.knots.named("3_1"))
+    # one task per (curve, edge count, seed); ids unique
+    more = batch.tasks(["3_1"], edges=[40, 60], seeds=(0, 1))
+    assert len({t.id for t in more}) == 4
+
+
+@pytest.mark.parametrize("inputs, kw, words", [
+    (["3_1", "not_a_knot"], {}, "unknown knot or link 'not_a_knot'"),
+    (["14_*"], {}, "matches no knot"),
+    (["missing.obj"], {}, "cannot read"),
+    ([], {"crossings": "15"}, "no knot of 15 crossings"),
+    ([], {"crossings": "7-5"}, "empty"),
+    ([], {}, "nothing to run"),
+    (["3_1"], {"edges": [2]}, "at least 4"),
+    (["3_1"], {"method": "newton"}, "unknown method"),
+])
+def test_bad_inputs_refused(inputs, kw, words):
+    with pytest.raises(ValueError, match=words):
+        batch.tasks(inputs, **kw)
+
+
+def test_unreadable_files_refused(tmp_path):
+    bad = tmp_path / "bad.obj"
+    bad.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2\nl 2 3\n")  # an open path
+    with pytest.raises(ValueError, match="cannot read"):
+        batch.tasks([str(bad)])
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(ValueError, match="no .obj files"):
+        batch.tasks([str(empty)])
+    junk = tmp_path / "junk.txt"
+    junk.write_text("not a braid\n")
+    with pytest.raises(ValueError, match="junk.txt:1"):
+        batch.tasks([str(junk)])
+    if os.geteuid() != 0:  # root reads anything
+        locked = lemniscate_obj(tmp_path / "locked.obj")
+        locked.chmod(0)
+        with pytest.raises(ValueError, match="cannot read"):
+            batch.tasks([str(locked)])
+
+
+def test_scheduler_that_does_not_answer_refused_before_work(tmp_path):
+    pytest.importorskip("distributed")
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    out = tmp_path / "out"
+    with pytest.raises(ValueError, match="no Dask scheduler answers"):
+        batch.run(small("3_1"), out, scheduler=f"tcp://127.0.0.1:{port}", timeout=2, say=quiet)
+    assert not out.exists()
+
+
+def test_too_many_workers_refused(tmp_path):
+    cores = os.cpu_count()
+    with pytest.raises(ValueError, match="exceed"):
+        batch.run(small("3_1"), tmp_path, workers=cores, threads=2, say=quiet)
+    assert not (tmp_path / "results.csv").exists()
+
+
+def test_missing_dask_says_how_to_install(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed fails
+    with pytest.raises(ImportError, match=r"moebius_addon\[batch\]"):
+        batch.run(small("3_1"), tmp_path, workers=1, say=quiet)
+    assert not (tmp_path / "results.csv").exists()
+
+
+def test_failed_task_recorded_others_finish(tmp_path):
+    todo = small("3_1", str(lemniscate_obj(tmp_path / "eight.obj")), "4_1")
+    report = batch.run(todo, tmp_path / "out", workers=0, say=quiet)
+    assert sorted(report["done"]) == sorted(t.id for t in todo if t.name != "eight")
+    (bad,) = report["failed"]
+    assert "intersects itself" in report["failed"][bad]
+    by_id = {r["id"]: r for r in rows(tmp_path / "out")}
+    assert "intersects itself" in by_id[bad]["error"]
+    assert all(by_id[t.id]["status1"] for t in todo if t.name != "eight")
+    # a failed task is tried again, finished ones are not
+    again = batch.run(todo, tmp_path / "out", workers=0, say=quiet)
+    assert list(again["failed"]) == [bad] and again["done"] == []
+    assert len(again["skipped"]) == 2
+
+
+def test_resume_skips_finished_tasks(tmp_path):
+    out = tmp_path / "out"
+    todo = small("3_1", "4_1", "5_1", "5_2")
+    first = batch.run(todo, out, workers=0, limit=2, say=quiet)  # interrupted half way
+    assert len(first["done"]) == 2
+    mtimes = {i: (out / "curves" / f"{i}.npz").stat().st_mtime_ns for i in first["done"]}
+    second = batch.run(todo, out, workers=0, say=quiet)
+    assert sorted(second["skipped"]) == sorted(first["done"])
+    assert sorted(second["done"]) == sorted(set(t.id for t in todo) - set(first["done"]))
+    assert {i: (out / "curves" / f"{i}.npz").stat().st_mtime_ns for i in first["done"]} == mtimes
+    assert sorted(r["id"] for r in rows(out)) == sorted(t.id for t in todo)
+    # a task whose polygon is gone runs again
+    (out / "curves" / f"{first['done'][0]}.npz").unlink()
+    third = batch.run(todo, out, workers=0, say=quiet)
+    assert third["done"] == [first["done"][0]]
+    assert len(json.loads((out / "run.json").read_text())) == 3  # one record per run
+
+
+def test_largest_first():
+    todo = batch.tasks(["3_1", "4_1"], edges=[40, 80], max_iter=1)
+    assert sorted(todo, key=lambda t: -t.cost)[0].edges == 80
+
+
+def test_stages_resample_and_relax_again(tmp_path):
+    (task,) = batch.tasks(["3_1"], edges=[40], stages=(1, 2), max_iter=3, identify=True)
+    row = batch.run_task(task, threads=1)
+    assert row["error"] == ""
+    assert [r["n"] for r in row["runs"]] == [40, 80]
+    assert len(row["x"]) == 80 and row["identified"] == "3_1"
+
+
+def test_local_cluster_equals_in_process(tmp_path):
+    """Two worker processes against the same tasks run in one process, bit for bit. The
+    in-process run is a subprocess with the workers' thread counts (batch.thread_env): the
+    BLAS thread count changes the last bits of its products."""
+    pytest.importorskip("distributed")
+    inputs = ["3_1", "4_1", "5_1", "5_2"]
+    todo = small(*inputs) + batch.tasks(["3_1"], edges=[40], stages=(1, 1.5), max_iter=3,
+                                        identify=True)
+    here = tmp_path / "here"
+    env = {**os.environ, **batch.thread_env(1),
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    for args in (["--edges", "40", "--max-iter", "4", "--no-identify", *inputs],
+                 ["3_1", "--edges", "40", "--stages", "1", "1.5", "--max-iter", "3"]):
+        subprocess.run([sys.executable, "-m", "moebius_addon.core.batch", *args, "--workers",
+                        "0", "--out", str(here)], env=env, check=True, capture_output=True)
+    cluster = tmp_path / "cluster"
+    report = batch.run(todo, cluster, workers=2, threads=1, dashboard=None, say=quiet)
+    assert report["failed"] == {} and len(report["done"]) == len(todo)
+    a, b = {r["id"]: r for r in rows(here)}, {r["id"]: r for r in rows(cluster)}
+    assert sorted(a) == sorted(b) == sorted(t.id for t in todo)
+    workers = {b[i]["worker"] for i in b}
+    assert all(w.split(":")[1] != str(os.getpid()) for w in workers)
+    for i in a:
+        for key in ("n1", "energy1", "iterations1", "status1", "n2", "energy2", "identified"):
+            assert a[i][key] == b[i][key], (i, key)
+        x, y = batch.load_curve(here, i), batch.load_curve(cluster, i)
+        assert x.dtype == y.dtype and np.array_equal(x, y), i
+
+
+def test_command_line(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert batch.console(["batch", "3_1", "--edges", "40", "--max-iter", "2", "--workers", "0",
+                          "--no-identify", "--out", str(out)]) == 0
+    assert [r["id"] for r in rows(out)] == ["3_1_40"]
+    assert batch.console(["batch", "nope_9", "--out", str(out)]) == 2
+    assert "unknown knot or link 'nope_9'" in capsys.readouterr().err
+    assert batch.console(["relax"]) == 2
