@@ -29,6 +29,20 @@ thread count): 1.3 s there, 10 ms for 240 edges and 1 536 triangles. A Barnes–
 with one term per box (area-weighted centre) was tried and not kept: its centre distances
 differ from the kernel's nearest-point distances to first order in the triangle size, 3–5 %
 error in the energy at θ = 0.1 on a torus of 20 000 triangles.
+
+The far field (``tol > 0``, :func:`_edge_terms_tree`) keeps the kernel's nearest points in its
+bounds instead. For a box of the triangle hierarchy (area ``A``, area-weighted centre ``c`` of
+its triangles' centroids, all its triangles within ``R`` of ``c``, none of radius above ``h``)
+and a midpoint at ``D = |m − c| > R + h``: Σ A_k |m − c_k|⁻³ lies within ``6 A R² / (D − R)⁵``
+of ``A / D³`` (Taylor; the first-order term vanishes about ``c``), and each nearest point is
+nearer than its centroid by at most ``h``, so the box's sum lies in ``[L, U]`` with
+``L = A/D³ − 6AR²/(D−R)⁵`` and ``U = (A/D³ + 6AR²/(D−R)⁵)·((D−R)/(D−R−h))³``. Visiting the
+nearer box first, a box counts ``(L + U)/2`` when ``U − L ≤ tol (U + L)`` or when
+``(U − L)/2 ≤ tol · (A / total area) · (lower bound of the edge's sum so far)``: each edge's sum
+is then within ``2 tol / (1 − tol)`` of its exact value, relatively (proven; measured far
+below, docs/benchmarks.md).
+The gradient of an accepted box is the monopole's, scaled to its value: no proven bound,
+measured.
 """
 
 from __future__ import annotations

@@ -300,11 +300,12 @@ def test_the_hierarchy_energy_is_within_its_bound_of_all_pairs(tol):
     e0, _, _ = exact._terms(X, layout.nxt, False)
     e, _, _ = tree._terms(X, layout.nxt, False)
     assert not np.array_equal(e, e0)  # the far field was used
-    # each edge's sum within 2 tol of its own (module text: both acceptances together)
-    assert np.all(np.abs(e - e0) <= 2 * tol * e0)
+    # each edge's sum within 2 tol / (1 − tol) of its own (module text: both acceptances)
+    bound = 2 * tol / (1 - tol)
+    assert np.all(np.abs(e - e0) <= bound * e0)
     E0, G0 = exact.energy_gradient(X, layout.nxt, layout.prv)
     E, G = tree.energy_gradient(X, layout.nxt, layout.prv)
-    assert abs(E - E0) <= 2 * tol * E0
+    assert abs(E - E0) <= bound * E0
     assert E == pytest.approx(tree.energy(X, layout.nxt), rel=1e-14)
     # the gradient has no proven bound; measured (docs/benchmarks.md) well within tol
     assert np.linalg.norm(G - G0) <= tol * np.linalg.norm(G0)
