@@ -39,3 +39,22 @@ def segments_closest(p1, q1, p2, q2) -> np.ndarray:
     t = np.clip(t, 0, 1)
     diff = (p1 + d1 * s[:, None]) - (p2 + d2 * t[:, None])
     return np.sqrt(np.einsum("ij,ij->i", diff, diff))
+
+
+def ray_parity_inside(P, V, F, rng):
+    """Inside by the parity of a ray's crossings with the triangles (Möller–Trumbore, all
+    pairs at once), along one random direction (hitting an edge or a vertex exactly has
+    probability zero)."""
+    d = rng.normal(size=3)
+    d /= np.linalg.norm(d)
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    e1, e2 = b - a, c - a
+    h = np.cross(d, e2)
+    det = np.einsum("kj,kj->k", e1, h)
+    s = P[:, None, :] - a[None]
+    u = np.einsum("nkj,kj->nk", s, h) / det
+    q = np.cross(s, e1[None])
+    v = np.einsum("j,nkj->nk", d, q) / det
+    t = np.einsum("kj,nkj->nk", e2, q) / det
+    hit = (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+    return hit.sum(axis=1) % 2 == 1

@@ -82,6 +82,8 @@ def relax_settings(settings) -> dict:
         kwargs.update(pin_selected=True, pin_tangents=settings.pin_tangents)
     if getattr(settings, "obstacles", None) is not None:
         kwargs.update(obstacles=settings.obstacles, obstacle_weight=settings.obstacle_weight)
+    if getattr(settings, "container", None) is not None:
+        kwargs.update(container=settings.container, obstacle_weight=settings.obstacle_weight)
     kwargs["refine"] = bool(getattr(settings, "refine", True))
     if kwargs["refine"] and getattr(settings, "max_edges", 0):
         kwargs["max_edges"] = settings.max_edges

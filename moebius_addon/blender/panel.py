@@ -232,8 +232,9 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
         row.active = s.pin_selected
         row.prop(s, "pin_tangents")
         col.prop(s, "obstacles", text="")
+        col.prop(s, "container")
         row = col.row()
-        row.active = s.obstacles is not None
+        row.active = s.obstacles is not None or s.container is not None
         row.prop(s, "obstacle_weight")
         col = layout.column(align=True)
         col.active = "backproject_iter" in acting  # a nudge keeps the constraints

@@ -195,8 +195,14 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     )
     obstacle_weight: FloatProperty(
         name="Obstacle Weight", default=1.0, min=0.0, soft_max=10.0,
-        description="Weight of the obstacles' repulsion beside the curve's own energy (0: no "
-                    "repulsion, the curve is only stopped at the obstacles)",
+        description="Weight of the obstacles' (and the container's) repulsion beside the "
+                    "curve's own energy (0: no repulsion, the curve is only stopped at them)",
+    )
+    container: PointerProperty(
+        type=bpy.types.Object, name="Container",
+        poll=lambda _settings, o: o.type == "MESH",
+        description="A closed mesh object the curve stays inside (as shown: modifiers "
+                    "applied); the curve must start inside it",
     )
     use_energy_target: BoolProperty(
         name="Energy Target", default=False,

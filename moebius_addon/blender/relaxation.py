@@ -248,7 +248,8 @@ class ObjectRelaxation:
         obstacles (:mod:`.scene_constraints`): ``pinned=`` indices (a list per spline for a
         link) or ``pin_selected=True`` (the points selected in Edit Mode), ``pin_tangents``;
         ``obstacles=`` a collection, a list of mesh objects or the core's ``(V, F)`` arrays
-        (in the curve's object coordinates), ``obstacle_weight``.
+        (in the curve's object coordinates), ``obstacle_weight``; ``container=`` a closed mesh
+        object (or the core's ``(V, F)``) the curve stays inside.
 
     Raises
     ------

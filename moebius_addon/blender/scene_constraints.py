@@ -1,9 +1,11 @@
-"""What the scene adds to a relaxation: obstacles (mesh objects the curve never crosses) and
-pins (points of the curve selected in Edit Mode that stay where they are).
+"""What the scene adds to a relaxation: obstacles (mesh objects the curve never crosses), a
+container (a closed mesh object the curve stays inside) and pins (points of the curve selected
+in Edit Mode that stay where they are).
 
 ``resolve(obj, options)`` turns the Blender forms of these options into the core's:
 ``obstacles`` given as a collection or a list of objects become ``(V, F)`` triangle arrays in
-the curve's object coordinates (modifiers applied, as shown), ``pin_selected=True`` becomes
+the curve's object coordinates (modifiers applied, as shown), so does a ``container`` given as
+a mesh object (the core checks that it is closed and holds the curve), ``pin_selected=True`` becomes
 ``pinned=`` with the selected points' indices (one list per spline for a link).
 """
 
@@ -34,26 +36,46 @@ def obstacle_meshes(source, curve: bpy.types.Object,
         raise ValueError(f"{what} holds no mesh object to use as an obstacle{has}")
     if depsgraph is None:
         depsgraph = bpy.context.evaluated_depsgraph_get()
-    to_curve = np.array(curve.matrix_world.inverted(), dtype=np.float64)
-    out = []
-    for o in meshes:
-        ev = o.evaluated_get(depsgraph)
-        mesh = ev.to_mesh()
-        try:
-            mesh.calc_loop_triangles()
-            V = np.empty(3 * len(mesh.vertices))
-            mesh.vertices.foreach_get("co", V)
-            F = np.empty(3 * len(mesh.loop_triangles), dtype=np.int32)
-            mesh.loop_triangles.foreach_get("vertices", F)
-        finally:
-            ev.to_mesh_clear()
-        if len(F) == 0:
-            raise ValueError(f"obstacle '{o.name}' has no faces (a mesh without faces "
-                             "cannot be an obstacle)")
-        M = to_curve @ np.array(o.matrix_world, dtype=np.float64)
-        V = V.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
-        out.append((V, F.reshape(-1, 3).astype(np.int64)))
-    return out
+    return [_triangles(o, curve, depsgraph, "obstacle") for o in meshes]
+
+
+def _triangles(o: bpy.types.Object, curve: bpy.types.Object, depsgraph, role: str) -> tuple:
+    """``(V, F)`` of mesh object ``o`` as shown, triangulated, in ``curve``'s coordinates."""
+    ev = o.evaluated_get(depsgraph)
+    mesh = ev.to_mesh()
+    try:
+        mesh.calc_loop_triangles()
+        V = np.empty(3 * len(mesh.vertices))
+        mesh.vertices.foreach_get("co", V)
+        F = np.empty(3 * len(mesh.loop_triangles), dtype=np.int32)
+        mesh.loop_triangles.foreach_get("vertices", F)
+    finally:
+        ev.to_mesh_clear()
+    if len(F) == 0:
+        raise ValueError(f"{role} '{o.name}' has no faces (a mesh without faces cannot be "
+                         f"{'an obstacle' if role == 'obstacle' else 'a container'})")
+    M = np.array(curve.matrix_world.inverted(), dtype=np.float64) @ np.array(
+        o.matrix_world, dtype=np.float64)
+    V = V.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+    return V, F.reshape(-1, 3).astype(np.int64)
+
+
+def container_mesh(o: bpy.types.Object, curve: bpy.types.Object,
+                   depsgraph: bpy.types.Depsgraph | None = None) -> tuple:
+    """``(V, F)`` of the container object ``o`` (modifiers applied), triangulated, in
+    ``curve``'s object coordinates.
+
+    Raises
+    ------
+    ValueError
+        ``o`` is not a mesh object, or is the curve itself.
+    """
+    if o == curve or o.type != "MESH":
+        raise ValueError(f"the container '{o.name}' is a {o.type.lower()} object; choose a "
+                         "closed mesh object around the curve")
+    if depsgraph is None:
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+    return _triangles(o, curve, depsgraph, "container")
 
 
 def selected_points(obj: bpy.types.Object):
@@ -79,9 +101,11 @@ def resolve(obj: bpy.types.Object, options: dict) -> dict:
     Raises
     ------
     ValueError
-        ``pin_selected`` with no point selected; obstacles that are not meshes.
+        ``pin_selected`` with no point selected; obstacles or a container that are not meshes.
     """
     options = dict(options)
+    if isinstance(options.get("container"), bpy.types.Object):
+        options["container"] = container_mesh(options["container"], obj)
     source = options.get("obstacles")
     if source is not None and (isinstance(source, bpy.types.Collection) or (
             isinstance(source, (list, tuple)) and source

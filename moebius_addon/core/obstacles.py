@@ -29,6 +29,20 @@ thread count): 1.3 s there, 10 ms for 240 edges and 1 536 triangles. A Barnes–
 with one term per box (area-weighted centre) was tried and not kept: its centre distances
 differ from the kernel's nearest-point distances to first order in the triangle size, 3–5 %
 error in the energy at θ = 0.1 on a torus of 20 000 triangles.
+
+The far field (``tol > 0``, :func:`_edge_terms_tree`) keeps the kernel's nearest points in its
+bounds instead. For a box of the triangle hierarchy (area ``A``, area-weighted centre ``c`` of
+its triangles' centroids, all its triangles within ``R`` of ``c``, none of radius above ``h``)
+and a midpoint at ``D = |m − c| > R + h``: Σ A_k |m − c_k|⁻³ lies within ``6 A R² / (D − R)⁵``
+of ``A / D³`` (Taylor; the first-order term vanishes about ``c``), and each nearest point is
+nearer than its centroid by at most ``h``, so the box's sum lies in ``[L, U]`` with
+``L = A/D³ − 6AR²/(D−R)⁵`` and ``U = (A/D³ + 6AR²/(D−R)⁵)·((D−R)/(D−R−h))³``. Visiting the
+nearer box first, a box counts ``(L + U)/2`` when ``U − L ≤ tol (U + L)`` or when
+``(U − L)/2 ≤ tol · (A / total area) · (lower bound of the edge's sum so far)``: each edge's sum
+is then within ``2 tol / (1 − tol)`` of its exact value, relatively (proven; measured far
+below, docs/benchmarks.md).
+The gradient of an accepted box is the monopole's, scaled to its value: no proven bound,
+measured.
 """
 
 from __future__ import annotations
@@ -252,6 +266,116 @@ def _edge_terms(X, nxt, T, area, grad):
 
 
 @nb.njit(cache=True)
+def _node_moments(T, area, centre, radius, lo, hi):
+    """Per node of the hierarchy: its area ``A``, the area-weighted centre ``c`` of its
+    triangles' centroids, the radius ``R`` about ``c`` of a ball holding its triangles and the
+    largest triangle radius ``h`` (about the triangle's own centroid)."""
+    m = lo.shape[0]
+    A = np.zeros(m)
+    c = np.zeros((m, 3))
+    R = np.zeros(m)
+    h = np.zeros(m)
+    for node in range(m):
+        for k in range(lo[node], hi[node]):
+            A[node] += area[k]
+            for d in range(3):
+                c[node, d] += area[k] * centre[k, d]
+            h[node] = max(h[node], radius[k])
+        for d in range(3):
+            c[node, d] /= A[node]
+        for k in range(lo[node], hi[node]):
+            for v in range(3):
+                R[node] = max(R[node], np.sqrt((T[k, v, 0] - c[node, 0]) ** 2
+                                               + (T[k, v, 1] - c[node, 1]) ** 2
+                                               + (T[k, v, 2] - c[node, 2]) ** 2))
+    return A, c, R, h
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _edge_terms_tree(X, nxt, T, area, left, right, lo, hi, A, c, R, h, tol, grad):
+    """:func:`_edge_terms` through the triangles' hierarchy, each edge's sum within relative
+    ``tol`` of the exact one (module text, "the far field"). Nodes are visited nearer centre
+    first; a node whose bounds ``[L, U]`` on its sum are accepted counts ``(L + U) / 2`` and
+    its gradient as the monopole's, scaled to that value; leaves are summed exactly."""
+    n = X.shape[0]
+    e = np.zeros(n)
+    gm = np.zeros((n, 3))
+    gl = np.zeros(n)
+    total = A[0]
+    for i in nb.prange(n):
+        stack = np.empty(256, np.int64)
+        j = nxt[i]
+        mx = 0.5 * (X[i, 0] + X[j, 0])
+        my = 0.5 * (X[i, 1] + X[j, 1])
+        mz = 0.5 * (X[i, 2] + X[j, 2])
+        ln = np.sqrt((X[j, 0] - X[i, 0]) ** 2 + (X[j, 1] - X[i, 1]) ** 2
+                     + (X[j, 2] - X[i, 2]) ** 2)
+        s = 0.0  # the estimate of Σ_T A / d³
+        low = 0.0  # a lower bound of it: the budget of the far field's error
+        sx = 0.0
+        sy = 0.0
+        sz = 0.0
+        stack[0] = 0
+        top = 1
+        while top > 0:
+            top -= 1
+            node = stack[top]
+            rx, ry, rz = mx - c[node, 0], my - c[node, 1], mz - c[node, 2]
+            D = np.sqrt(rx * rx + ry * ry + rz * rz)
+            near = D - R[node]
+            if near - h[node] > 0.0:
+                mono = A[node] / (D * D * D)
+                # Taylor's remainder of Σ A_k |m − c_k|⁻³ about c (no first-order term: c
+                # is the area-weighted centre); |Hessian of r⁻³| ≤ 12 r⁻⁵
+                rem = 6.0 * A[node] * R[node] * R[node] / near ** 5
+                # the nearest point is at most h nearer than the triangle's centroid
+                up = (mono + rem) * (near / (near - h[node])) ** 3
+                lw = max(mono - rem, 0.0)
+                # accepted when its error is within tol of its own value or of its area's
+                # share of the sum so far: either way the accepted errors add up to at most
+                # tol times the edge's sum (twice that, both together)
+                if up - lw <= tol * (up + lw) or 0.5 * (up - lw) <= tol * (A[node] / total) * low:
+                    est = 0.5 * (up + lw)
+                    s += est
+                    low += lw
+                    if grad:
+                        f = -3.0 * est / (D * D)  # the monopole's gradient, scaled to est
+                        sx += f * rx
+                        sy += f * ry
+                        sz += f * rz
+                    continue
+            if left[node] < 0:
+                for k in range(lo[node], hi[node]):
+                    qx, qy, qz = _closest_on_triangle(mx, my, mz, T, k)
+                    px, py, pz = mx - qx, my - qy, mz - qz
+                    d2 = px * px + py * py + pz * pz
+                    inv3 = area[k] / (d2 * np.sqrt(d2))
+                    s += inv3
+                    low += inv3
+                    if grad:
+                        f = -3.0 * inv3 / d2
+                        sx += f * px
+                        sy += f * py
+                        sz += f * pz
+                continue
+            a, b = left[node], right[node]
+            da = (mx - c[a, 0]) ** 2 + (my - c[a, 1]) ** 2 + (mz - c[a, 2]) ** 2
+            db = (mx - c[b, 0]) ** 2 + (my - c[b, 1]) ** 2 + (mz - c[b, 2]) ** 2
+            if da < db:  # the nearer child on top: its exact terms raise the budget first
+                a, b = b, a
+            stack[top] = a
+            stack[top + 1] = b
+            top += 2
+        e[i] = ln * s
+        if grad:
+            gm[i, 0] = ln * sx
+            gm[i, 1] = ln * sy
+            gm[i, 2] = ln * sz
+            gl[i] = s
+    return e, gm, gl
+
+
+@nb.njit(cache=True)
 def _gather(X, nxt, prv, gm, gl):
     """Vertex gradient from the edges' midpoint and length derivatives."""
     n = X.shape[0]
@@ -444,9 +568,14 @@ class ObstacleField:
         The run's map from the caller's coordinates to its own.
     weight : float
         Factor of the obstacle energy in the flow's objective.
+    labels : list of str, optional
+        What each mesh is called in messages ("obstacle m" by default; "the container").
     """
 
-    def __init__(self, meshes, shift=0.0, scale: float = 1.0, weight: float = 1.0):
+    def __init__(self, meshes, shift=0.0, scale: float = 1.0, weight: float = 1.0,
+                 labels=None, tol: float = 0.0):
+        self.labels = (list(labels) if labels is not None
+                       else [f"obstacle {m}" for m in range(len(meshes))])
         tri, owner, local = [], [], []
         for m, (V, F) in enumerate(meshes):
             tri.append(((V - shift) / scale)[F])
@@ -464,6 +593,10 @@ class ObstacleField:
         self.radius = np.max(np.linalg.norm(self.T - self.centre[:, None, :], axis=2), axis=1)
         self.weight = float(weight)
         self.scale = float(scale)
+        #: Relative error bound of each edge's obstacle energy (0: every pair, exactly).
+        self.tol = float(tol)
+        lo, hi = self.tree[0], self.tree[1]
+        self._moments = _node_moments(self.T, self.area, self.centre, self.radius, lo, hi)
 
     @property
     def triangles(self) -> int:
@@ -475,6 +608,10 @@ class ObstacleField:
         return self.weight * float(e.sum())
 
     def _terms(self, X, nxt, grad):
+        if self.tol > 0.0:
+            lo, hi, left, right = self.tree[:4]
+            return _edge_terms_tree(X, nxt, self.T, self.area, left, right, lo, hi,
+                                    *self._moments, self.tol, grad)
         return _edge_terms(X, nxt, self.T, self.area, grad)
 
     def energy_gradient(self, X: np.ndarray, nxt: np.ndarray, prv: np.ndarray
@@ -512,9 +649,11 @@ class ObstacleField:
         c = int(layout.comp[i])
         edge = int(i - layout.starts[c])
         where = f"edge {edge} of component {c}" if layout.is_link else f"edge {edge}"
-        tri = f"triangle {int(self.local[k])} of obstacle {int(self.owner[k])}"
+        label = self.labels[int(self.owner[k])]
+        tri = f"triangle {int(self.local[k])} of {label}"
+        what = "the container's wall" if label == "the container" else "an obstacle"
         if d == 0.0:
-            raise ValueError(f"the curve crosses an obstacle: {where} passes through {tri}; "
-                             "move the curve or the obstacle so that they do not meet")
-        raise ValueError(f"the curve touches an obstacle: {where} is {d * self.scale:.3g} "
+            raise ValueError(f"the curve crosses {what}: {where} passes through {tri}; "
+                             f"move the curve or {label} so that they do not meet")
+        raise ValueError(f"the curve touches {what}: {where} is {d * self.scale:.3g} "
                          f"from {tri}; move it clear first")

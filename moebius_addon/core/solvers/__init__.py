@@ -111,7 +111,8 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
                        max_seconds=options.get("max_seconds"),
                        closed=options.get("closed", True), pinned=options.get("pinned"),
                        pin_tangents=options.get("pin_tangents", False),
-                       check=options.get("check", True), obstacles=options.get("obstacles"))
+                       check=options.get("check", True), obstacles=options.get("obstacles"),
+                       container=options.get("container"))
 
 
 def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",

@@ -135,7 +135,7 @@ class AdaptiveRun:
                  max_edges: int | None = None, restarts: int = 0, seed: int = 0,
                  restart_scale: float = RESTART_SCALE, max_seconds: float | None = None,
                  closed=True, pinned=None, pin_tangents: bool = False, check: bool = True,
-                 obstacles=None):
+                 obstacles=None, container=None):
         self.t0 = time.perf_counter()
         self._make = make
         self.refine = bool(refine)
@@ -155,8 +155,9 @@ class AdaptiveRun:
         self.refinements: list[dict] = []
         start, changes, path = P, {}, []
         if self.refine and check:
+            separable = obstacles is None and container is None
             start, changes, path = self._refine_start(P, X, layout, pinned, pin_tangents,
-                                                      obstacles is None)
+                                                      separable)
         # a separation's steps count as iterations of the path
         self.run = make(start, max(0, self.max_iter - len(path)), self.max_seconds, **changes)
         self._retired: list[dict] = []  # the counters of every run left behind

@@ -33,6 +33,7 @@ import numpy as np
 
 from .._checks import check_number  # noqa: F401 - public as core.check_number
 from .._layout import OPEN_TREE_REFUSAL, as_unit_layout
+from ..container import check_container, check_inside
 from ..energy_choice import check_energy
 from ..engine import make_engine
 from ..metrics import METRICS
@@ -206,7 +207,8 @@ class Run:
                  target_lengths: str, check: bool, equilateral: bool, engine: str = "auto",
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
                  fixed_lengths: bool = True, obstacles=None, obstacle_weight: float = 1.0,
-                 closed=True, energy="moebius", alpha=None, beta=None, **engine_options):
+                 container=None, obstacle_tol: float = 0.0, closed=True, energy="moebius",
+                 alpha=None, beta=None, **engine_options):
         _check_names(metric, target_lengths)
         #: The energy minimized (:mod:`..energy_choice`): ``energy``, ``alpha``, ``beta``.
         self.energy_choice = check_energy(energy, alpha, beta)
@@ -219,7 +221,12 @@ class Run:
         self.max_seconds = None if max_seconds is None else check_number("max_seconds",
                                                                          max_seconds, 0)
         obstacle_weight = check_number("obstacle_weight", obstacle_weight, 0)
+        obstacle_tol = check_number("obstacle_tol", obstacle_tol, 0)
+        if obstacle_tol >= 1.0:
+            raise ValueError(f"obstacle_tol must be below 1 (a relative error bound of the "
+                             f"obstacle energy; 0: every pair exactly), got {obstacle_tol!r}")
         meshes = None if obstacles is None else check_obstacles(obstacles)
+        container = None if container is None else check_container(container)
         X, layout, e2 = as_unit_layout(P, closed)  # exact scaling of curves far from size 1
         if layout.has_open:
             self._check_open(engine)
@@ -258,8 +265,18 @@ class Run:
             self.eps = 1e-3 * float(self.lengths0[layout.real].mean())
         else:
             self.eps = 1e-3 * float(self.lengths0.mean())  # contact distance
-        if meshes is not None:
-            field = ObstacleField(meshes, self._shift, self._scale, obstacle_weight)
+        if meshes is not None or container is not None:
+            # a container is one more obstacle (its wall repels, the contact bound stops every
+            # step short of it) that the curve starts inside (.container)
+            meshes = list(meshes or [])
+            labels = [f"obstacle {m}" for m in range(len(meshes))]
+            if container is not None:
+                V, F = container
+                check_inside((V - self._shift) / self._scale, F, self.X, layout)
+                meshes.append(container)
+                labels.append("the container")
+            field = ObstacleField(meshes, self._shift, self._scale, obstacle_weight, labels,
+                                  obstacle_tol)
             field.check_clear(self.X, layout, self.eps)
             self.engine.obstacles = field
         self.nit = 0

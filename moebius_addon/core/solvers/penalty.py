@@ -78,7 +78,8 @@ class _PenaltyRun(Run):
                  max_seconds: float | None = None, initial_step: float = 1.0,
                  target_lengths: str = "equal", check: bool = True, engine: str = "auto",
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
-                 obstacles=None, obstacle_weight: float = 1.0, closed=True,
+                 obstacles=None, obstacle_weight: float = 1.0, container=None,
+                 obstacle_tol: float = 0.0, closed=True,
                  energy="moebius", alpha=None, beta=None, **ignored):
         unknown = set(ignored) - _FEASIBLE_ONLY
         if unknown:
@@ -95,8 +96,9 @@ class _PenaltyRun(Run):
         super().__init__(P, metric, max_iter, tol, energy_target=energy_target, ftol=ftol,
                          max_seconds=max_seconds, target_lengths=target_lengths, check=check,
                          equilateral=False, engine=engine, theta=theta, obstacles=obstacles,
-                         obstacle_weight=obstacle_weight, closed=closed, energy=energy,
-                         alpha=alpha, beta=beta)
+                         obstacle_weight=obstacle_weight, container=container,
+                         obstacle_tol=obstacle_tol, closed=closed,
+                         energy=energy, alpha=alpha, beta=beta)
         self.alpha = float(weight)  # α of the docs (docs/design.md, the penalty methods)
         self.penalty_in_metric = (metric != "l2") if penalty_metric == "auto" else bool(
             penalty_metric)

@@ -160,6 +160,8 @@ class Relaxation(Run):
         pin_tangents: bool = False,
         obstacles=None,
         obstacle_weight: float = 1.0,
+        container=None,
+        obstacle_tol: float = 0.0,
         closed=True,
         energy="moebius",
         alpha: float | None = None,
@@ -181,8 +183,9 @@ class Relaxation(Run):
                          reuse_factorization=reuse_factorization, krylov_rtol=krylov_rtol,
                          exact_backprojection=exact_backprojection, pinned=pinned,
                          pin_tangents=pin_tangents, fixed_lengths=bool(edge_lengths),
-                         obstacles=obstacles, obstacle_weight=obstacle_weight, closed=closed,
-                         energy=energy, alpha=alpha, beta=beta)
+                         obstacles=obstacles, obstacle_weight=obstacle_weight, container=container,
+                         obstacle_tol=obstacle_tol, closed=closed, energy=energy, alpha=alpha,
+                         beta=beta)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter
