@@ -2,6 +2,7 @@
 
 from importlib import import_module
 
+import bmesh
 import bpy
 import numpy as np
 import pytest
@@ -66,14 +67,12 @@ def test_bad_containers_are_refused_with_the_scene_unchanged(scene, mb, loop_in_
     s.max_iterations = 2
     # a sphere with a hole: not closed
     me = sphere.data
-    for p in me.polygons:
-        p.select = False
-    me.polygons[0].select = True
-    bpy.context.view_layer.objects.active = sphere
-    bpy.ops.object.mode_set(mode="EDIT")
-    bpy.ops.mesh.delete(type="FACE")
-    bpy.ops.object.mode_set(mode="OBJECT")
-    bpy.context.view_layer.objects.active = obj
+    bm = bmesh.new()  # one face deleted, its edges kept: a hole
+    bm.from_mesh(me)
+    bm.faces.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[bm.faces[0]], context="FACES_ONLY")
+    bm.to_mesh(me)
+    bm.free()
     s.container = sphere
     before = scene_state()
     with pytest.raises(RuntimeError, match="the container is not closed"):
