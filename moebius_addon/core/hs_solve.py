@@ -22,7 +22,6 @@ Every iterate stays on ``C u = r`` to rounding, whatever the tolerance. Measured
 from __future__ import annotations
 
 import numpy as np
-from scipy import sparse
 
 from ._layout import Layout, layout_from_sizes
 from .banded import BandedSaddle
@@ -156,7 +155,31 @@ MIN_CONTACT = 0.5
 DENSE_MAX = 1200
 
 
-def _halve(layout: Layout) -> tuple[np.ndarray, Layout, sparse.csr_matrix]:
+class _Sparse:
+    """A sparse matrix by its entries ``(rows, cols, vals)``, with ``@`` on vectors and on
+    (n, 3) arrays: the levels' interpolations (no scipy here: the extension ships numpy and
+    numba only)."""
+
+    def __init__(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, shape: tuple):
+        self.rows, self.cols, self.vals, self.shape = rows, cols, vals, shape
+
+    @property
+    def T(self) -> _Sparse:
+        return _Sparse(self.cols, self.rows, self.vals, (self.shape[1], self.shape[0]))
+
+    def __matmul__(self, y: np.ndarray) -> np.ndarray:
+        y = np.asarray(y)
+        out = np.zeros((self.shape[0],) + y.shape[1:], dtype=np.result_type(y, self.vals))
+        np.add.at(out, self.rows, self.vals.reshape((-1,) + (1,) * (y.ndim - 1)) * y[self.cols])
+        return out
+
+    def toarray(self) -> np.ndarray:
+        A = np.zeros(self.shape)
+        np.add.at(A, (self.rows, self.cols), self.vals)
+        return A
+
+
+def _halve(layout: Layout) -> tuple[np.ndarray, Layout, _Sparse]:
     """Every second vertex of each component with at least 16 vertices (the others kept
     whole): the kept indices, the coarse layout and the interpolation ``P`` (fine × coarse)
     from the coarse vertices to the fine ones, by the four-point subdivision scheme (Dubuc;
@@ -191,8 +214,8 @@ def _halve(layout: Layout) -> tuple[np.ndarray, Layout, sparse.csr_matrix]:
         idx.append(s0 + local[::2] if s1 - s0 >= 16 else s0 + local)
         sizes.append(k)
         offset += k
-    P = sparse.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                          shape=(layout.n, offset))
+    P = _Sparse(np.concatenate(rows), np.concatenate(cols), np.concatenate(vals),
+                (layout.n, offset))
     return np.concatenate(idx), layout_from_sizes(sizes, layout.is_link), P
 
 
@@ -232,7 +255,7 @@ class Multilevel:
                  order: float = PAPER_ORDER, fine: BandedSaddle | None = None):
         self.jac = jac
         self.fine = BandedSaddle(_parts(X, layout, metric, order), jac) if fine is None else fine
-        self.transfers: list[tuple[sparse.csr_matrix, sparse.csr_matrix]] = []
+        self.transfers: list[tuple[_Sparse, _Sparse]] = []
         polygons = []
         Xl, lay = X, layout
         while lay.n > COARSEST:
@@ -246,7 +269,7 @@ class Multilevel:
             # ≥ 2, down to 1 562 vertices and that level banded: 19)
             if closest_pairs(Xc, clay, CONTACT_GAP)[0][0] < MIN_CONTACT * ln.mean():
                 break
-            self.transfers.append((P, P.T.tocsr()))
+            self.transfers.append((P, P.T))
             polygons.append((Xc, clay, ln))
             Xl, lay = Xc, clay
         self.solves = []
