@@ -14,23 +14,21 @@ energy, ``engine.EXACT_RESULT_MAX``).
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from moebius_addon import core
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from moebius_addon import core  # noqa: E402
+from tests.conftest import random_rotation  # noqa: E402 - the tests' rotations, seeded
 
 
 def rotations(k: int, seed: int = 7) -> list[np.ndarray]:
     rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(k):
-        q, r = np.linalg.qr(rng.standard_normal((3, 3)))
-        q = q * np.sign(np.diag(r))
-        if np.linalg.det(q) < 0:
-            q[:, 0] *= -1
-        out.append(q)
-    return out
+    return [random_rotation(rng) for _ in range(k)]
 
 
 def main(argv=None) -> None:

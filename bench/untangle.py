@@ -336,6 +336,7 @@ def update_table(names: list[str], max_iter: int) -> None:
     method, tol 1e-4), the extrapolation redone, and the row replaced only if the new
     extrapolated energy is lower. The relaxed curves go to ``out/energy_table/`` (pack them
     with ``bench/energy_table.py --pack``)."""
+    from bench.energy_table import FIELDS, table_row  # the table's own row and extrapolation
     from moebius_addon import core
 
     rows = table_rows()
@@ -356,8 +357,13 @@ def update_table(names: list[str], max_iter: int) -> None:
                         max_iter=max_iter)
         s2 = time.process_time() - t0
         e2 = core.energy(r2.x, engine="exact")
-        extrapolated = e2 + (e2 - e1) / (2.0 ** order - 1.0)
         names_found = " | ".join(core.identify(r2.x).names)
+        new = table_row({"name": name, "n1": n1, "energy1": e1,
+                         "iterations1": best["iterations"], "seconds1": best["cpu_seconds"],
+                         "status1": best["status"], "n2": n2, "energy2": e2,
+                         "iterations2": r2.nit, "seconds2": s2, "status2": r2.status.name,
+                         "identified": names_found}, order)
+        extrapolated = float(new["extrapolated"])
         print(f"{name}: from {best['id']}: E({n1}) {float(row['energy1']):.6f} -> {e1:.6f}, "
               f"E({n2}) {float(row['energy2']):.6f} -> {e2:.6f} ({r2.nit} iterations, "
               f"{s2:.0f} CPU s, {r2.status.name}), extrapolated {row['extrapolated']} -> "
@@ -365,19 +371,13 @@ def update_table(names: list[str], max_iter: int) -> None:
         if extrapolated >= float(row["extrapolated"]) or name not in names_found.split(" | "):
             print(f"{name}: row kept")
             continue
-        row.update({"energy1": f"{e1:.6f}", "iterations1": best["iterations"],
-                    "seconds1": f"{best['cpu_seconds']:.1f}", "status1": best["status"],
-                    "energy2": f"{e2:.6f}", "iterations2": r2.nit, "seconds2": f"{s2:.1f}",
-                    "status2": r2.status.name, "extrapolated": f"{extrapolated:.4f}",
-                    "identified": names_found})
+        rows[name] = new
         obj = ROOT / "out" / "energy_table"
         obj.mkdir(parents=True, exist_ok=True)
         core.write_obj(obj / f"{name}_{n1}.obj", X1, name=name)
         core.write_obj(obj / f"{name}_{n2}.obj", r2.x, name=name)
-        with open(TABLE) as f:
-            fields = csv.DictReader(f).fieldnames
         with open(TABLE, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=fields)
+            w = csv.DictWriter(f, fieldnames=FIELDS)
             w.writeheader()
             w.writerows(rows.values())
         print(f"{name}: row replaced in {TABLE.name}", flush=True)

@@ -56,6 +56,15 @@ def poly_curve(name: str, polygons, cyclic: bool = True, spline_type: str = "POL
     return obj
 
 
+def world_mesh(obj):
+    """(V, F) of a mesh object in world coordinates, triangulated."""
+    me = obj.data
+    me.calc_loop_triangles()
+    V = np.array([obj.matrix_world @ v.co for v in me.vertices])
+    F = np.array([t.vertices[:] for t in me.loop_triangles])
+    return V, F
+
+
 def scene_state() -> dict:
     """Everything a failed operator must leave alone: data-blocks, visibility, geometry."""
     state = {

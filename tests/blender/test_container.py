@@ -6,18 +6,9 @@ import bmesh
 import bpy
 import numpy as np
 import pytest
-from bpy_helpers import poly_curve, scene_state
+from bpy_helpers import poly_curve, scene_state, world_mesh
 
 from tests.mesh_checks import crossings, ray_parity_inside
-
-
-def world_mesh(obj):
-    """(V, F) of a mesh object in world coordinates, triangulated."""
-    me = obj.data
-    me.calc_loop_triangles()
-    V = np.array([obj.matrix_world @ v.co for v in me.vertices])
-    F = np.array([t.vertices[:] for t in me.loop_triangles])
-    return V, F
 
 
 @pytest.fixture

@@ -6,7 +6,7 @@ from importlib import import_module
 import bpy
 import numpy as np
 import pytest
-from bpy_helpers import poly_curve, scene_state, spline_points
+from bpy_helpers import poly_curve, scene_state, spline_points, world_mesh
 
 from tests.mesh_checks import crossings
 
@@ -15,15 +15,6 @@ def keyed(mb, obj):
     """(frames, points per frame) of the flow keyed on ``obj``."""
     frames, points, _ = import_module(mb.__name__ + ".keyframes").read_flow_keyframes(obj)
     return frames, points
-
-
-def world_mesh(obj):
-    """(V, F) of a mesh object in world coordinates, triangulated."""
-    me = obj.data
-    me.calc_loop_triangles()
-    V = np.array([obj.matrix_world @ v.co for v in me.vertices])
-    F = np.array([t.vertices[:] for t in me.loop_triangles])
-    return V, F
 
 
 @pytest.fixture
