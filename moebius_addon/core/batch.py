@@ -492,6 +492,10 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
         f"-> {out}")
     t0 = time.perf_counter()
     bar = _Progress(len(todo), say)
+    # a LocalCluster's nannies write their workers' settings (OMP_NUM_THREADS=1 and others)
+    # into this process's os.environ and leave them: every process started from here later
+    # ran its BLAS on one thread (the last bits of its products changed)
+    environ = dict(os.environ)
     try:
         if client is None and workers == 0:
             for t in todo:
@@ -530,6 +534,9 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
             client.close()
         if cluster is not None:
             cluster.close()
+        if os.environ != environ:
+            os.environ.clear()
+            os.environ.update(environ)
     report["seconds"] = time.perf_counter() - t0
     say(f"{len(report['done'])} done, {len(report['failed'])} failed in "
         f"{report['seconds']:.1f} s")

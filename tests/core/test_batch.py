@@ -181,7 +181,11 @@ def test_local_cluster_equals_in_process(tmp_path):
         subprocess.run([sys.executable, "-m", "moebius_addon.core.batch", *args, "--workers",
                         "0", "--out", str(here)], env=env, check=True, capture_output=True)
     cluster = tmp_path / "cluster"
+    environ = dict(os.environ)
     report = batch.run(todo, cluster, workers=2, threads=1, dashboard=None, say=quiet)
+    # the nannies set OMP_NUM_THREADS=1 and others here; the processes started after this
+    # test (the bitwise thread-count tests) ran their BLAS on one thread
+    assert dict(os.environ) == environ
     assert report["failed"] == {} and len(report["done"]) == len(todo)
     a, b = {r["id"]: r for r in rows(here)}, {r["id"]: r for r in rows(cluster)}
     assert sorted(a) == sorted(b) == sorted(t.id for t in todo)
