@@ -353,3 +353,28 @@ def test_restarts_are_seeded_and_keep_the_lowest():
     kept = {r["iteration"] for r in a.stats["restarts"] if r["kept"]}
     assert rises <= kept
     assert len(E) == a.nit + 1
+
+
+def test_a_stall_with_the_strands_apart_starts_the_method_afresh(monkeypatch, trefoil_table):
+    # a large ftol stalls the implicit method on the table's trefoil after 4 iterates with the
+    # projected gradient still 0.157 (no two strands near: nothing to refine); started afresh
+    # from that polygon at the same edge count it goes on lower
+    opts = {"tol": 1e-4, "ftol": 1e-3, "max_iter": 300}
+    plain = core.relax(trefoil_table, refine=False, **opts)
+    assert plain.status == core.Status.STALLED
+    r = core.relax(trefoil_table, **opts)
+    (fresh,) = r.stats["fresh_starts"]
+    assert fresh["iteration"] == plain.nit and fresh["energy"] == plain.fun
+    assert r.refinements == [] and len(r.x) == 60 and set(r.history["edges"]) == {60}
+    assert r.fun < plain.fun and r.nit > plain.nit and len(r.history["energy"]) == r.nit + 1
+    assert np.all(np.diff(r.history["energy"]) < 0)
+    # the same path up to the stall, bit for bit; the stalled polygon is the new run's start
+    # (its energy as that run evaluates it, in its own scaled copy)
+    np.testing.assert_array_equal(r.history["energy"][: plain.nit], plain.history["energy"][:-1])
+    assert r.history["energy"][plain.nit] == pytest.approx(plain.fun, rel=1e-13)
+    assert "started afresh 1 time" in r.message and r.status == core.Status.CONVERGED
+    # none allowed: the stall stands, as before
+    monkeypatch.setattr(adaptive, "FRESH_STARTS", 0)
+    again = core.relax(trefoil_table, **opts)
+    assert again.status == core.Status.STALLED and again.fun == plain.fun
+    assert again.stats["fresh_starts"] == [] and "no two strands are closer" in again.message

@@ -8,7 +8,10 @@ it splits every edge in two (:func:`..polygon.subdivide`) and goes on with a new
 same method from the refined polygon. Splitting leaves the curve as a point set unchanged, so
 the refined polygon crosses nothing the old one did not and keeps its knot type; it is checked
 like a start all the same (:func:`..polygon.check_polygon`). A start that fails only the
-coarseness check is refined the same way before the first iterate, instead of refused.
+coarseness check is refined the same way before the first iterate, instead of refused. A run
+that stalls with its strands apart is not refined (a finer polygon would stall the same): the
+method is started afresh from its polygon at the same edge count (its step sizes, Krylov and
+quasi-Newton memory let go), up to :data:`FRESH_STARTS` times while each makes progress.
 
 ``restarts=K`` nudges a run that converged: K times, the best polygon so far is moved by a
 random smooth field (a solve in the run's metric of white noise, projected onto the
@@ -54,6 +57,11 @@ MAX_EDGES_FACTOR = 4
 #: 0.12 edge lengths apart), and a refinement of the squeezed polygon jams again (three
 #: refinements in a row, measured); relaxed shapes of the energy table keep 0.82 or more.
 CHECKPOINT_RATIO = 0.75
+#: Fresh starts of the method after stalls with the strands apart, at most: 9_3 from a tangled
+#: braid (700 edges) stalled at 257.59 with the projected gradient's norm still 0.31 and no two
+#: strands closer than 0.88 edge lengths; the implicit method started again from that polygon
+#: went on to the table's 250.9956 (docs/benchmarks.md, "Untangling benchmark").
+FRESH_STARTS = 3
 #: Default size of a restart's nudge: the largest vertex move, in mean edge lengths.
 RESTART_SCALE = 0.25
 
@@ -166,6 +174,9 @@ class AdaptiveRun:
         self.nit = self.run.nit
         self._run_nit = self.run.nit  # the current run's count when last looked at
         self._restart_log: list[dict] = []
+        #: the fresh starts after stalls with the strands apart: dicts of iteration, energy,
+        #: the stalled run's message
+        self.fresh_starts: list[dict] = []
         self._rng = np.random.default_rng(self.seed)
         self._best = None  # (energy, run, nit, history length, refinements) of the best
         self._trial = None  # the restart in progress: (index, first iterate)
@@ -334,6 +345,38 @@ class AdaptiveRun:
         self._note_checkpoint(new)
         return True
 
+    def _start_afresh(self, run) -> bool:
+        """Go on from the polygon of ``run``, which stalled with its strands apart, with a new
+        run of the method at the same edge count; False when :data:`FRESH_STARTS` are used
+        up, the last fresh start did not lower the energy, or no budget is left (the stall
+        stands)."""
+        if len(self.fresh_starts) >= FRESH_STARTS or (
+                self._iterations_left() == 0 or self._seconds_left() == 0.0):
+            return False
+        if self.fresh_starts:
+            last = self.fresh_starts[-1]["energy"]
+            if not run.E < last - _KEEP * abs(last):  # the last one went nowhere
+                return False
+        changes = {}
+        if getattr(run, "pinned", None) is not None:
+            changes = {"pinned": _pins_after(run.pinned, run.layout, 1), "pin_tangents": False}
+        try:
+            new = self._make(run.x, self._iterations_left(), self._seconds_left(), check=False,
+                             **changes)
+        except ValueError:
+            return False
+        self.fresh_starts.append({"iteration": self.nit, "energy": float(run.E),
+                                  "message": run.message})
+        self._retire(run)
+        self.run = new
+        self._run_nit = new.nit
+        # the last entry is the same iterate: it becomes the new run's start
+        for k, v in new.history.items():
+            if k in self.history:
+                self.history[k][-1] = v[0]
+        self.history["seconds"][-1] = time.perf_counter() - self.t0
+        return True
+
     def _jammed(self, run) -> bool:
         """Whether a stalled run's strands are closer than the start check allows (contact
         ratio below 1): a jam a finer polygon resolves. A run stalled against an obstacle, or
@@ -434,8 +477,9 @@ class AdaptiveRun:
                     self._note_checkpoint(run)
             if not run.done:
                 return
-            if run.status == Status.STALLED and self.refine and self._jammed(run) and (
-                    self._refine_run("jammed: " + run.message)):
+            if run.status == Status.STALLED and self.refine and (
+                    self._refine_run("jammed: " + run.message) if self._jammed(run)
+                    else self._start_afresh(run)):
                 continue
             if self._trial is not None:
                 self._end_restart()
@@ -459,6 +503,10 @@ class AdaptiveRun:
             notes.append("refined " + ", ".join(_words(r) for r in self.refinements))
         if status == Status.STALLED and self._why_not:
             notes.append(self._why_not)
+        if self.fresh_starts:
+            k = len(self.fresh_starts)
+            notes.append(f"the method started afresh {k} time{'s' * (k > 1)} after a stall with "
+                         f"the strands apart")
         if self._restart_log:
             kept = sum(r["kept"] for r in self._restart_log)
             notes.append(f"{len(self._restart_log)} restarts, {kept} kept")
@@ -531,6 +579,7 @@ class AdaptiveRun:
                 if k in other:
                     stats[k] = stats.get(k, 0) + other[k]
         stats["refinements"] = len(self.refinements)
+        stats["fresh_starts"] = [dict(r) for r in self.fresh_starts]
         if self.restarts:
             stats["restarts"] = [dict(r) for r in self._restart_log]
         return RelaxResult(
