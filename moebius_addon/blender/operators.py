@@ -495,10 +495,12 @@ class MOEBIUS_OT_show_gradient(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     l2: BoolProperty(name="L²", default=True, description="Plain L² gradient (red)")
-    hs_pure: BoolProperty(name="W^{3/2,2} pure", default=True,
-                          description="Pure fractional Sobolev gradient (green)")
-    hs: BoolProperty(name="W^{3/2,2} geometric", default=True,
-                     description="Geometric Sobolev gradient used by the flow (blue)")
+    hs_pure: BoolProperty(name="W^{s,2} pure", default=True,
+                          description="Pure fractional Sobolev gradient (green); the order s "
+                          "fits the Flow panel's energy")
+    hs: BoolProperty(name="W^{s,2} geometric", default=True,
+                     description="Geometric Sobolev gradient used by the flow (blue); the "
+                     "order s fits the Flow panel's energy")
     length: FloatProperty(name="Arrow Length", default=0.15, min=0.0, soft_max=1.0,
                           subtype="FACTOR",
                           description="Longest arrow of each field, relative to the curve's size")
@@ -514,8 +516,11 @@ class MOEBIUS_OT_show_gradient(bpy.types.Operator):
             return {"CANCELLED"}
         obj = _active_curve(context)
         try:
+            # the gradient of the energy the Flow panel relaxes
+            settings = api.relax_settings(context.scene.moebius)
+            energy = {k: settings[k] for k in ("energy", "alpha", "beta") if k in settings}
             made = api.show_gradients(obj, metrics, length=self.length,
-                                      projected=self.projected, context=context)
+                                      projected=self.projected, context=context, **energy)
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}

@@ -13,9 +13,9 @@ import numpy as np
 
 from ._layout import as_checked_layout
 from .constraints import jacobian, make_constraints
+from .energy_choice import check_energy
 from .linalg import Factorization
-from .metrics import gram_x
-from .moebius_dense import energy_gradient_x
+from .metrics import ORDERED_METRICS, gram_x
 from .solvers import make_run
 from .solvers.base import IterationState, RelaxResult, check_dense_size
 
@@ -82,16 +82,21 @@ def relax(
     return run.result()
 
 
-def sobolev_gradient(P, metric: str = "hs", projected: bool = True):
-    """The ``metric``-gradient of the Möbius energy at ``P``.
+def sobolev_gradient(P, metric: str = "hs", projected: bool = True, *, energy: str = "moebius",
+                     alpha: float | None = None, beta: float | None = None):
+    """The ``metric``-gradient of the energy ``energy`` at ``P`` (exact sums).
 
     Parameters
     ----------
     P : (N, 3) array or list of arrays
     metric : {"hs", "hs_pure", "h2", "h1", "l2"}
+        ``hs`` and ``hs_pure`` of the order that fits the energy, as a run takes them
+        (:attr:`.EnergyChoice.metric_order`: 3/2 for the Möbius energy).
     projected : bool
         Project onto the tangent space of the constraints (edge lengths and barycenter fixed),
         as the flow does; otherwise ``G⁻¹ ∇E``.
+    energy, alpha, beta
+        The energy, as :func:`relax` takes it (default the Möbius energy).
 
     Returns
     -------
@@ -99,10 +104,12 @@ def sobolev_gradient(P, metric: str = "hs", projected: bool = True):
         Direction of steepest ascent in that metric (the flow moves along its negative); the
         paper's Fig. 2 compares these fields.
     """
-    X, layout, k = as_checked_layout(P)  # u(2^k X) = 2^k u(X): every Gram matrix scales as 4^-k
+    choice = check_energy(energy, alpha, beta)
+    X, layout, k = as_checked_layout(P)  # the vertices scaled by 2^-k
     check_dense_size(layout.n)
-    _, g = energy_gradient_x(X, layout)
-    A = gram_x(metric, X, layout)
+    order = choice.metric_order
+    _, g = choice.exact_gradient(X, layout)
+    A = gram_x(metric, X, layout, order=order)
     if not projected:
         u = np.linalg.solve(A, g)
     else:
@@ -110,4 +117,8 @@ def sobolev_gradient(P, metric: str = "hs", projected: bool = True):
         con = make_constraints(X, layout, ln)
         fac = Factorization(A, jacobian(X, con))
         u, _ = fac.solve(g, np.zeros(con.size))
-    return layout.split(np.ldexp(u, k) if k else u)
+    # u(λX) = λ^p u(X): the gradient scales as λ^(scaling − 1), every Gram matrix as λ^-2 but
+    # hs and hs_pure of order s, as λ^(1 − 2s) (both 3/2 for the Möbius energy: p = 1)
+    gram = 1.0 - 2.0 * order if metric in ORDERED_METRICS else -2.0
+    p = choice.scaling - 1.0 - gram
+    return layout.split(u * 2.0 ** (k * p) if k else u)

@@ -50,6 +50,33 @@ def test_continue_with_another_energy_is_refused(scene, mb, knot):
     assert scene_state() == before
 
 
+def test_gradient_fields_are_the_chosen_energys(scene, mb, core, knot):
+    # Show Gradients drew the Möbius energy's fields whatever the Energy menu said
+    s = scene.moebius
+    s.energy, s.tp_alpha, s.tp_beta = "tangent_point", 2.0, 4.0
+    assert bpy.ops.moebius.show_gradient(l2=False, length=0.2) == {"FINISHED"}
+    P = mb.curve_polygons(knot)[0]
+    for metric in ("hs_pure", "hs"):
+        arrows = bpy.data.objects[f"{knot.name}.grad.{metric}"]
+        assert arrows["moebius_gradient_energy"] == "tangent_point(2, 4)"
+        V = np.array([v.co[:] for v in arrows.data.vertices])
+        D = V[90:] - V[:90]
+        G = core.sobolev_gradient(P, metric, energy="tangent_point", alpha=2, beta=4)
+        np.testing.assert_allclose(D, arrows["moebius_arrow_scale"] * G,
+                                   atol=1e-5 * np.abs(D).max())
+        M = core.sobolev_gradient(P, metric)
+        assert np.abs(G / np.abs(G).max() - M / np.abs(M).max()).max() > 1e-2
+    # redrawn after a relaxation: still the tangent-point energy's, at the relaxed shape
+    s.energy, s.max_iterations, s.tolerance = "moebius", 2, 0.0
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    P = mb.curve_polygons(knot)[0]
+    arrows = bpy.data.objects[f"{knot.name}.grad.hs"]
+    V = np.array([v.co[:] for v in arrows.data.vertices])
+    G = core.sobolev_gradient(P, "hs", energy="tangent_point", alpha=2, beta=4)
+    np.testing.assert_allclose(V[90:] - V[:90], arrows["moebius_arrow_scale"] * G,
+                               atol=1e-5 * np.abs(V[90:] - V[:90]).max())
+
+
 @pytest.mark.parametrize("alpha, beta, word", [(2.0, 5.5, "beta"), (0.5, 2.2, "beta")])
 def test_bad_exponents_leave_the_scene(scene, mb, knot, alpha, beta, word):
     s = scene.moebius

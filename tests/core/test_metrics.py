@@ -148,3 +148,31 @@ def test_far_from_unit_size(metric):
                                rtol=0, atol=1e-8 * np.abs(u).max())  # h2: κ(A) ~ 1e8
     with pytest.raises(ValueError, match="outside the float64 range"):
         gram_matrix(metric, 1e300 * P)  # entries of 1e-600
+
+
+@pytest.mark.parametrize("metric", ["hs", "h1"])
+def test_sobolev_gradient_of_the_tangent_point_energy(metric):
+    # the field of the energy asked for (Show Gradients drew the Möbius one whatever the
+    # energy): G u = ∇E with the metric of the order that fits it, (β − 1)/α = 7/4 for hs
+    from moebius_addon import core
+
+    P = resample(trefoil(300), 60)
+    _, g = core.energy_gradient(P, energy="tangent_point", engine="exact")
+    order = 1.75 if metric == "hs" else 1.5
+    A = gram_matrix(metric, P, order=order)
+    u = sobolev_gradient(P, metric, projected=False, energy="tangent_point")
+    np.testing.assert_allclose(A @ u, g, rtol=0, atol=1e-9 * np.abs(g).max())
+    moebius = sobolev_gradient(P, metric, projected=False)
+    assert np.abs(u / np.abs(u).max() - moebius / np.abs(moebius).max()).max() > 1e-2
+    # projected: on the constraints' tangent space (edge lengths and barycenter kept)
+    w = sobolev_gradient(P, metric, energy="tangent_point", alpha=2, beta=4)
+    e = np.roll(P, -1, axis=0) - P
+    assert np.abs(np.sum(e * (np.roll(w, -1, axis=0) - w), axis=1)).max() < 1e-9 * np.abs(
+        w).max() * np.abs(e).max()
+    assert np.abs(w.sum(axis=0)).max() < 1e-9 * np.abs(w).max() * len(w)
+    # far from unit size, computed near 1 and scaled back: u(λP) = λ^p u(P), p from the energy's
+    # and the metric's scaling (λ^(2 + α − β − 1) and λ^(1 − 2s) or λ^-2)
+    k = 100
+    p = (2 + 2 - 4.5) - 1 - ((1 - 2 * order) if metric == "hs" else -2)
+    far = sobolev_gradient(np.ldexp(P, k), metric, projected=False, energy="tangent_point")
+    np.testing.assert_allclose(far / 2.0 ** (k * p), u, rtol=0, atol=1e-9 * np.abs(u).max())
