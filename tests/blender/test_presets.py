@@ -22,11 +22,18 @@ def polyline_length(P, closed):
     return float(np.linalg.norm(np.diff(P, axis=0), axis=1).sum())
 
 
-def _cables():
-    """Two open cables side by side and a collection 'Obstacles' with a cube between them."""
-    t = np.linspace(0, 1, 30)
-    a = np.c_[4 * t, 0.3 * np.sin(3 * np.pi * t), 0 * t]
-    b = np.c_[4 * t, 1.0 + 0.2 * np.sin(2 * np.pi * t), 0.1 + 0 * t]
+def _core(mb):
+    return import_module(mb.__name__.rsplit(".", 1)[0] + ".core")
+
+
+def _cables(mb):
+    """Two open cables side by side (equal edges: as converted) and a collection 'Obstacles'
+    with a cube between them."""
+    t = np.linspace(0, 1, 200)
+    resample = _core(mb).resample
+    a = resample(np.c_[4 * t, 0.3 * np.sin(3 * np.pi * t), 0 * t], 30, closed=False)
+    b = resample(np.c_[4 * t, 1.0 + 0.2 * np.sin(2 * np.pi * t), 0.1 + 0 * t], 30,
+                 closed=False)
     obstacles = bpy.data.collections.new("Obstacles")
     bpy.context.scene.collection.children.link(obstacles)
     bpy.ops.mesh.primitive_cube_add(size=0.3, location=(2.0, 0.5, 1.0))
@@ -38,7 +45,7 @@ def _cables():
 
 
 def test_untangle_cables_keeps_them_open_pins_the_ends_and_takes_the_obstacles(scene, mb):
-    obj, obstacles = _cables()
+    obj, obstacles = _cables(mb)
     s = scene.moebius
     s.close_open = True  # the preset turns what contradicts it off
     assert bpy.ops.moebius.apply_preset(preset="untangle_cables") == {"FINISHED"}
@@ -87,7 +94,7 @@ def test_pack_in_volume_grows_and_relax_knot_restores_the_defaults(scene, mb):
 
 
 def test_a_preset_in_edit_mode_is_refused_with_nothing_changed(scene, mb):
-    _cables()
+    _cables(mb)
     bpy.ops.object.mode_set(mode="EDIT")
     s = scene.moebius
     with pytest.raises(RuntimeError, match="is in Edit Mode"):
@@ -102,9 +109,8 @@ def loop_in_sphere(scene, mb):
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.8, segments=24, ring_count=12,
                                          location=(0.3, 0.0, 0.0))
     sphere = bpy.context.active_object
-    core = import_module(mb.__name__.rsplit(".", 1)[0] + ".core")
     t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
-    P = core.resample(np.stack([0.6 * np.cos(t), 0.6 * np.sin(t), 0.25 * np.sin(5 * t)], -1),
+    P = _core(mb).resample(np.stack([0.6 * np.cos(t), 0.6 * np.sin(t), 0.25 * np.sin(5 * t)], -1),
                       60)
     obj = poly_curve("Loop", [P])
     obj.location = (0.3, 0.0, 0.0)
@@ -179,8 +185,9 @@ def test_bad_growth_input_is_refused_with_the_scene_unchanged(scene, mb, loop_in
 
 
 def test_pins_on_every_point_of_a_cable_are_refused_with_the_scene_unchanged(scene, mb):
-    t = np.linspace(0, 1, 20)
-    obj = poly_curve("Cable", [np.c_[3 * t, 0.3 * np.sin(3 * np.pi * t), 0 * t]], cyclic=False)
+    t = np.linspace(0, 1, 200)
+    P = _core(mb).resample(np.c_[3 * t, 0.3 * np.sin(3 * np.pi * t), 0 * t], 20, closed=False)
+    obj = poly_curve("Cable", [P], cyclic=False)
     s = scene.moebius
     assert bpy.ops.moebius.apply_preset(preset="untangle_cables") == {"FINISHED"}
     for p in obj.data.splines[0].points:
