@@ -520,8 +520,8 @@ class ObjectRelaxation:
 
 
 def _refinement_line(r: dict) -> str:
-    why = "start too coarse" if r["iteration"] == 0 and r["reason"].startswith(
-        "start") else "jammed"
+    why = ("start too coarse" if r["iteration"] == 0 and r["reason"].startswith("start")
+           else "edges grown" if r["reason"].startswith("edges grown") else "jammed")
     if r.get("separation_steps"):
         why += f", strands pushed apart in {r['separation_steps']} steps"
     return f"{r['edges_before']} → {r['edges_after']} edges at iteration {r['iteration']} ({why})"
