@@ -110,7 +110,6 @@ class LengthGrowth:
         self.scale = float(scale)
         #: mean length of a growing edge at the start (run units): the split rule's yardstick
         self.start_edge = float(lengths0[grows].mean()) if grows.any() else 1.0
-        self.blocked = 0  # iterations in a row in which no growth was possible
 
     @property
     def reached(self) -> bool:

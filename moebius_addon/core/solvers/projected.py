@@ -129,6 +129,12 @@ class Relaxation(Run):
         ``alpha``, ``beta`` (default 2, 4.5; :mod:`..energy_choice`). The energies of the history
         are those of the curve scaled to total length 1 (the same as the caller's curve's when
         the energy is scale-invariant: Möbius, and tangent-point with β = α + 2).
+    length_target : float or sequence of float, optional
+        Grow the total length (caller's units; of the whole curve, or one per component) to
+        this during the run, then hold it (:mod:`.growth`; docs/api.md, "Length growth").
+    length_growth : float, optional
+        Relative growth per iteration, > 0 (default ``growth.DEFAULT_LENGTH_GROWTH``, 1 %);
+        needs ``length_target``.
     """
 
     _OPEN_CURVES = True
@@ -406,10 +412,8 @@ class Relaxation(Run):
         (obstacles, the container, an energy that is not scale-invariant); the descent part
         passed it already."""
         Q, con, free = grown
-        sched = self.growth_schedule
         EQ, gQ = self.engine.energy_gradient(Q)
         if con is None:
-            sched.blocked += 1
             self._prepare(Q, EQ, gQ)
         else:
             old, self.con = self.con, con
@@ -418,8 +422,7 @@ class Relaxation(Run):
             except BaseException:  # an interruption leaves the last iterate whole
                 self.con = old
                 raise
-            sched.commit(free)
-            sched.blocked = 0
+            self.growth_schedule.commit(free)
             self.lengths0 = con.lengths0
         self.tau = tau
         self.nit += 1
