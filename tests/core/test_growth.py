@@ -93,6 +93,24 @@ def test_growth_inside_a_container_never_leaves_it(rng):
     assert wall_distance(r.x, V, F) > 0
 
 
+def test_growth_with_no_room_left_stops_stalled_and_says_so(rng):
+    # a flat round circle has no direction to fold in (its energy gradient is zero): it grows
+    # until the next growth would touch the wall (weight 0: nothing pushes it off), then stops
+    V, F = uv_sphere(0.8)
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    P = np.c_[0.6 * np.cos(t), 0.6 * np.sin(t), 0 * t]
+    xs = [P]
+    r = core.relax(P, container=(V, F), obstacle_weight=0.0, max_iter=80,
+                   length_target=3 * length(P), length_growth=0.05, engine="exact",
+                   refine=False, callback=lambda s: xs.append(s.x.copy()))
+    assert r.status == core.Status.STALLED and not r.success
+    assert r.message.startswith("growth blocked at length")
+    L = np.array(r.history["length"])
+    assert np.all(np.diff(L) >= -ROUND * L[-1]) and L[-1] > 1.2 * L[0]
+    assert L[-1] < 2 * np.pi * 0.8  # the sphere's great circle: it cannot be longer, round
+    assert not left_on_the_way(xs, V, F, rng)
+
+
 def test_growth_splits_edges_grown_past_twice_their_start():
     P = trefoil(40)
     L0 = length(P)
@@ -106,6 +124,17 @@ def test_growth_splits_edges_grown_past_twice_their_start():
     assert np.all(edges[:first] == 40) and np.all(edges[first:] == 80)
     assert length(r.x) == pytest.approx(2.5 * L0, rel=ROUND)
     assert np.all(np.diff(L) >= -ROUND * L0)
+
+
+def test_the_tree_engine_grows_too():
+    P = trefoil(120)
+    L0 = length(P)
+    r = core.relax(P, engine="tree", max_iter=12, length_target=1.5 * L0, length_growth=0.05,
+                   refine=False)
+    assert r.stats["engine"] == "tree"
+    L = np.array(r.history["length"])
+    assert np.all(np.diff(L) >= -ROUND * L0)
+    assert length(r.x) == pytest.approx(1.5 * L0, rel=ROUND)
 
 
 def test_growth_keeps_the_ratios_of_kept_lengths():
