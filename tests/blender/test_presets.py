@@ -80,6 +80,9 @@ def test_pack_in_volume_grows_and_relax_knot_restores_the_defaults(scene, mb):
     assert s.length_target == pytest.approx(opts.PACK_LENGTH_FACTOR * L, rel=1e-5)
     assert s.method == "projected_gradient" and not s.pin_selected and s.max_iterations == 400
     assert obj.data.bevel_depth == pytest.approx(opts.BEVEL_EDGES * L / 60, rel=1e-5)
+    kwargs = mb.relax_settings(s)  # what Relax passes on: the percent as the core's fraction
+    assert kwargs["length_target"] == pytest.approx(s.length_target)
+    assert kwargs["length_growth"] == pytest.approx(0.01)
     bpy.ops.mesh.primitive_uv_sphere_add(radius=3.0)
     s.container = bpy.context.active_object
     bpy.context.view_layer.objects.active = obj
