@@ -9,10 +9,10 @@ from __future__ import annotations
 import time
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, IntProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from .. import core
-from . import api, keyframes
+from . import api, keyframes, options, presets
 
 _CONVERTIBLE = {"CURVE", "MESH"}
 
@@ -529,6 +529,53 @@ class MOEBIUS_OT_show_gradient(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class MOEBIUS_OT_apply_preset(bpy.types.Operator):
+    """Set the panel's settings for a kind of scene (and give the active curve a thickness);
+    every setting can be changed afterwards"""
+
+    bl_idname = "moebius.apply_preset"
+    bl_label = "Apply Preset"
+    bl_options = {"REGISTER", "UNDO"}
+
+    preset: EnumProperty(
+        name="Preset",
+        items=[(key, label, desc) for key, (label, desc, _) in options.PRESETS.items()])
+
+    @classmethod
+    def description(cls, context, properties):
+        return options.PRESETS[properties.preset][1]
+
+    @classmethod
+    def poll(cls, context):
+        settings = getattr(context.scene, "moebius", None)
+        if settings is not None and settings.running:
+            cls.poll_message_set("A relaxation is running; press Esc in the 3D Viewport to "
+                                 "stop it")
+            return False
+        return True
+
+    def execute(self, context):
+        try:
+            done = presets.apply_preset(context.scene, self.preset, context.active_object)
+        except ValueError as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Preset {done}")
+        return {"FINISHED"}
+
+
+class MOEBIUS_MT_presets(bpy.types.Menu):
+    """Settings for a kind of scene: cables between fixed ends, a curve packed in a volume,
+    a knot"""
+
+    bl_idname = "MOEBIUS_MT_presets"
+    bl_label = "Presets"
+
+    def draw(self, context):
+        for key, (label, _, _) in options.PRESETS.items():
+            self.layout.operator(MOEBIUS_OT_apply_preset.bl_idname, text=label).preset = key
+
+
 def menu_add_knot(self, context):
     self.layout.menu(MOEBIUS_MT_add_knot.bl_idname, text="Knot", icon="CURVE_DATA")
 
@@ -544,6 +591,8 @@ classes = (
     MOEBIUS_OT_apply_frame,
     MOEBIUS_OT_export_flow,
     MOEBIUS_OT_show_gradient,
+    MOEBIUS_OT_apply_preset,
+    MOEBIUS_MT_presets,
 )
 
 

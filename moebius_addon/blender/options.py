@@ -89,11 +89,51 @@ def relax_settings(settings) -> dict:
         kwargs["max_edges"] = settings.max_edges
     if getattr(settings, "restarts", 0) and "backproject_iter" in acting:  # feasible methods
         kwargs.update(restarts=settings.restarts, seed=settings.seed)
+    if getattr(settings, "use_length_target", False):  # the panel's percent, the core's fraction
+        kwargs.update(length_target=settings.length_target,
+                      length_growth=settings.length_growth / 100.0)
     if settings.use_energy_target:
         kwargs["energy_target"] = settings.energy_target
     if settings.max_seconds > 0:
         kwargs["max_seconds"] = settings.max_seconds
     return kwargs
+
+
+#: The panel's presets: key -> (label, description, settings of ``scene.moebius``). A preset
+#: sets these (the user can change any afterwards); :mod:`.presets` adds what it does to the
+#: scene. Relax Knot sets every setting any preset sets back to its default (empty here: the
+#: defaults are the properties' own).
+PRESETS = {
+    "untangle_cables": (
+        "Untangle Cables",
+        "Open splines kept open, their end points selected and pinned, obstacles from a "
+        "collection (Advanced ▸ Obstacles; one named 'Obstacles' is taken if none is set); "
+        "a thickness set on the curve",
+        {"keep_open": True, "close_open": False, "pin_selected": True, "pin_tangents": False,
+         "use_length_target": False, "method": EXPLICIT_METHOD, "refine": True},
+    ),
+    "pack_in_volume": (
+        "Pack in Volume",
+        "Grow the curve to three times its length at 1 % per iteration inside the Container "
+        "(Advanced ▸ Container: a closed mesh around the curve); a thickness set on the curve",
+        {"use_length_target": True, "length_growth": 1.0, "method": EXPLICIT_METHOD,
+         "keep_open": False, "pin_selected": False, "refine": True, "max_iterations": 400},
+    ),
+    "relax_knot": (
+        "Relax Knot",
+        "The default settings: a closed knot or link relaxed to its low-energy shape (no "
+        "pins, obstacles, container or growth); a thickness set on the curve",
+        {},
+    ),
+}
+#: The settings the presets set: Relax Knot puts each back to its default.
+PRESET_SETTINGS = tuple(sorted({k for _, _, d in PRESETS.values() for k in d}
+                               | {"obstacles", "container"}))
+#: Pack in Volume's Length Target, in multiples of the active curve's length.
+PACK_LENGTH_FACTOR = 3.0
+#: The thickness a preset gives the curve (bevel depth, the tube's radius), in mean edge
+#: lengths: strands the flow keeps about an edge apart stay visibly apart.
+BEVEL_EDGES = 0.3
 
 
 def check_relax_options(max_iterations, tolerance, keyframe_stride, frame_start,

@@ -68,6 +68,7 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
         else:
             col.label(text="Select a curve object", icon="INFO")
             col.label(text="or add a knot (Polygon)")
+        layout.menu("MOEBIUS_MT_presets", icon="PRESET")
         row = layout.row(align=True)
         row.scale_y = 1.4
         row.operator("moebius.relax", icon="PLAY").append = False
@@ -236,6 +237,13 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
         row = col.row()
         row.active = s.obstacles is not None or s.container is not None
         row.prop(s, "obstacle_weight")
+        col = layout.column(align=True)
+        col.label(text="Length Growth")
+        col.prop(s, "use_length_target")
+        sub = col.column(align=True)
+        sub.active = s.use_length_target
+        sub.prop(s, "length_target")
+        sub.prop(s, "length_growth")
         col = layout.column(align=True)
         col.active = "backproject_iter" in acting  # a nudge keeps the constraints
         col.label(text="Restarts")

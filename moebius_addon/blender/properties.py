@@ -204,6 +204,25 @@ class MoebiusSettings(bpy.types.PropertyGroup):
         description="A closed mesh object the curve stays inside (as shown: modifiers "
                     "applied); the curve must start inside it",
     )
+    # Length growth (core: length_target=, length_growth=)
+    use_length_target: BoolProperty(
+        name="Grow Length", default=False,
+        description="Grow the curve's total length during the run, a little every iteration, "
+                    "to Length Target, then hold it (curve packing: with a Container the curve "
+                    "folds to fill it). Runs on the projected gradient (Automatic picks it)",
+    )
+    length_target: FloatProperty(
+        name="Length Target", default=10.0, min=0.0, soft_min=0.01, subtype="DISTANCE",
+        description="Total length to grow to, in object units (of all splines together; at "
+                    "least the curve's length at the start)",
+    )
+    length_growth: FloatProperty(
+        name="Growth per Iteration", default=1.0, min=0.0, soft_min=0.01, soft_max=10.0,
+        precision=2, subtype="PERCENTAGE",
+        description="How much longer the curve gets per iteration, in percent (less where the "
+                    "room runs out: a growth that would touch the curve itself, an obstacle or "
+                    "the container is made smaller); must be above 0",
+    )
     use_energy_target: BoolProperty(
         name="Energy Target", default=False,
         description="Stop once the energy is at or below a value",

@@ -249,7 +249,9 @@ class ObjectRelaxation:
         link) or ``pin_selected=True`` (the points selected in Edit Mode), ``pin_tangents``;
         ``obstacles=`` a collection, a list of mesh objects or the core's ``(V, F)`` arrays
         (in the curve's object coordinates), ``obstacle_weight``; ``container=`` a closed mesh
-        object (or the core's ``(V, F)``) the curve stays inside.
+        object (or the core's ``(V, F)``) the curve stays inside. ``length_target=`` (object
+        units) and ``length_growth=`` (a fraction per iteration): the curve's length grows to
+        the target during the run (``core.relax``; Automatic runs the projected gradient).
 
     Raises
     ------
@@ -334,6 +336,8 @@ class ObjectRelaxation:
         self.requested = method
         self.method, self.why = (
             (EXPLICIT_METHOD, "an open curve") if self.open and method == AUTO_METHOD
+            else (EXPLICIT_METHOD, "length growth") if (
+                method == AUTO_METHOD and options.get("length_target") is not None)
             else choose_method(method, polygons))
         if method == AUTO_METHOD and self.method != EXPLICIT_METHOD:
             # the panel's Armijo constant and step growth are the explicit method's; the
@@ -516,8 +520,8 @@ class ObjectRelaxation:
 
 
 def _refinement_line(r: dict) -> str:
-    why = "start too coarse" if r["iteration"] == 0 and r["reason"].startswith(
-        "start") else "jammed"
+    why = ("start too coarse" if r["iteration"] == 0 and r["reason"].startswith("start")
+           else "edges grown" if r["reason"].startswith("edges grown") else "jammed")
     if r.get("separation_steps"):
         why += f", strands pushed apart in {r['separation_steps']} steps"
     return f"{r['edges_before']} → {r['edges_after']} edges at iteration {r['iteration']} ({why})"

@@ -61,7 +61,10 @@ def relax(
         See :class:`Relaxation` (``energy_target``, ``ftol``, ``max_seconds``, ``initial_step``,
         ``armijo``, ``growth``, ``backproject_iter``, ``backproject_tol``, ``edge_lengths``,
         ``barycenter``, ``target_lengths``, ``check``, ``reuse_factorization``,
-        ``precision``, ``pinned``, ``pin_tangents``) and the method's own class.
+        ``precision``, ``pinned``, ``pin_tangents``, ``length_target``, ``length_growth``)
+        and the method's own class. ``length_target``: grow the total length to this during
+        the run, ``length_growth`` (default 0.01) per iteration, then hold it (docs/api.md,
+        "Length growth").
         ``pinned``: vertex indices (a list per component for a link) that keep their
         positions exactly; feasible methods only (docs/api.md, "Pinned vertices").
 
@@ -70,7 +73,8 @@ def relax(
     RelaxResult
         ``x`` (same shape as ``P``), ``fun``, ``nit``, ``success``, ``message``, ``status``
         (a ``Status`` code) and ``history`` (per-iteration lists from the start: energy, step,
-        grad_norm, constraint_residual, seconds). Deterministic for a given input.
+        grad_norm, constraint_residual, seconds; the feasible methods also length). Deterministic
+        for a given input.
     """
     run = make_run(method, P, metric, max_iter, tol, engine=engine, theta=theta, **options)
     while not run.done:

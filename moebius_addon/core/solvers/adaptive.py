@@ -62,6 +62,10 @@ CHECKPOINT_RATIO = 0.75
 #: strands closer than 0.88 edge lengths; the implicit method started again from that polygon
 #: went on to the table's 250.9956 (docs/benchmarks.md, "Untangling benchmark").
 FRESH_STARTS = 3
+#: Length growth (``length_target=``) splits every edge in two once growth has made an edge
+#: more than this many times the start's mean edge length (the energy resolves a curve at the
+#: scale of its edges: the split keeps them near the length they started with).
+GROWN_SPLIT = 2.0
 #: Default size of a restart's nudge: the largest vertex move, in mean edge lengths.
 RESTART_SCALE = 0.25
 
@@ -377,6 +381,43 @@ class AdaptiveRun:
         self.history["seconds"][-1] = time.perf_counter() - self.t0
         return True
 
+    def _split_grown(self, run) -> None:
+        """Go on from the current iterate of a growing run with every edge split in two once
+        growth has made its edges more than :data:`GROWN_SPLIT` times the start's (the same
+        point set, so nothing is crossed; the new run keeps the grown lengths as its targets
+        and grows on to the same ``length_target``). Nothing happens beyond ``max_edges`` or
+        where the method refuses the size."""
+        sched = getattr(run, "growth_schedule", None)
+        if sched is None or run.done or sched.edge_ratio(run.lengths0) <= GROWN_SPLIT:
+            return
+        edges_now = self._edges(run.layout.n)
+        if FACTOR * edges_now > self.max_edges:
+            return
+        Q = subdivide(run.x, FACTOR, self.closed)
+        changes = {"target_lengths": "keep"}  # the grown lengths (pinned stretches differ)
+        if getattr(run, "pinned", None) is not None:
+            changes.update(pinned=_pins_after(run.pinned, run.layout, FACTOR),
+                           pin_tangents=False)
+        try:
+            new = self._make(Q, self._iterations_left(), self._seconds_left(), check=False,
+                             **changes)
+        except ValueError:
+            return
+        self._retire(run)
+        self.refinements.append({
+            "iteration": self.nit, "edges_before": edges_now,
+            "edges_after": self._edges(new.layout.n),
+            "reason": f"edges grown to {sched.edge_ratio(run.lengths0):.2f} times the start's",
+            "energy_before": float(run.E), "energy_after": float(new.E)})
+        self.run = new
+        self._run_nit = new.nit
+        for k, v in new.history.items():  # the same iterate, split: the new run's start
+            if k in self.history:
+                self.history[k][-1] = v[0]
+        self.history["edges"][-1] = new.layout.n
+        self._checkpoint = (self.nit, None, len(self.history["energy"]))
+        self._note_checkpoint(new)
+
     def _jammed(self, run) -> bool:
         """Whether a stalled run's strands are closer than the start check allows (contact
         ratio below 1): a jam a finer polygon resolves. A run stalled against an obstacle, or
@@ -475,6 +516,7 @@ class AdaptiveRun:
                 self._append(run)
                 if self.refine:
                     self._note_checkpoint(run)
+                    self._split_grown(run)
             if not run.done:
                 return
             if run.status == Status.STALLED and self.refine and (

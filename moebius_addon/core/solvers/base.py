@@ -41,6 +41,7 @@ from ..obstacles import ObstacleField, check_obstacles
 from ..pinned_solve import TREE_MAX_PINS
 from ..pins import check_pins
 from ..polygon import check_polygon
+from .growth import DEFAULT_LENGTH_GROWTH, LengthGrowth
 
 HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
 
@@ -201,6 +202,9 @@ class Run:
     #: Whether the method needs the metric as a dense matrix whatever the engine (the penalty
     #: methods' solver is dense).
     _DENSE_METRIC = False
+    #: Whether the method grows the length to ``length_target`` (the explicit method: the
+    #: growth rides on its accepted steps, :meth:`.projected.Relaxation._grow`).
+    _LENGTH_GROWTH = False
 
     def __init__(self, P, metric: str, max_iter: int, tol: float, *,
                  energy_target: float | None, ftol: float, max_seconds: float | None,
@@ -208,7 +212,8 @@ class Run:
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
                  fixed_lengths: bool = True, obstacles=None, obstacle_weight: float = 1.0,
                  container=None, obstacle_tol: float = 0.0, closed=True, energy="moebius",
-                 alpha=None, beta=None, **engine_options):
+                 alpha=None, beta=None, length_target=None, length_growth=None,
+                 **engine_options):
         _check_names(metric, target_lengths)
         #: The energy minimized (:mod:`..energy_choice`): ``energy``, ``alpha``, ``beta``.
         self.energy_choice = check_energy(energy, alpha, beta)
@@ -265,6 +270,8 @@ class Run:
             self.eps = 1e-3 * float(self.lengths0[layout.real].mean())
         else:
             self.eps = 1e-3 * float(self.lengths0.mean())  # contact distance
+        #: the length growth (:mod:`.growth`), or None
+        self.growth_schedule = self._check_growth(length_target, length_growth, fixed_lengths)
         if meshes is not None or container is not None:
             # a container is one more obstacle (its wall repels, the contact bound stops every
             # step short of it) that the curve starts inside (.container)
@@ -285,6 +292,26 @@ class Run:
         self.success = False
         self.message = ""
         self.status = Status.NOT_FINISHED
+
+    def _check_growth(self, length_target, length_growth, fixed_lengths: bool):
+        """The :class:`.growth.LengthGrowth` of ``length_target`` and ``length_growth``, None
+        without a target; ValueError where the method or the options cannot grow."""
+        if length_target is None:
+            if length_growth is not None:
+                raise ValueError("length_growth needs length_target=, the total length to grow "
+                                 "to (growth stops there)")
+            return None
+        if not self._LENGTH_GROWTH:
+            name = getattr(self, "NAME", type(self).__name__)
+            raise ValueError(f"method {name!r} cannot grow the curve's length (length_target=): "
+                             f"use method='projected_gradient'")
+        if not fixed_lengths:
+            raise ValueError("length_target= grows the target edge lengths, which a run without "
+                             "the edge-length constraints (edge_lengths=False) does not keep: "
+                             "turn them on")
+        rate = DEFAULT_LENGTH_GROWTH if length_growth is None else length_growth
+        return LengthGrowth(length_target, rate, self.lengths0, self.layout, self.pinned,
+                            self._scale)
 
     def _check_reach(self, ln: np.ndarray, layout) -> None:
         """Refuse coordinates too far out for their edges: a step of the flow is a small

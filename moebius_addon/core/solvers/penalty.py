@@ -80,7 +80,8 @@ class _PenaltyRun(Run):
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
                  obstacles=None, obstacle_weight: float = 1.0, container=None,
                  obstacle_tol: float = 0.0, closed=True,
-                 energy="moebius", alpha=None, beta=None, **ignored):
+                 energy="moebius", alpha=None, beta=None, length_target=None,
+                 length_growth=None, **ignored):
         unknown = set(ignored) - _FEASIBLE_ONLY
         if unknown:
             raise TypeError(f"unknown option(s) {', '.join(sorted(unknown))}")
@@ -98,7 +99,8 @@ class _PenaltyRun(Run):
                          equilateral=False, engine=engine, theta=theta, obstacles=obstacles,
                          obstacle_weight=obstacle_weight, container=container,
                          obstacle_tol=obstacle_tol, closed=closed,
-                         energy=energy, alpha=alpha, beta=beta)
+                         energy=energy, alpha=alpha, beta=beta, length_target=length_target,
+                         length_growth=length_growth)  # refused there, by name
         self.alpha = float(weight)  # α of the docs (docs/design.md, the penalty methods)
         self.penalty_in_metric = (metric != "l2") if penalty_metric == "auto" else bool(
             penalty_metric)

@@ -25,7 +25,7 @@ import numpy as np
 from ..constraints import Constraints, jacobian, make_constraints, residual
 from ..pinned_solve import tree_borders
 from ._interrupts import resumable
-from .base import HISTORY_KEYS, Run, _check_names, check_dense_size, check_number
+from .base import HISTORY_KEYS, Run, Status, _check_names, check_dense_size, check_number
 
 # The modified Newton back-projection gives up on a trial step once |Φ| shrinks by less than
 # this factor per iteration (it converges linearly; slower means the step left its basin).
@@ -43,6 +43,9 @@ _EARLY = 1e-5
 # floor the FHW unknot at 600 edges stalled at once with 3e-15 and ran with 1e-14, and
 # 1e-300 ran into a reported jam (Blender's Back-projection Digits go up to 14 as well).
 MIN_BACKPROJECT_TOL = 1e-14
+# A growth whose path meets something, or whose back-projection fails, is halved up to this
+# many times (1 % becomes 0.004 %) before the iteration goes on without growing.
+_GROWTH_HALVINGS = 8
 
 
 def check_line_search(armijo: float, growth: float) -> tuple[float, float]:
@@ -126,9 +129,16 @@ class Relaxation(Run):
         ``alpha``, ``beta`` (default 2, 4.5; :mod:`..energy_choice`). The energies of the history
         are those of the curve scaled to total length 1 (the same as the caller's curve's when
         the energy is scale-invariant: Möbius, and tangent-point with β = α + 2).
+    length_target : float or sequence of float, optional
+        Grow the total length (caller's units; of the whole curve, or one per component) to
+        this during the run, then hold it (:mod:`.growth`; docs/api.md, "Length growth").
+    length_growth : float, optional
+        Relative growth per iteration, > 0 (default ``growth.DEFAULT_LENGTH_GROWTH``, 1 %);
+        needs ``length_target``.
     """
 
     _OPEN_CURVES = True
+    _LENGTH_GROWTH = True
 
     def __init__(
         self,
@@ -166,6 +176,8 @@ class Relaxation(Run):
         energy="moebius",
         alpha: float | None = None,
         beta: float | None = None,
+        length_target=None,
+        length_growth: float | None = None,
     ):
         _check_names(metric, target_lengths)
         armijo, growth = check_line_search(armijo, growth)
@@ -185,7 +197,7 @@ class Relaxation(Run):
                          pin_tangents=pin_tangents, fixed_lengths=bool(edge_lengths),
                          obstacles=obstacles, obstacle_weight=obstacle_weight, container=container,
                          obstacle_tol=obstacle_tol, closed=closed, energy=energy, alpha=alpha,
-                         beta=beta)
+                         beta=beta, length_target=length_target, length_growth=length_growth)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter
@@ -207,7 +219,7 @@ class Relaxation(Run):
                                                  edge_lengths, barycenter, self.pinned)
         self.tau = initial_step / self.growth
         self._prepare(self.X, *self.engine.energy_gradient(self.X))
-        self.history = {k: [] for k in HISTORY_KEYS}
+        self.history = {k: [] for k in (*HISTORY_KEYS, "length")}
         self._record(0.0)
         self._check_stop(None)
 
@@ -236,6 +248,8 @@ class Relaxation(Run):
         h["grad_norm"].append(float(np.sqrt(max(self.gu, 0.0))))
         h["constraint_residual"].append(float(np.abs(self.phi).max()) if self.phi.size else 0.0)
         h["seconds"].append(time.perf_counter() - self.t0)
+        ln = self.jac.ln[self.layout.real] if self.layout.has_open else self.jac.ln
+        h["length"].append(float(ln.sum()) * self._scale)
 
     # -- one iteration -------------------------------------------------------------------------
 
@@ -332,6 +346,8 @@ class Relaxation(Run):
             if EQ is None:
                 EQ = self.engine.energy(Q) if ok else np.inf
             if EQ <= target and self.engine.contact_time(X, X - Q, 1.0, self.eps) >= 1.0:
+                if self._growing:  # the length grows from the accepted trial
+                    return self._accept_grown(self._grow(X, Q), tau, E)
                 EQ, gQ = self.engine.energy_gradient(Q)
                 if EQ <= target:
                     self._prepare(Q, EQ, gQ)
@@ -350,7 +366,87 @@ class Relaxation(Run):
             tau *= shrink
             if tau * gu <= 1e-15 * abs(E):
                 break
+        if self._growing:  # no descent step: the length may still grow from the iterate
+            grown = self._grow(X, X)
+            if grown[1] is not None:
+                return self._accept_grown(grown, self.tau, E, step=0.0)
+            return self._growth_blocked()
         return self._give_up(gu)
+
+    # -- length growth (.growth) ---------------------------------------------------------------
+
+    @property
+    def _growing(self) -> bool:
+        """Whether the length is still to grow (``length_target=`` not reached yet)."""
+        return self.growth_schedule is not None and not self.growth_schedule.reached
+
+    def _grow(self, X: np.ndarray, Q: np.ndarray):
+        """``(G, con, free)``: ``Q`` (an accepted trial from the iterate ``X``, or ``X``
+        itself) back-projected onto target lengths grown by one iteration's growth, those
+        constraints and the components' grown lengths; ``(Q, None, None)`` where no growth
+        was possible. Nothing of the run changes here (:meth:`_accept_grown` commits).
+
+        The straight path from ``X`` to the grown polygon is tested for contact with the curve
+        itself, the obstacles and the container like every step (it is what the keyframes
+        interpolate); where it fails, or the back-projection does, the growth is halved, up to
+        :data:`_GROWTH_HALVINGS` times."""
+        sched = self.growth_schedule
+        rate = sched.rate
+        old = self.con
+        try:
+            for _ in range(_GROWTH_HALVINGS + 1):
+                free = sched.propose(rate)
+                self.con = sched.constraints(old, free)
+                with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                    G, ok = self._backproject(Q)
+                if ok and self.engine.contact_time(X, X - G, 1.0, self.eps) >= 1.0:
+                    return G, self.con, free
+                rate *= 0.5
+        finally:
+            self.con = old
+        return Q, None, None
+
+    def _accept_grown(self, grown, tau: float, E: float, step: float | None = None) -> bool:
+        """Make the polygon of ``grown`` (:meth:`_grow`: grown, or a descent step whose
+        growth was blocked) the next iterate. No Armijo test: growth may raise the energy
+        (obstacles, the container, an energy that is not scale-invariant); the descent part
+        passed it already."""
+        Q, con, free = grown
+        EQ, gQ = self.engine.energy_gradient(Q)
+        if con is None:
+            self._prepare(Q, EQ, gQ)
+        else:
+            old, self.con = self.con, con
+            try:
+                self._prepare(Q, EQ, gQ)
+            except BaseException:  # an interruption leaves the last iterate whole
+                self.con = old
+                raise
+            self.growth_schedule.commit(free)
+            self.lengths0 = con.lengths0
+        self.tau = tau
+        self.nit += 1
+        self._record(tau if step is None else step)
+        self._check_stop(E)
+        return not self.done
+
+    def _growth_blocked(self) -> bool:
+        """End a growing run that can neither descend nor grow."""
+        self._finish(False, f"growth blocked at {self.growth_schedule.words()}: no room to "
+                            f"grow without contact and no descent step left (the container or "
+                            f"the obstacles leave too little room, or strands are jammed)",
+                     Status.STALLED)
+        return False
+
+    def _check_stop(self, prev: float | None) -> None:
+        if not self._growing:
+            super()._check_stop(prev)
+        elif self.nit >= self.max_iter:  # no convergence before the target length is reached
+            self._finish(False, f"maximum number of iterations ({self.max_iter}) reached "
+                                f"while growing ({self.growth_schedule.words()})",
+                         Status.MAX_ITER)
+        elif self.max_seconds is not None and time.perf_counter() - self.t0 >= self.max_seconds:
+            self._time_up()
 
     def nudge(self, rng: np.random.Generator, scale: float):
         """A feasible polygon near the current iterate, for a restart (``restarts=`` of

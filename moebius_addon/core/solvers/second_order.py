@@ -38,6 +38,8 @@ class _Feasible(Relaxation):
     option is refused here rather than ignored.
     """
 
+    _LENGTH_GROWTH = False  # the growth rides on the explicit method's line search
+
     def __init__(self, P, metric, max_iter, tol, *, interpolate: bool = False, **options):
         if interpolate:
             raise ValueError(
