@@ -105,6 +105,21 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--restarts", type=int, default=0, metavar="K",
                    help="after converging, relax K small random nudges of the result and keep "
                         "the lowest energy (projected gradient methods; default %(default)s)")
+    scene = p.add_argument_group("scene constraints (cables, packing)")
+    scene.add_argument("--obstacles", metavar="NAME", action="append", default=[],
+                       help="a collection, or a mesh object, whose meshes the curve never "
+                       "crosses (repeat for more)")
+    scene.add_argument("--container", metavar="OBJECT",
+                       help="a closed mesh object the curve stays inside")
+    scene.add_argument("--obstacle-weight", type=float, default=None, metavar="W",
+                       help="weight of the obstacles' and the container's repulsion (default 1)")
+    scene.add_argument("--pin-ends", action="store_true",
+                       help="pin the two end points of every open spline (cables)")
+    scene.add_argument("--length-target", type=float, default=None, metavar="L",
+                       help="grow the curve's total length to L (object units) during the run")
+    scene.add_argument("--length-growth", type=float, default=None, metavar="RATE",
+                       help="relative growth per iteration with --length-target (default "
+                       "0.01: 1 %%)")
     p.add_argument("--frame-start", type=int, default=1,
                    help="frame of the start shape (default %(default)s)")
     p.add_argument("--stride", type=int, default=1,
@@ -133,6 +148,46 @@ def _say(line: str) -> None:
     print(f"moebius: {line}", flush=True)
 
 
+def _scene_options(args) -> dict:
+    """``relax_object``'s obstacles, container, weight and growth options from the command
+    line, the named collections and objects looked up in the opened file; ValueError naming
+    one that is not there."""
+    def mesh_object(name: str, role: str):
+        o = bpy.data.objects.get(name)
+        if o is None:
+            names = ", ".join(x.name for x in bpy.data.objects if x.type == "MESH") or "none"
+            raise ValueError(f"--{role} {name!r}: no such object (mesh objects: {names})")
+        return o
+
+    out = {}
+    if args.obstacles:
+        if len(args.obstacles) == 1 and args.obstacles[0] in bpy.data.collections:
+            out["obstacles"] = bpy.data.collections[args.obstacles[0]]
+        else:
+            out["obstacles"] = [mesh_object(n, "obstacles") for n in args.obstacles]
+    if args.container:
+        out["container"] = mesh_object(args.container, "container")
+    if args.obstacle_weight is not None:
+        out["obstacle_weight"] = args.obstacle_weight
+    if args.length_target is not None:
+        out["length_target"] = args.length_target
+    if args.length_growth is not None:
+        out["length_growth"] = args.length_growth
+    return out
+
+
+def _pins(obj, args) -> dict:
+    """``pinned=``: the two end points of every open spline of ``obj`` with ``--pin-ends``."""
+    if not args.pin_ends:
+        return {}
+    splines = obj.data.splines
+    if all(s.use_cyclic_u for s in splines):
+        raise ValueError(f"--pin-ends: '{obj.name}' has no open spline (use --keep-open to keep "
+                         "open splines open)")
+    per = [[] if s.use_cyclic_u else [0, len(s.points) - 1] for s in splines]
+    return {"pinned": per[0] if len(per) == 1 else per}
+
+
 def _run(args, run: dict, notation: str | None):
     """Open or empty the scene, add or convert, identify, relax, save and export (the options
     were checked by :func:`main`); returns the curve object."""
@@ -141,6 +196,7 @@ def _run(args, run: dict, notation: str | None):
         bpy.ops.wm.open_mainfile(filepath=args.open)
     else:  # not Blender's startup file: its Cube, Camera and Light would be saved too
         bpy.ops.wm.read_homefile(use_empty=True)
+    scene = _scene_options(args)  # named objects checked before anything is added
     if args.knot:
         obj = api.add_knot(args.knot, args.edges, p=args.pq[0], q=args.pq[1],
                            seed=args.seed, **run)
@@ -169,9 +225,11 @@ def _run(args, run: dict, notation: str | None):
         t0 = time.perf_counter()
         start = geometry.curve_polygons(obj, allow_open=True)
         is_open = not all(geometry.curve_closed(obj))
-        method, why = ((api.EXPLICIT_METHOD, "an open curve")
-                       if is_open and args.method == api.AUTO_METHOD
-                       else api.choose_method(args.method, start))
+        if args.method == api.AUTO_METHOD and (is_open or args.length_target is not None):
+            # the explicit method: the one that grows, and the one for open curves
+            method, why = api.EXPLICIT_METHOD, ("an open curve" if is_open else "length growth")
+        else:
+            method, why = api.choose_method(args.method, start)
         result = api.relax_object(obj, energy=args.energy, alpha=args.alpha, beta=args.beta,
                                   metric=args.metric, method=method,
                                   penalty=args.penalty, engine=args.engine,
@@ -179,7 +237,8 @@ def _run(args, run: dict, notation: str | None):
                                   tolerance=args.tolerance, frame_start=args.frame_start,
                                   keyframe_stride=args.stride, refine=args.refine,
                                   max_edges=args.max_edges, restarts=args.restarts,
-                                  seed=args.seed, progress=_say if args.verbose else False)
+                                  seed=args.seed, progress=_say if args.verbose else False,
+                                  **scene, **_pins(obj, args))
         frames = keyframes.keyed_frames(obj)
         say(f"{method}{f' ({why})' if why else ''}, "
             f"{'' if result.energy == 'moebius' else result.energy + ' energy, '}"
@@ -220,6 +279,8 @@ def main(argv: list[str]) -> int:
         if args.max_edges is not None and args.max_edges < 1:
             raise ValueError(f"--max-edges must be a positive whole number, got "
                              f"{args.max_edges}")
+        if args.length_growth is not None and args.length_target is None:
+            raise ValueError("--length-growth needs --length-target (the length to grow to)")
         if args.restarts < 0:
             raise ValueError(f"--restarts must be 0 or more, got {args.restarts}")
         if args.restarts and args.method in api.PENALTY_METHODS:

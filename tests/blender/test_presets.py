@@ -200,3 +200,51 @@ def test_pins_on_every_point_of_a_cable_are_refused_with_the_scene_unchanged(sce
         bpy.ops.moebius.relax()
     assert scene_state() == before
     assert s.pin_selected
+
+
+def test_the_command_line_grows_inside_a_container_and_pins_cable_ends(scene, mb, tmp_path,
+                                                                          loop_in_sphere, capfd):
+    # the scene constraints the panel has, from the command line (it had none)
+    cli = import_module(mb.__name__ + ".cli")
+    obj, sphere, L0 = loop_in_sphere
+    ball = sphere.name
+    blend, out = tmp_path / "scene.blend", tmp_path / "grown.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    rc = cli.main(["--open", str(blend), "--object", "Loop", "--container", ball,
+                   "--length-target", str(1.3 * L0), "--length-growth", "0.05",
+                   "--max-iter", "8", "--save", str(out)])
+    assert rc == 0, capfd.readouterr().err
+    assert "length growth" in capfd.readouterr().out  # Automatic took the explicit method
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    obj, sphere = bpy.data.objects["Loop"], bpy.data.objects[ball]
+    V, F = world_mesh(sphere)
+    frames, points, _ = import_module(mb.__name__ + ".keyframes").read_flow_keyframes(obj)
+    lengths = [polyline_length(P, True) for P in points]
+    assert len(frames) == 9 and lengths[-1] == pytest.approx(1.3 * L0, rel=1e-5)
+    M = np.array(obj.matrix_world)
+    rng = np.random.default_rng(1)
+    for P in points:
+        assert ray_parity_inside(P @ M[:3, :3].T + M[:3, 3], V, F, rng).all()
+    # a cable with its ends pinned; names that are not there, and growth without a target,
+    # refused before anything is added or saved
+    bpy.ops.wm.read_homefile(use_empty=True)
+    cable = poly_curve("Cable", [np.c_[np.linspace(-1, 1, 41), 0.1 * np.sin(np.linspace(
+        0, 9, 41)), np.zeros(41)]], cyclic=False)
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    rc = cli.main(["--open", str(blend), "--object", cable.name, "--keep-open", "--edges",
+                   "40", "--pin-ends", "--max-iter", "3", "--save", str(out)])
+    assert rc == 0, capfd.readouterr().err
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    frames, points, _ = import_module(mb.__name__ + ".keyframes").read_flow_keyframes(
+        bpy.data.objects["Cable.moebius"])  # the converted copy (the original is kept)
+    assert len(frames) == 4 and np.abs(points[-1] - points[0]).max() > 1e-3
+    for P in points:  # the ends never moved (keyed in single precision)
+        np.testing.assert_allclose(P[[0, -1]], points[0][[0, -1]], atol=1e-6)
+    capfd.readouterr()
+    for argv, words in ((["--container", "Nope"], "--container 'Nope': no such object"),
+                        (["--obstacles", "Nope"], "--obstacles 'Nope': no such object"),
+                        (["--length-growth", "0.1"], "--length-growth needs --length-target")):
+        assert cli.main(["--open", str(blend), "--object", "Cable", "--keep-open",
+                         "--save", str(tmp_path / "never.blend"), *argv]) == 1
+        assert words in capfd.readouterr().err
+        assert not (tmp_path / "never.blend").exists()
