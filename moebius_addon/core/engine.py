@@ -438,10 +438,10 @@ def engine_class(name: str, n: int) -> type[DenseEngine]:
 
 def _frame(X, layout, engine, theta, choice: EnergyChoice = MOEBIUS):
     """The Barnes–Hut frame of the energy ``choice`` for ``engine``/``theta`` at X (θ None:
-    the energy's own default), or None for the exact sum (always for open curves: "auto"
-    takes the exact sum, "tree" is refused)."""
+    the energy's own default), or None for the exact sum (always for the tangent-point energy
+    of open curves: "auto" takes the exact sum, "tree" is refused)."""
     theta = choice.default_theta if theta is None else barnes_hut.check_theta(theta)
-    if layout.has_open:
+    if layout.has_open and not choice.open_tree:
         if engine == "tree":
             raise ValueError(OPEN_TREE_REFUSAL)
         if engine not in ("exact", "auto"):
@@ -463,15 +463,14 @@ def moebius_energy(P, *, engine: str = "auto", theta: float | None = None,
         the components of a link.
     engine : {"exact", "tree", "auto"}
         "exact": the sum over all pairs; "tree": Barnes–Hut on a hierarchy of edges with
-        admissibility ``theta`` (relative error about 1e-4 at the default, O(N log N));
-        "auto": the tree from ``ENERGY_TREE_FROM`` edges on.
+        admissibility ``theta`` (relative error about 1e-4 at the default, O(N log N); open
+        curves too); "auto": the tree from ``ENERGY_TREE_FROM`` edges on.
     theta : float, optional
         Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); smaller is more
         accurate and slower.
     closed : bool or sequence of bool
         False: ``P`` is an open polyline (for a link: one flag per component, or one for
-        all), whose energy is O'Hara's regularized sum (docs/api.md, "Open curves"; exact
-        engine only).
+        all), whose energy is O'Hara's regularized sum (docs/api.md, "Open curves").
 
     Returns
     -------
@@ -548,7 +547,7 @@ def energy(P, *, energy: str = "moebius", alpha: float | None = None, beta: floa
         (:func:`.energy_choice.check_energy`, the runs' check).
     engine : {"exact", "tree", "auto"}
         As in :func:`moebius_energy` ("auto": the tree from ``ENERGY_TREE_FROM`` edges on;
-        open curves: exact only).
+        the tangent-point energy of open curves: exact only).
     theta : float, optional
         Admissibility of the tree in (0, 2); default ``barnes_hut.THETA`` for "moebius",
         ``tangent_point_tree.THETA`` for "tangent_point".

@@ -254,7 +254,7 @@ def test_refusals():
     with pytest.raises(ValueError, match="exact engine only: pass engine='exact'"):
         core.relax(P, closed=False, engine="tree")
     with pytest.raises(ValueError, match="exact engine only"):
-        core.moebius_energy(P, closed=False, engine="tree")
+        core.energy(P, energy="tangent_point", closed=False, engine="tree")
     for method in ("ncg", "lbfgs", "nesterov"):
         with pytest.raises(ValueError, match=f"method '{method}' cannot relax open curves"):
             core.relax(P, closed=False, method=method)
