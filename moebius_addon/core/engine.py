@@ -34,7 +34,7 @@ import numpy as np
 from . import barnes_hut, energy_choice, hs_solve, hs_tree
 from ._layout import OPEN_TREE_REFUSAL, Layout, as_checked_layout
 from ._memory import check_memory
-from .banded import BANDED_METRICS, BandedSaddle
+from .banded import BANDED_METRICS, BandedSaddle, OpenBandedSaddle
 from .collision import contact_time_x
 from .constraints import Jacobian
 from .energy_choice import MOEBIUS, EnergyChoice, check_energy
@@ -150,6 +150,11 @@ class DenseEngine:
         """:meth:`holds_dense` for this engine's metric."""
         return self.holds_dense(self.metric)
 
+    def solves_pins(self, n_pinned: int) -> bool:
+        """Whether the saddle-point solves with ``n_pinned`` pinned vertices need no dense
+        matrix (the exact engine's always do)."""
+        return False
+
     # -- energy, gradient, contact -------------------------------------------------------------
 
     def energy(self, X: np.ndarray) -> float:
@@ -240,6 +245,13 @@ class DenseEngine:
         return list(self.solver.krylov_its)
 
 
+#: Why the tree engine refuses the hs metrics of open curves, and what works instead.
+OPEN_TREE_METRICS = ("open curves (closed=False) run on the tree engine in the banded metrics "
+                     "only (metric='h1', 'h2' or 'l2'): its hs solver assumes closed "
+                     "components. Pass one of those with engine='tree', or engine='exact' "
+                     "(or 'auto', which takes it for open curves in hs and hs_pure)")
+
+
 #: Up to this many vertices a run on the tree reports its result's exact energy
 #: (:meth:`TreeEngine.result_energy`): the all-pairs sum took 0.02 s at 1 648 edges and 1.8 s
 #: at 20 000 (one thread, load 6; docs/benchmarks.md), under 3 % of such a run.
@@ -279,6 +291,8 @@ class TreeEngine(DenseEngine):
 
     def __init__(self, layout: Layout, metric: str, **options):
         self.check_size(layout.n)  # before anything is built
+        if layout.has_open and metric not in BANDED_METRICS:
+            raise ValueError(OPEN_TREE_METRICS)
         super().__init__(layout, metric, **options)
         self._tree_krylov: list[int] = []  # per solve: Krylov iterations (0: direct)
 
@@ -286,9 +300,24 @@ class TreeEngine(DenseEngine):
     def holds_dense(cls, metric: str) -> bool:
         return metric not in BANDED_METRICS + hs_tree.METRICS
 
+    def solves_pins(self, n_pinned: int) -> bool:
+        # open layouts' banded solver eliminates any number of pins (banded.OpenBandedSaddle)
+        return (self.layout.has_open and self.metric in BANDED_METRICS) or tree_borders(
+            n_pinned)
+
     def update(self, X: np.ndarray, jac: Jacobian) -> None:
         con = jac.con
         pins = 0 if con.pinned is None else con.pinned.size
+        if self.layout.has_open and self.metric in BANDED_METRICS and (
+                con.edge_lengths and con.barycenter):
+            # open components: dummy edges and any number of pins eliminated in the band
+            old, self._saddle = self._saddle, None
+            if old is not None:
+                old.release()
+            self._saddle = OpenBandedSaddle(banded_parts(self.metric, X, self.layout), jac,
+                                            getattr(old, "base", old))
+            self._banded_factorizations += 1
+            return
         if self.dense_metric or not (con.edge_lengths and con.barycenter) or (
                 pins and not tree_borders(pins)):
             # the tree's solvers need both kinds of rows, and few pins: else solve densely
@@ -418,8 +447,11 @@ def make_engine(name: str, layout: Layout, metric: str, **options) -> DenseEngin
     ValueError
         For an unknown name (the message lists the valid ones).
     """
-    # only "auto" looks at the size; open curves run on the exact engine (docs/api.md)
-    n = layout.n if name == "auto" and not layout.has_open else 0
+    # only "auto" looks at the size; open curves take the tree for the Möbius energy in a
+    # banded metric only (docs/api.md)
+    energy = options.get("energy", MOEBIUS)
+    n = layout.n if name == "auto" and (not layout.has_open or (
+        energy.open_tree and metric in BANDED_METRICS)) else 0
     return engine_class(name, n)(layout, metric, **options)
 
 
