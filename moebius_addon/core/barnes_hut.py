@@ -134,8 +134,9 @@ OPEN_KIND = -3
 # 3-D sum and the arc-length part nearly cancel, and the far field's error (its gradient's
 # falls like theta³) is measured against what is left (single cables of 1 000 to 2 000 edges,
 # default theta, gradient relative to the exact one: 6e-3 at factor 1, 1.5e-3 to 2.9e-3 at
-# 0.5, 7e-4 to 1.4e-3 at 0.4; 100 cables of 200 edges: 1.2M near pairs of leaves at 1, 2.0M
-# at 0.5 and 0.4).
+# 0.5, 7e-4 to 1.4e-3 at 0.4). Which pairs may share one is told by the nodes' masks of open
+# components (open_masks): without them every pair of nodes holding several cables took it,
+# and 100 cables of 200 edges had 2.0M near pairs of leaves instead of 1.25M (1.2M at 1).
 OPEN_THETA = 0.4
 
 
@@ -147,15 +148,48 @@ def _kinds_admissible(ka, kb):
 
 
 @nb.njit(cache=True, inline="always")
-def _may_share_open(ka, kb):
-    """Whether two nodes of these kinds may hold edges of one open component."""
+def _may_share_open(ka, kb, masks, a, b):
+    """Whether nodes ``a`` and ``b`` of kinds ``ka``, ``kb`` may hold edges of one open
+    component: ``masks`` (nodes, 2) has bit ``c mod 128`` of every open component ``c`` a node
+    holds (two nodes with no bit in common hold none in common; :func:`open_masks`)."""
     if ka >= 0 or kb >= 0:
         return False
-    return not (ka <= -3 and kb <= -3 and ka != kb)
+    return (masks[a, 0] & masks[b, 0]) != 0 or (masks[a, 1] & masks[b, 1]) != 0
+
+
+def open_masks(layout: Layout, tree: bvh.Tree) -> np.ndarray:
+    """``(nodes, 2)`` uint64: bit ``c mod 128`` set for every open component ``c`` a node
+    holds (all zero for closed layouts)."""
+    n = layout.n
+    bits = np.zeros((n, 2), np.uint64)
+    if layout.has_open:
+        c = layout.comp
+        on = ~layout.closed[c]
+        w = (c % 128) // 64
+        b = np.left_shift(np.uint64(1), (c % 64).astype(np.uint64))
+        bits[np.flatnonzero(on & (w == 0)), 0] = b[on & (w == 0)]
+        bits[np.flatnonzero(on & (w == 1)), 1] = b[on & (w == 1)]
+    return _node_masks(bits, tree.perm, tree.lo, tree.hi, tree.left, tree.right)
+
+
+@nb.njit(cache=True)
+def _node_masks(bits, perm, lo, hi, left, right):
+    """Per node the OR of its edges' ``bits`` (2 words), bottom-up (children come after their
+    parents)."""
+    m = lo.shape[0]
+    masks = np.zeros((m, 2), np.uint64)
+    for node in range(m - 1, -1, -1):
+        for k in range(2):
+            if left[node] < 0:
+                for q in range(lo[node], hi[node]):
+                    masks[node, k] |= bits[perm[q], k]
+            else:
+                masks[node, k] = masks[left[node], k] | masks[right[node], k]
+    return masks
 
 
 @nb.njit(cache=True, inline="always")
-def _admissible_row(tab, a, b, theta2):
+def _admissible_row(tab, a, b, theta2, masks):
     """Far pair: boxes apart, one component each, ``max(diam²) ≤ θ² gap²`` (rows of
     :func:`_node_table`)."""
     g = 0.0
@@ -166,12 +200,12 @@ def _admissible_row(tab, a, b, theta2):
     ka, kb = tab[a, 7], tab[b, 7]
     if g <= 0.0 or not _kinds_admissible(ka, kb):
         return False
-    t2 = theta2 * (OPEN_THETA * OPEN_THETA) if _may_share_open(ka, kb) else theta2
+    t2 = theta2 * (OPEN_THETA * OPEN_THETA) if _may_share_open(ka, kb, masks, a, b) else theta2
     return max(tab[a, 6], tab[b, 6]) <= t2 * g
 
 
 @nb.njit(cache=True)
-def _descend(a0, b0, left, right, tab, theta2, stack, far, nfar, near, nnear):
+def _descend(a0, b0, left, right, tab, theta2, masks, stack, far, nfar, near, nnear):
     """Depth-first split of the pair (a0, b0): far pairs (admissible clusters) and near pairs of
     leaves written to ``far``/``near`` from ``nfar``/``nnear`` on; returns the new counts, or
     (−1, −1) when an array is full. The order of :func:`bvh.push_split`: a self pair's children
@@ -203,7 +237,7 @@ def _descend(a0, b0, left, right, tab, theta2, stack, far, nfar, near, nnear):
                 stack[top + 2, 1] = la
                 top += 3
             continue
-        if _admissible_row(tab, a, b, theta2):
+        if _admissible_row(tab, a, b, theta2, masks):
             if nfar == fcap:
                 return -1, -1
             far[nfar, 0] = a
@@ -233,16 +267,17 @@ def _descend(a0, b0, left, right, tab, theta2, stack, far, nfar, near, nnear):
 
 
 @nb.njit(cache=True, inline="always")
-def _admissible(a, b, bmin, bmax, nc, diam2, theta2):
+def _admissible(a, b, bmin, bmax, nc, diam2, theta2, masks):
     gap2 = bvh.box_gap2(bmin, bmax, a, b)
     if gap2 <= 0.0 or not _kinds_admissible(nc[a], nc[b]):
         return False
-    t2 = theta2 * (OPEN_THETA * OPEN_THETA) if _may_share_open(nc[a], nc[b]) else theta2
+    t2 = (theta2 * (OPEN_THETA * OPEN_THETA) if _may_share_open(nc[a], nc[b], masks, a, b)
+          else theta2)
     return max(diam2[a], diam2[b]) <= t2 * gap2
 
 
 @nb.njit(cache=True)
-def _tasks(left, right, bmin, bmax, nc, diam2, theta2, want):
+def _tasks(left, right, bmin, bmax, nc, diam2, theta2, masks, want):
     """The pairs of nodes the depth-first split starts from: (root, root) expanded breadth
     first, as the split would (far and leaf pairs are final), until there are ``want``."""
     cur = np.zeros((1, 2), np.int64)
@@ -253,7 +288,7 @@ def _tasks(left, right, bmin, bmax, nc, diam2, theta2, want):
         for p in range(cur.shape[0]):
             a, b = cur[p, 0], cur[p, 1]
             if (left[a] >= 0 or left[b] >= 0) and (
-                    a == b or not _admissible(a, b, bmin, bmax, nc, diam2, theta2)):
+                    a == b or not _admissible(a, b, bmin, bmax, nc, diam2, theta2, masks)):
                 nxt, count = bvh.push_split(nxt, count, a, b, left, right, diam2)
                 grew = True
             else:
@@ -266,14 +301,14 @@ def _tasks(left, right, bmin, bmax, nc, diam2, theta2, want):
 
 
 @nb.njit(cache=True, parallel=True)
-def _split(left, right, bmin, bmax, nc, theta2, nchunks, want, cap):
+def _split(left, right, bmin, bmax, nc, theta2, masks, nchunks, want, cap):
     """Dual traversal from (root, root): unordered far pairs (admissible clusters) and near
     pairs of leaves (self pairs ``(A, A)`` included). The pairs of a frontier of ``want`` node
     pairs are split depth first in ``nchunks`` fixed chunks, each into a buffer of ``cap``
     pairs (all chunks again with twice the room while one runs out), and concatenated in
     chunk order: the same lists for every thread count."""
     diam2 = bvh.node_diam2(bmin, bmax)
-    tasks = _tasks(left, right, bmin, bmax, nc, diam2, theta2, want)
+    tasks = _tasks(left, right, bmin, bmax, nc, diam2, theta2, masks, want)
     tab = _node_table(bmin, bmax, nc)
     nf = np.zeros(nchunks, np.int64)
     nn = np.zeros(nchunks, np.int64)
@@ -286,7 +321,7 @@ def _split(left, right, bmin, bmax, nc, theta2, nchunks, want, cap):
             stack = np.empty((_STACK, 2), np.int64)
             f, n = 0, 0
             for t in range(ch, tasks.shape[0], nchunks):
-                f, n = _descend(tasks[t, 0], tasks[t, 1], left, right, tab, theta2, stack,
+                f, n = _descend(tasks[t, 0], tasks[t, 1], left, right, tab, theta2, masks, stack,
                                 fbuf[ch], f, nbuf[ch], n)
                 if f < 0:
                     break
@@ -397,7 +432,8 @@ class Frame:
         # each list holds about 2.8–3.9 m / theta pairs (measured from 5 000 to 100 000 edges),
         # and never more than every pair of nodes (a tiny theta asked for petabytes here)
         cap = max(256, int(min(8 * m / self.theta, m * (m + 1) / 2) / _SPLIT_CHUNKS))
-        far, near = _split(tree.left, tree.right, bmin, bmax, nc, self.theta**2, _SPLIT_CHUNKS,
+        far, near = _split(tree.left, tree.right, bmin, bmax, nc, self.theta**2,
+                           open_masks(layout, tree), _SPLIT_CHUNKS,
                            64 * _SPLIT_CHUNKS, cap)
         self.far_pairs = far.shape[0]
         self.near_pairs = near.shape[0]
