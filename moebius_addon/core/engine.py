@@ -18,7 +18,8 @@ Engines by name (the ``engine=`` option of ``relax``, ``make_run`` and every run
   matrix: direct O(N) saddle-point solves for the banded metrics (``l2``, ``h1``, ``h2``:
   :mod:`.banded`), preconditioned Krylov solves for ``hs`` and ``hs_pure`` (:mod:`.hs_tree`,
   :mod:`.hs_solve`).
-* ``"auto"``: the tree from ``AUTO_TREE_FROM`` vertices on, else exact.
+* ``"auto"``: the tree from ``AUTO_TREE_FROM`` vertices on, else exact (open curves: in the
+  banded metrics only, the exact engine in ``hs``/``hs_pure``).
 
 This module is the one place for engines by name: their names (:data:`ENGINE_NAMES`), what
 "auto" picks (:func:`uses_tree`, both of its thresholds), the classes (:data:`ENGINES`,
@@ -273,7 +274,12 @@ class TreeEngine(DenseEngine):
     ``exact_backprojection``. With up to ``pinned_solve.TREE_MAX_PINS`` pinned vertices
     these solvers are bordered by the pin rows (:mod:`.pinned_solve`; hs then without its
     coarse level); with more pins, or without one kind of constraint, the saddle-point
-    systems are solved as in the exact engine (dense; sizes are bounded)."""
+    systems are solved as in the exact engine (dense; sizes are bounded).
+
+    Layouts with open components (issue 28): the Möbius energy as above (O'Hara's regularized
+    kernel, :mod:`._arc_field`), the banded metrics only (``hs``/``hs_pure``: ValueError
+    :data:`OPEN_TREE_METRICS`), solved by :class:`banded.OpenBandedSaddle` with any number
+    of pins eliminated in the band."""
 
     name = "tree"
     _frame = None  # the last frame and the polygon it was built at
