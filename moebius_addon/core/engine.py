@@ -18,8 +18,8 @@ Engines by name (the ``engine=`` option of ``relax``, ``make_run`` and every run
   matrix: direct O(N) saddle-point solves for the banded metrics (``l2``, ``h1``, ``h2``:
   :mod:`.banded`), preconditioned Krylov solves for ``hs`` and ``hs_pure`` (:mod:`.hs_tree`,
   :mod:`.hs_solve`).
-* ``"auto"``: the tree from ``AUTO_TREE_FROM`` vertices on, else exact (open curves: in the
-  banded metrics only, the exact engine in ``hs``/``hs_pure``).
+* ``"auto"``: the tree from ``AUTO_TREE_FROM`` vertices on, else exact (the tangent-point
+  energy of open curves: always exact).
 
 This module is the one place for engines by name: their names (:data:`ENGINE_NAMES`), what
 "auto" picks (:func:`uses_tree`, both of its thresholds), the classes (:data:`ENGINES`,
@@ -246,13 +246,6 @@ class DenseEngine:
         return list(self.solver.krylov_its)
 
 
-#: Why the tree engine refuses the hs metrics of open curves, and what works instead.
-OPEN_TREE_METRICS = ("open curves (closed=False) run on the tree engine in the banded metrics "
-                     "only (metric='h1', 'h2' or 'l2'): its hs solver assumes closed "
-                     "components. Pass one of those with engine='tree', or engine='exact' "
-                     "(or 'auto', which takes it for open curves in hs and hs_pure)")
-
-
 #: Up to this many vertices a run on the tree reports its result's exact energy
 #: (:meth:`TreeEngine.result_energy`): the all-pairs sum took 0.02 s at 1 648 edges and 1.8 s
 #: at 20 000 (one thread, load 6; docs/benchmarks.md), under 3 % of such a run.
@@ -277,9 +270,9 @@ class TreeEngine(DenseEngine):
     systems are solved as in the exact engine (dense; sizes are bounded).
 
     Layouts with open components (issue 28): the Möbius energy as above (O'Hara's regularized
-    kernel, :mod:`._arc_field`), the banded metrics only (``hs``/``hs_pure``: ValueError
-    :data:`OPEN_TREE_METRICS`), solved by :class:`banded.OpenBandedSaddle` with any number
-    of pins eliminated in the band."""
+    kernel, :mod:`._arc_field`); every metric, the banded ones solved by
+    :class:`banded.OpenBandedSaddle` with any number of pins eliminated in the band, ``hs``
+    and ``hs_pure`` by conjugate gradients preconditioned with it (no coarse level)."""
 
     name = "tree"
     _frame = None  # the last frame and the polygon it was built at
@@ -297,8 +290,6 @@ class TreeEngine(DenseEngine):
 
     def __init__(self, layout: Layout, metric: str, **options):
         self.check_size(layout.n)  # before anything is built
-        if layout.has_open and metric not in BANDED_METRICS:
-            raise ValueError(OPEN_TREE_METRICS)
         super().__init__(layout, metric, **options)
         self._tree_krylov: list[int] = []  # per solve: Krylov iterations (0: direct)
 
@@ -307,9 +298,9 @@ class TreeEngine(DenseEngine):
         return metric not in BANDED_METRICS + hs_tree.METRICS
 
     def solves_pins(self, n_pinned: int) -> bool:
-        # open layouts' banded solver eliminates any number of pins (banded.OpenBandedSaddle)
-        return (self.layout.has_open and self.metric in BANDED_METRICS) or tree_borders(
-            n_pinned)
+        # open layouts' band solver eliminates any number of pins (banded.OpenBandedSaddle),
+        # for the banded metrics and as hs's preconditioner
+        return self.layout.has_open or tree_borders(n_pinned)
 
     def update(self, X: np.ndarray, jac: Jacobian) -> None:
         con = jac.con
@@ -453,11 +444,10 @@ def make_engine(name: str, layout: Layout, metric: str, **options) -> DenseEngin
     ValueError
         For an unknown name (the message lists the valid ones).
     """
-    # only "auto" looks at the size; open curves take the tree for the Möbius energy in a
-    # banded metric only (docs/api.md)
+    # only "auto" looks at the size; open curves take the tree for the Möbius energy only
+    # (docs/api.md)
     energy = options.get("energy", MOEBIUS)
-    n = layout.n if name == "auto" and (not layout.has_open or (
-        energy.open_tree and metric in BANDED_METRICS)) else 0
+    n = layout.n if name == "auto" and (not layout.has_open or energy.open_tree) else 0
     return engine_class(name, n)(layout, metric, **options)
 
 
