@@ -316,7 +316,7 @@ class TreeEngine(DenseEngine):
             self._banded_factorizations += 1
             return
         if self.dense_metric or not (con.edge_lengths and con.barycenter) or (
-                pins and not tree_borders(pins)):
+                pins and not self.solves_pins(pins)):
             # the tree's solvers need both kinds of rows, and few pins: else solve densely
             super().update(X, jac)
             return

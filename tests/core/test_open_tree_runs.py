@@ -14,6 +14,8 @@ from moebius_addon.core.constraints import jacobian, make_constraints
 from moebius_addon.core.engine import DenseEngine, TreeEngine, make_engine
 from moebius_addon.core.hs_tree import HsOperator
 from moebius_addon.core.metrics import banded_parts, gram_x
+from moebius_addon.core.pinned_solve import TREE_MAX_PINS
+from moebius_addon.core.solvers import make_run
 from tests.conftest import ngon
 from tests.mesh_checks import segments_closest
 
@@ -153,6 +155,21 @@ def test_tree_run_on_pinned_cables_in_hs():
     for c, p in enumerate(parts):
         assert np.array_equal(res.x[c][[0, -1]], p[[0, -1]])
     assert _min_gap(res.x) > 0.2 * _min_gap(parts)
+
+
+@pytest.mark.parametrize("metric", ["hs", "h1"])
+def test_many_pins_stay_off_the_dense_solver(metric):
+    # 64 pins, more than pinned_solve.TREE_MAX_PINS: closed curves would be solved densely
+    # there; open ones eliminate the pins in the band (hs: its preconditioner)
+    parts = cables(32, 12, spacing=0.4)
+    run = make_run("projected_gradient", parts, metric, 2, 0.0, engine="tree", closed=False,
+                   pinned=ends(parts), refine=False)
+    assert run.pinned.size > TREE_MAX_PINS
+    while run.step():
+        pass
+    assert run.engine.solver.n_factor == 0  # no dense factorization
+    assert run.engine._saddle is not None
+    assert run.history["energy"][-1] < run.history["energy"][0]
 
 
 @pytest.mark.parametrize("method", ["projected_gradient_implicit", "trust_region"])
