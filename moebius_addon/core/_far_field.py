@@ -73,8 +73,9 @@ def _levels(left, right):
 def _cluster_data(E, M, ln, cp, lo, hi, left, right):
     """Per node, bottom-up: total length ``L``, length-weighted centre ``c``, summed edge vector
     ``S``, tangent dipole ``D = Σ e_I δ_Iᵀ``, length quadrupole ``Q = Σ l_I δ_I δ_Iᵀ``, tangent
-    quadrupole ``T_acd = Σ e_I,a δ_I,c δ_I,d`` (``δ_I = m_I − c``) and the node's component (−1
-    for a node holding edges of several components). A parent takes its children's moments
+    quadrupole ``T_acd = Σ e_I,a δ_I,c δ_I,d`` (``δ_I = m_I − c``) and the node's kind
+    (:func:`_kind`: its component; −1 for a node of several components, −2 of several open
+    ones). A parent takes its children's moments
     moved to its centre (``δ = δ_child + h``, ``h = c_child − c``; ``Σ l δ_child = 0``). One
     depth at a time from the deepest, its nodes in parallel (each writes its own row)."""
     m = lo.shape[0]
@@ -105,6 +106,18 @@ def _node_moments(node, E, M, ln, cp, lo, hi, left, right, L, C, S, D, Q, T, nc)
 
 
 @nb.njit(cache=True, inline="always")
+def _kind(a, b):
+    """The kind of a node of edges of kinds ``a`` and ``b``: a component ``c ≥ 0`` (closed)
+    or ``≤ −3`` (open, :data:`.barnes_hut.OPEN_KIND` − c) when one, −2 for several open
+    components, −1 for any other mixture."""
+    if a == b:
+        return a
+    if a <= -2 and b <= -2:
+        return -2
+    return -1
+
+
+@nb.njit(cache=True, inline="always")
 def _leaf_moments(E, M, ln, cp, q0, q1, node, L, C, S, D, Q, T, nc):
     """A leaf's moments from its edges ``q0 ≤ q < q1`` (see :func:`_cluster_data`)."""
     tot = 0.0
@@ -119,8 +132,7 @@ def _leaf_moments(E, M, ln, cp, q0, q1, node, L, C, S, D, Q, T, nc):
         sx += E[q, 0]
         sy += E[q, 1]
         sz += E[q, 2]
-        if cp[q] != c0:
-            c0 = -1
+        c0 = _kind(c0, cp[q])
     L[node] = tot
     C[node, 0] = cx / tot
     C[node, 1] = cy / tot
@@ -166,7 +178,7 @@ def _parent_moments(a0, b0, node, L, C, S, D, Q, T, nc):
                     hc = h0 if c == 0 else (h1 if c == 1 else h2)
                     T[node, a, b, c] += (T[ch, a, b, c] + D[ch, a, b] * hc + D[ch, a, c] * hb
                                          + S[ch, a] * hb * hc)
-    nc[node] = nc[a0] if nc[a0] == nc[b0] else -1
+    nc[node] = _kind(nc[a0], nc[b0])
 
 
 # ------------------------------------------------------------------------------------------------
@@ -599,7 +611,8 @@ def _far(L, C, S, D, Q, T, nc, foff, fpart, grad):
                 for j in range(_LANES):
                     p = p0 + j
                     if p < foff[a + 1]:
-                        _stage(W, j, rows, a, fpart[p], nc[fpart[p]] == nc[a])
+                        # one closed component: the whole kernel (else O'Hara's, length part)
+                        _stage(W, j, rows, a, fpart[p], nc[fpart[p]] == nc[a] and nc[a] >= 0)
                     else:
                         _empty_lane(W, j)
                 if grad:

@@ -133,7 +133,8 @@ def _to_vertices(part, prv, at):
     """The gradient ``(N, 3)`` from the derivatives in the edge vectors (rows 1–3 of ``part``)
     and midpoints (rows 4–6) in tree order: ``e_I = P[nxt I] − P[I]`` and
     ``m_I = (P[I] + P[nxt I]) / 2``, so vertex ``v`` takes ``½ ∂m − ∂e`` of the edge it starts
-    and ``∂e + ½ ∂m`` of the edge ``prv[v]`` it ends. Per vertex, in parallel."""
+    and ``∂e + ½ ∂m`` of the edge ``prv[v]`` it ends (none at the ends of an open polyline,
+    whose dummy edges have tree position −1). Per vertex, in parallel."""
     n = at.shape[0]
     G = np.empty((n, 3))
     for vv in nb.prange(n):
@@ -141,6 +142,7 @@ def _to_vertices(part, prv, at):
         q = at[v]
         p = at[prv[v]]
         for k in range(3):
-            G[v, k] = (0.5 * part[4 + k, q] - part[1 + k, q]) + (part[1 + k, p]
-                                                                 + 0.5 * part[4 + k, p])
+            a = (0.5 * part[4 + k, q] - part[1 + k, q]) if q >= 0 else 0.0
+            b = (part[1 + k, p] + 0.5 * part[4 + k, p]) if p >= 0 else 0.0
+            G[v, k] = a + b
     return G

@@ -346,3 +346,207 @@ class BandedSaddle:
             s = slice(lay.starts[c], lay.starts[c + 1])
             out[s] += np.outer(self.beta[s], self.beta[s] @ V[s])
         return out
+
+
+# ------------------------------------------------------------------------------------------------
+# layouts with open components, and pins by elimination (issue 28)
+
+
+@nb.njit(cache=True)
+def _fill_open(rows, cols, vals, pos, anchors, mu, T, ln, nxt, has_row, fixed, kl, ku, ab):
+    """:func:`_fill` with edge slots that have no row (``has_row`` False: an open component's
+    dummy edge, an edge between two pins) and pinned vertices (``fixed``) eliminated: their
+    unknowns get the row ``x = 0`` (identity, nothing coupled), so that the band is the
+    system of the free unknowns."""
+    n = pos.shape[0]
+    diag = np.zeros(n)
+    for t in range(rows.shape[0]):
+        if rows[t] == cols[t]:
+            diag[rows[t]] += vals[t]
+    for c in range(anchors.shape[0]):
+        diag[anchors[c]] += mu[c]
+    D = np.empty(4 * n)
+    for v in range(n):
+        for d in range(3):
+            D[4 * pos[v] + d] = 1.0 if fixed[v] else 1.0 / np.sqrt(diag[v])
+    for i in range(n):
+        if has_row[i]:
+            j = nxt[i]
+            s = (diag[i] ** -1.0 + diag[j] ** -1.0) / (ln[i] * ln[i])
+            D[4 * pos[i] + 3] = 1.0 / np.sqrt(s)
+        else:
+            D[4 * pos[i] + 3] = 1.0
+    ab[:] = 0.0
+    for t in range(rows.shape[0]):
+        if fixed[rows[t]] or fixed[cols[t]]:
+            continue
+        r0 = 4 * pos[rows[t]]
+        c0 = 4 * pos[cols[t]]
+        for d in range(3):
+            ab[r0 + d, c0 - r0 + kl] += vals[t] * D[r0 + d] * D[c0 + d]
+    for c in range(anchors.shape[0]):
+        r0 = 4 * pos[anchors[c]]
+        for d in range(3):
+            ab[r0 + d, kl] += mu[c] * D[r0 + d] * D[r0 + d]
+    for v in range(n):
+        if fixed[v]:
+            for d in range(3):
+                ab[4 * pos[v] + d, kl] = 1.0
+    for i in range(n):
+        lam = 4 * pos[i] + 3
+        if not has_row[i]:
+            ab[lam, kl] = 1.0
+            continue
+        xi = 4 * pos[i]
+        j = nxt[i]
+        xj = 4 * pos[j]
+        for d in range(3):
+            t = T[i, d] / ln[i] * D[lam]
+            if not fixed[i]:
+                a = -t * D[xi + d]  # d(log l_i)/d(x_i)
+                ab[lam, xi + d - lam + kl] += a
+                ab[xi + d, lam - xi - d + kl] += a
+            if not fixed[j]:
+                b = t * D[xj + d]  # d(log l_i)/d(x_{i+1})
+                ab[lam, xj + d - lam + kl] += b
+                ab[xj + d, lam - xj - d + kl] += b
+    return D
+
+
+class OpenBandedSaddle(BandedSaddle):
+    """:class:`BandedSaddle` for layouts with open components and any number of pinned
+    vertices: the edge slots without a row (dummy edges, edges between two pins) and the
+    pinned coordinates are eliminated in the band itself (:func:`_fill_open`), not bordered
+    (:mod:`.pinned_solve`: three solves per pin and iterate). A component with a pin has no
+    barycenter rows and needs no spring (the pin holds it): its correction is the barycenter
+    term alone (rank 3), without pins the one of :class:`BandedSaddle` (rank 12). The
+    components are independent blocks of the band: the correction's columns of all of them
+    are solved together, nine band solves per iterate for any number of components."""
+
+    def __init__(self, parts, jac: Jacobian, recycle: BandedSaddle | None = None):
+        rows, cols, vals, beta = parts
+        con = jac.con
+        if not (con.edge_lengths and con.barycenter):
+            raise ValueError("the banded saddle-point solver needs the edge-length and "
+                             "barycenter constraints")
+        lay = con.layout
+        n, k = lay.n, lay.k
+        self.layout, self.jac = lay, jac
+        self.rows, self.cols, self.vals = rows, cols, vals
+        fixed = np.zeros(n, bool)
+        if con.pinned is not None:
+            fixed[con.pinned] = True
+        self.fixed = fixed
+        beta = np.where(fixed, 0.0, beta)  # the metric of the free coordinates
+        self.beta_full, self.beta = parts[3], beta
+        pinned_comp = np.zeros(k, bool)
+        pinned_comp[lay.comp[fixed]] = True
+        self.free_comps = np.flatnonzero(~pinned_comp)
+        pos = zigzag_positions(lay)
+        self.pos = pos
+        width = int(np.max(np.abs(pos[rows] - pos[cols]), initial=0))
+        width = max(width, int(np.max(np.abs(pos[lay.nxt] - pos), initial=0)))
+        self.kl = self.ku = 4 * width + 3
+        anchors = np.asarray(lay.starts[:-1], np.int64)[self.free_comps]
+        diag = np.zeros(n)
+        np.add.at(diag, rows[rows == cols], vals[rows == cols])
+        mu = diag[anchors]
+        self.anchors, self.mu = anchors, mu
+        T, inv_l = jac.edge_fields()
+        ln = np.where(inv_l > 0, 1.0 / np.where(inv_l > 0, inv_l, 1.0), 0.0)
+        has_row = con.edge_rows >= 0
+        shape = (4 * n, 2 * self.kl + self.ku + 1)
+        reuse = recycle is not None and recycle.ab.shape == shape
+        ab = recycle.ab if reuse else np.empty(shape)
+        recycle = None
+        self.D = _fill_open(rows, cols, vals, pos, anchors, mu, T, ln, lay.nxt, has_row, fixed,
+                            self.kl, self.ku, ab)
+        self.ab = ab
+        self.piv, self.mult, bad = band_lu(ab, self.kl, self.ku)
+        if bad >= 0:
+            raise np.linalg.LinAlgError(f"singular band at unknown {bad}")
+        # the correction's columns, every component's in one field per column: spring (3),
+        # barycenter term (3), barycenter rows (3)
+        F = jac.barycenter_fields()  # (3k', N, 3), k' = the components with barycenter rows
+        U = np.zeros((9, n, 3))
+        for d in range(3):
+            U[d, anchors, d] = 1.0
+            U[3 + d, :, d] = beta
+        for r, c in enumerate(con.bary_components):
+            s = slice(lay.starts[c], lay.starts[c + 1])
+            for d in range(3):
+                U[6 + d, s] += F[3 * r + d, s]
+        self.U = U
+        self.Z, self.Zlam = self._band_inverse(U)
+        self.slices = [slice(int(lay.starts[c]), int(lay.starts[c + 1])) for c in range(k)]
+        self.has_bary = np.zeros(k, bool)
+        self.has_bary[con.bary_components] = True
+        self.cap = []
+        for c in range(k):
+            s = self.slices[c]
+            W = U[:, s].reshape(9, -1) @ self.Z[:, s].reshape(9, -1).T
+            if self.has_bary[c]:
+                Sinv = np.zeros((12, 12))
+                Sinv[0:3, 0:3] = -np.eye(3) / diag[lay.starts[c]]
+                Sinv[3:6, 3:6] = np.eye(3)
+                Sinv[6:9, 6:9] = np.eye(3)
+                Sinv[6:9, 9:12] = np.eye(3)
+                Sinv[9:12, 6:9] = np.eye(3)
+                Sinv[0:9, 0:9] += W
+                Sinv[9:12, 9:12] += np.eye(3)
+                self.cap.append(np.linalg.inv(Sinv))
+            else:  # the barycenter term alone: (K + β βᵀ)⁻¹ by Sherman–Morrison–Woodbury
+                self.cap.append(np.linalg.inv(np.eye(3) + W[3:6, 3:6]))
+        self.bary_order = con.bary_components
+
+    def _solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        con = self.jac.con
+        n = self.layout.n
+        ne = con.n_edge_rows
+        g = np.where(self.fixed[:, None], 0.0, g)
+        lam0 = np.zeros(n)
+        lam0[con.edge_index] = r[:ne]
+        (y,), (ylam,) = self._band_inverse(g[None], lam0[None])
+        yb = np.asarray(r[ne:], float).reshape(-1, 3)
+        u = y.copy()
+        lam_e = ylam.copy()
+        lam_b = yb.copy()
+        row = {c: q for q, c in enumerate(self.bary_order)}
+        for c, s in enumerate(self.slices):
+            Ys = y[s].ravel()
+            if self.has_bary[c]:
+                t = np.empty(12)
+                t[:9] = self.U[:, s].reshape(9, -1) @ Ys
+                t[9:] = yb[row[c]]
+                w = self.cap[c] @ t
+                cols = slice(0, 9)
+            else:
+                t = self.U[3:6, s].reshape(3, -1) @ Ys
+                w = self.cap[c] @ t
+                cols = slice(3, 6)
+            wz = w[:9] if self.has_bary[c] else w
+            u[s] -= np.tensordot(wz, self.Z[cols, s], axes=1)
+            lam_e[s] -= wz @ self.Zlam[cols, s]
+            if self.has_bary[c]:
+                lam_b[row[c]] -= w[9:]
+        u[self.fixed] = 0.0
+        return u, np.concatenate([lam_e[con.edge_index], lam_b.ravel()])
+
+    def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`BandedSaddle.solve` (one refinement step); the pinned coordinates'
+        equations are not part of the system."""
+        u, lam = self._solve(g, r)
+        rg = g - self.metric_product(u) - self.jac.rmatvec(lam)
+        rg[self.fixed] = 0.0
+        du, dlam = self._solve(rg, r - self.jac.matvec(u))
+        return u + du, lam + dlam
+
+    def solve_many(self, G: np.ndarray, R: np.ndarray):
+        raise NotImplementedError("OpenBandedSaddle eliminates its pins: nothing to border")
+
+    def metric_product(self, V: np.ndarray) -> np.ndarray:
+        """``A V`` (band and barycenter term, every coordinate)."""
+        out = _band_product(self.rows, self.cols, self.vals, np.ascontiguousarray(V, float))
+        for s in self.slices:
+            out[s] += np.outer(self.beta_full[s], self.beta_full[s] @ V[s])
+        return out

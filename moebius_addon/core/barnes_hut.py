@@ -9,7 +9,14 @@ hierarchy (:mod:`bvh`) into
   order in the clusters' moments (:mod:`._far_field`). At the default θ the relative errors
   measured at most 8.2e-6 (energy) and 5.0e-4 (gradient) on 7_2, FHW, a link of three rings
   and a non-equilateral 7_2 of 5 000 and 20 000 edges (docs/benchmarks.md); the gradient's
-  falls about like θ³.
+  falls about like θ³. Open components (docs/api.md, "Open curves"): their pairs take
+  O'Hara's kernel ``l_I l_J/|d|²``, so clusters of open components only are far whatever
+  components they hold (θ times :data:`OPEN_THETA` where they may share one); the arc-length
+  part ``−l_I l_J/D²`` of O'Hara's regularized energy is :mod:`._arc_field`'s, with the arc
+  terms that make the far field cancel on straight pieces as the exact sum does. Measured at
+  the default θ on open cables, bundles and mixed layouts (tests/core/test_open_tree.py):
+  energy within 1e-5; gradient within 1e-4 on bundles and mixed layouts, 1.5e-3 on single
+  nearly straight cables (where the energy nearly cancels).
 * the **near field**: every other pair (always the pairs close in space, and so those close
   along the curve: boxes of edges sharing a vertex touch), summed exactly with the kernel of
   ``moebius_dense.py`` (:mod:`._near_field`).
@@ -31,6 +38,7 @@ import numba as nb
 import numpy as np
 
 from . import bvh
+from ._arc_field import ArcField
 from ._far_field import _cluster_data, _far, _far_to_edges, _push_down
 from ._layout import Layout
 from ._near_field import _near, _to_vertices
@@ -116,8 +124,72 @@ def _node_table(bmin, bmax, nc):
     return tab
 
 
+#: Kinds of nodes (``nc`` of :func:`._far_field._cluster_data`): a closed component ``c ≥ 0``,
+#: an open one ``OPEN_KIND − c`` (≤ −3), several open ones −2, any other mixture −1. Every pair
+#: with an edge of an open component takes O'Hara's kernel ``l_I l_J/|d|²`` (its arc-length
+#: part is :mod:`._arc_field`'s), so a node of open components only is far from any node whose
+#: box is apart.
+OPEN_KIND = -3
+# Far pairs that may hold two edges of one open component take theta times this: there the
+# 3-D sum and the arc-length part nearly cancel, and the far field's error (its gradient's
+# falls like theta³) is measured against what is left (single cables of 1 000 to 2 000 edges,
+# default theta, gradient relative to the exact one: 6e-3 at factor 1, 1.5e-3 to 2.9e-3 at
+# 0.5, 7e-4 to 1.4e-3 at 0.4). Which pairs may share one is told by the nodes' masks of open
+# components (open_masks): without them every pair of nodes holding several cables took it,
+# and 100 cables of 200 edges had 2.0M near pairs of leaves instead of 1.25M (1.2M at 1).
+OPEN_THETA = 0.4
+
+
 @nb.njit(cache=True, inline="always")
-def _admissible_row(tab, a, b, theta2):
+def _kinds_admissible(ka, kb):
+    """Clusters whose pairs take one kernel: both of closed components (one each), or one of
+    open components only (kinds ≤ −2; −1: a node of several components, not all open)."""
+    return (ka >= 0 and kb >= 0) or ka <= -2 or kb <= -2
+
+
+@nb.njit(cache=True, inline="always")
+def _may_share_open(ka, kb, masks, a, b):
+    """Whether nodes ``a`` and ``b`` of kinds ``ka``, ``kb`` may hold edges of one open
+    component: ``masks`` (nodes, 2) has bit ``c mod 128`` of every open component ``c`` a node
+    holds (two nodes with no bit in common hold none in common; :func:`open_masks`)."""
+    if ka >= 0 or kb >= 0:
+        return False
+    return (masks[a, 0] & masks[b, 0]) != 0 or (masks[a, 1] & masks[b, 1]) != 0
+
+
+def open_masks(layout: Layout, tree: bvh.Tree) -> np.ndarray:
+    """``(nodes, 2)`` uint64: bit ``c mod 128`` set for every open component ``c`` a node
+    holds (all zero for closed layouts)."""
+    n = layout.n
+    bits = np.zeros((n, 2), np.uint64)
+    if layout.has_open:
+        c = layout.comp
+        on = ~layout.closed[c]
+        w = (c % 128) // 64
+        b = np.left_shift(np.uint64(1), (c % 64).astype(np.uint64))
+        bits[np.flatnonzero(on & (w == 0)), 0] = b[on & (w == 0)]
+        bits[np.flatnonzero(on & (w == 1)), 1] = b[on & (w == 1)]
+    return _node_masks(bits, tree.perm, tree.lo, tree.hi, tree.left, tree.right)
+
+
+@nb.njit(cache=True)
+def _node_masks(bits, perm, lo, hi, left, right):
+    """Per node the OR of its edges' ``bits`` (2 words), bottom-up (children come after their
+    parents)."""
+    m = lo.shape[0]
+    masks = np.zeros((m, 2), np.uint64)
+    for node in range(m - 1, -1, -1):
+        for k in range(2):
+            if left[node] < 0:
+                for q in range(lo[node], hi[node]):
+                    masks[node, k] |= bits[perm[q], k]
+            else:
+                masks[node, k] = masks[left[node], k] | masks[right[node], k]
+    return masks
+
+
+@nb.njit(cache=True, inline="always")
+def _admissible_row(tab, a, b, theta2, masks):
     """Far pair: boxes apart, one component each, ``max(diam²) ≤ θ² gap²`` (rows of
     :func:`_node_table`)."""
     g = 0.0
@@ -125,12 +197,15 @@ def _admissible_row(tab, a, b, theta2):
         x = max(tab[a, k] - tab[b, 3 + k], tab[b, k] - tab[a, 3 + k])
         if x > 0.0:
             g += x * x
-    return (g > 0.0 and tab[a, 7] >= 0.0 and tab[b, 7] >= 0.0
-            and max(tab[a, 6], tab[b, 6]) <= theta2 * g)
+    ka, kb = tab[a, 7], tab[b, 7]
+    if g <= 0.0 or not _kinds_admissible(ka, kb):
+        return False
+    t2 = theta2 * (OPEN_THETA * OPEN_THETA) if _may_share_open(ka, kb, masks, a, b) else theta2
+    return max(tab[a, 6], tab[b, 6]) <= t2 * g
 
 
 @nb.njit(cache=True)
-def _descend(a0, b0, left, right, tab, theta2, stack, far, nfar, near, nnear):
+def _descend(a0, b0, left, right, tab, theta2, masks, stack, far, nfar, near, nnear):
     """Depth-first split of the pair (a0, b0): far pairs (admissible clusters) and near pairs of
     leaves written to ``far``/``near`` from ``nfar``/``nnear`` on; returns the new counts, or
     (−1, −1) when an array is full. The order of :func:`bvh.push_split`: a self pair's children
@@ -162,7 +237,7 @@ def _descend(a0, b0, left, right, tab, theta2, stack, far, nfar, near, nnear):
                 stack[top + 2, 1] = la
                 top += 3
             continue
-        if _admissible_row(tab, a, b, theta2):
+        if _admissible_row(tab, a, b, theta2, masks):
             if nfar == fcap:
                 return -1, -1
             far[nfar, 0] = a
@@ -192,13 +267,17 @@ def _descend(a0, b0, left, right, tab, theta2, stack, far, nfar, near, nnear):
 
 
 @nb.njit(cache=True, inline="always")
-def _admissible(a, b, bmin, bmax, nc, diam2, theta2):
+def _admissible(a, b, bmin, bmax, nc, diam2, theta2, masks):
     gap2 = bvh.box_gap2(bmin, bmax, a, b)
-    return gap2 > 0.0 and nc[a] >= 0 and nc[b] >= 0 and max(diam2[a], diam2[b]) <= theta2 * gap2
+    if gap2 <= 0.0 or not _kinds_admissible(nc[a], nc[b]):
+        return False
+    t2 = (theta2 * (OPEN_THETA * OPEN_THETA) if _may_share_open(nc[a], nc[b], masks, a, b)
+          else theta2)
+    return max(diam2[a], diam2[b]) <= t2 * gap2
 
 
 @nb.njit(cache=True)
-def _tasks(left, right, bmin, bmax, nc, diam2, theta2, want):
+def _tasks(left, right, bmin, bmax, nc, diam2, theta2, masks, want):
     """The pairs of nodes the depth-first split starts from: (root, root) expanded breadth
     first, as the split would (far and leaf pairs are final), until there are ``want``."""
     cur = np.zeros((1, 2), np.int64)
@@ -209,7 +288,7 @@ def _tasks(left, right, bmin, bmax, nc, diam2, theta2, want):
         for p in range(cur.shape[0]):
             a, b = cur[p, 0], cur[p, 1]
             if (left[a] >= 0 or left[b] >= 0) and (
-                    a == b or not _admissible(a, b, bmin, bmax, nc, diam2, theta2)):
+                    a == b or not _admissible(a, b, bmin, bmax, nc, diam2, theta2, masks)):
                 nxt, count = bvh.push_split(nxt, count, a, b, left, right, diam2)
                 grew = True
             else:
@@ -222,14 +301,14 @@ def _tasks(left, right, bmin, bmax, nc, diam2, theta2, want):
 
 
 @nb.njit(cache=True, parallel=True)
-def _split(left, right, bmin, bmax, nc, theta2, nchunks, want, cap):
+def _split(left, right, bmin, bmax, nc, theta2, masks, nchunks, want, cap):
     """Dual traversal from (root, root): unordered far pairs (admissible clusters) and near
     pairs of leaves (self pairs ``(A, A)`` included). The pairs of a frontier of ``want`` node
     pairs are split depth first in ``nchunks`` fixed chunks, each into a buffer of ``cap``
     pairs (all chunks again with twice the room while one runs out), and concatenated in
     chunk order: the same lists for every thread count."""
     diam2 = bvh.node_diam2(bmin, bmax)
-    tasks = _tasks(left, right, bmin, bmax, nc, diam2, theta2, want)
+    tasks = _tasks(left, right, bmin, bmax, nc, diam2, theta2, masks, want)
     tab = _node_table(bmin, bmax, nc)
     nf = np.zeros(nchunks, np.int64)
     nn = np.zeros(nchunks, np.int64)
@@ -242,7 +321,7 @@ def _split(left, right, bmin, bmax, nc, theta2, nchunks, want, cap):
             stack = np.empty((_STACK, 2), np.int64)
             f, n = 0, 0
             for t in range(ch, tasks.shape[0], nchunks):
-                f, n = _descend(tasks[t, 0], tasks[t, 1], left, right, tab, theta2, stack,
+                f, n = _descend(tasks[t, 0], tasks[t, 1], left, right, tab, theta2, masks, stack,
                                 fbuf[ch], f, nbuf[ch], n)
                 if f < 0:
                     break
@@ -295,10 +374,11 @@ def _near_lists(pairs, m, perm, nxt, prv):
     ``(offsets, partners)`` of :func:`_by_target`: both directions of each pair, a self pair
     once), per tree position the tree positions of the previous and the next edge along the
     curve (always in a near partner: boxes of edges that share a vertex touch), and per edge
-    its tree position."""
+    its tree position (−1 for the dummy edges of open components, which are not in the tree:
+    the ends of an open polyline have no neighbour there)."""
     n = perm.shape[0]
     noff, npart = _by_target(pairs, m)
-    at = np.empty(n, np.int64)
+    at = np.full(nxt.shape[0], -1, np.int64)  # −1: a dummy edge of an open component
     for q in range(n):
         at[perm[q]] = q
     nbr = np.empty((n, 2), np.int64)
@@ -331,10 +411,19 @@ class Frame:
                  leaf_size: int = bvh.LEAF_SIZE):
         self.layout = layout
         self.theta = check_theta(theta)
-        tree = bvh.build(X, layout, leaf_size)
+        # open components: their dummy edges (._layout) stay out of the tree
+        tree = bvh.build(X, layout, leaf_size,
+                         np.flatnonzero(layout.real) if layout.has_open else None)
         self.tree = tree
+        self._closed_count = layout.k if layout.closed is None else int(layout.closed.sum())
         bmin, bmax = bvh.segment_boxes(tree, X, layout)
-        edges = _edge_arrays(X, layout.nxt, layout.comp, layout.starts, tree.perm)
+        edges = self._edges(X)
+        # the near field's components: an open component's edges match no other edge (its
+        # pairs take O'Hara's kernel, as edges of two components)
+        self._near_cp = edges[3]
+        if layout.has_open:
+            cp = layout.comp[tree.perm]
+            self._near_cp = np.where(layout.closed[cp], cp, -2 - np.arange(cp.shape[0]))
         clusters = _cluster_data(*edges[:4], tree.lo, tree.hi, tree.left, tree.right)
         # what an evaluation at the frame's own polygon reuses (the engine's next call)
         self._own = (X.copy(), edges, clusters)
@@ -343,7 +432,8 @@ class Frame:
         # each list holds about 2.8–3.9 m / theta pairs (measured from 5 000 to 100 000 edges),
         # and never more than every pair of nodes (a tiny theta asked for petabytes here)
         cap = max(256, int(min(8 * m / self.theta, m * (m + 1) / 2) / _SPLIT_CHUNKS))
-        far, near = _split(tree.left, tree.right, bmin, bmax, nc, self.theta**2, _SPLIT_CHUNKS,
+        far, near = _split(tree.left, tree.right, bmin, bmax, nc, self.theta**2,
+                           open_masks(layout, tree), _SPLIT_CHUNKS,
                            64 * _SPLIT_CHUNKS, cap)
         self.far_pairs = far.shape[0]
         self.near_pairs = near.shape[0]
@@ -351,23 +441,42 @@ class Frame:
         self.near = near
         self.leaves = np.flatnonzero(tree.left < 0).astype(np.int64)
         *self._near_lists, self._at = _near_lists(near, m, tree.perm, layout.nxt, layout.prv)
+        #: The arc-length part of the open components' energy (None: all closed).
+        self.arc = (ArcField(layout, X, tree, self.foff, self.fpart) if layout.has_open
+                    else None)
+
+    def _edges(self, X: np.ndarray):
+        """:func:`_edge_arrays` in tree order, an open component's edges of kind
+        :data:`OPEN_KIND` (what the clusters' ``nc`` is built from)."""
+        lay = self.layout
+        edges = _edge_arrays(X, lay.nxt, lay.comp, lay.starts, self.tree.perm)
+        if lay.has_open:
+            cp = edges[3]
+            edges = (*edges[:3], np.where(lay.closed[cp], cp, OPEN_KIND - cp), *edges[4:])
+        return edges
 
     def _evaluate(self, X: np.ndarray, grad: bool):
         lay, tree = self.layout, self.tree
         X0, edges, clusters = self._own
         if not np.array_equal(X, X0):
-            edges = _edge_arrays(X, lay.nxt, lay.comp, lay.starts, tree.perm)
+            edges = self._edges(X)
             clusters = _cluster_data(*edges[:4], tree.lo, tree.hi, tree.left, tree.right)
-        E, M, ln, cp, pos, size = edges
+        E, M, ln = edges[:3]
         L, C, S, D, Q, T, nc = clusters
         eF, gL, gS, gC, gD, gQ, gT = _far(L, C, S, D, Q, T, nc, self.foff, self.fpart, grad)
-        part = _near(E, M, ln, cp, tree.lo, tree.hi, self.leaves, *self._near_lists, grad)
-        energy = 4.0 * lay.k + float(np.sum(part[0])) + float(np.sum(eF))
+        part = _near(E, M, ln, self._near_cp, tree.lo, tree.hi, self.leaves, *self._near_lists,
+                     grad)
+        energy = 4.0 * self._closed_count + float(np.sum(part[0])) + float(np.sum(eF))
+        g1 = None
+        if self.arc is not None:  # O'Hara's arc-length part: E = (3-D part) − E₁ (+ C)
+            e1, g1 = self.arc.energy_gradient(X, grad)
+            energy += e1
         if not grad:
             return energy, None
         acc = _push_down(L, C, S, D, gL, gS, gC, gD, gQ, gT, tree.left, tree.right)
         _far_to_edges(E, M, ln, C, tree.lo, tree.hi, self.leaves, acc, part)
-        return energy, _to_vertices(part, lay.prv, self._at)
+        G = _to_vertices(part, lay.prv, self._at)
+        return energy, (G if g1 is None else G + g1)
 
     def energy(self, X: np.ndarray) -> float:
         """The approximated energy at ``X`` with this frame's split (cluster data refitted)."""

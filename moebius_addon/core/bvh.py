@@ -166,10 +166,16 @@ def _build(mid, leaf_size):
     return perm, lo, hi, left, right
 
 
-def build(X: np.ndarray, layout: Layout, leaf_size: int = LEAF_SIZE) -> Tree:
-    """Hierarchy over the edges ``(X[I], X[nxt[I]])`` split at their midpoints' quantiles."""
-    mid = np.ascontiguousarray(0.5 * (X + X[layout.nxt]))
-    return Tree(*_build(mid, int(leaf_size)))
+def build(X: np.ndarray, layout: Layout, leaf_size: int = LEAF_SIZE,
+          edges: np.ndarray | None = None) -> Tree:
+    """Hierarchy over the edges ``(X[I], X[nxt[I]])`` split at their midpoints' quantiles;
+    ``edges`` (sorted edge indices, default all) restricts it to those (the real edges of a
+    layout with open components, whose dummy edges hold no segment)."""
+    mid = 0.5 * (X + X[layout.nxt])
+    if edges is None:
+        return Tree(*_build(np.ascontiguousarray(mid), int(leaf_size)))
+    perm, lo, hi, left, right = _build(np.ascontiguousarray(mid[edges]), int(leaf_size))
+    return Tree(np.ascontiguousarray(edges[perm]), lo, hi, left, right)
 
 
 @nb.njit(cache=True)

@@ -59,9 +59,9 @@ def contact_time_x(X, U, layout: Layout, tau_max: float, eps: float,
                    search: str = "auto") -> float:
     """First contact of ``X − τU`` up to ``tau_max``; ``search`` "pairs" (all pairs), "tree"
     (the hierarchy: the same value) or "auto" (the tree from ``CONTACT_TREE_FROM`` edges).
-    Open components' dummy edges (._layout) are points at their last vertex, tested as such;
-    open curves always take the all-pairs search."""
-    if _use_tree(search, layout.n, CONTACT_TREE_FROM) and not layout.has_open:
+    Open components' dummy edges (._layout) are points at their last vertex, tested as such
+    (by both searches: the hierarchy's rule for the pairs it skips is the all-pairs one)."""
+    if _use_tree(search, layout.n, CONTACT_TREE_FROM):
         return tree_contact.contact_time_tree(X, U, layout, tau_max, eps)
     return float(
         _contact_rows(X, np.ascontiguousarray(U), layout.nxt, layout.starts, layout.comp,
@@ -158,7 +158,7 @@ def closest_pairs(X: np.ndarray, layout: Layout, min_gap: int = 4, search: str =
     of the closest points on them). ``search`` as in :func:`contact_time_x` (the same
     distances; of pairs at equal distance the tree reports the one with the smallest indices;
     "auto": the tree from ``CLOSEST_TREE_FROM`` edges)."""
-    if _use_tree(search, layout.n, CLOSEST_TREE_FROM) and not layout.has_open:
+    if _use_tree(search, layout.n, CLOSEST_TREE_FROM):
         return tree_contact.closest_pairs_tree(X, layout, min_gap)
     closed = np.ones(layout.k, np.bool_) if layout.closed is None else layout.closed
     vb, vi, eb, ei, ep = _closest_pairs(X, layout.nxt, layout.starts, layout.comp, closed,

@@ -78,6 +78,13 @@ class EnergyChoice:
         """The tree's admissibility when none is given (each energy measured its own)."""
         return barnes_hut.THETA if self.name == "moebius" else tangent_point_tree.THETA
 
+    @property
+    def open_tree(self) -> bool:
+        """Whether the tree evaluates this energy on layouts with open components (the Möbius
+        energy: :mod:`._arc_field` adds O'Hara's arc-length part; the tangent-point energy's
+        tree assumes closed components)."""
+        return self.name == "moebius"
+
     # -- evaluations (X at the run's scale; layout of the run) ---------------------------------
 
     def exact(self, X: np.ndarray, layout: Layout) -> float:
@@ -93,7 +100,7 @@ class EnergyChoice:
         return tp_energy_gradient_x(X, layout, self.alpha, self.beta)
 
     def frame(self, X: np.ndarray, layout: Layout, theta: float):
-        """The tree's frame at ``X`` (closed curves and links): ``.energy(X)`` and
+        """The tree's frame at ``X`` (open curves: Möbius only): ``.energy(X)`` and
         ``.energy_gradient(X)`` of the approximated sum."""
         if self.name == "moebius":
             return barnes_hut.Frame(X, layout, theta)

@@ -18,7 +18,8 @@ Engines by name (the ``engine=`` option of ``relax``, ``make_run`` and every run
   matrix: direct O(N) saddle-point solves for the banded metrics (``l2``, ``h1``, ``h2``:
   :mod:`.banded`), preconditioned Krylov solves for ``hs`` and ``hs_pure`` (:mod:`.hs_tree`,
   :mod:`.hs_solve`).
-* ``"auto"``: the tree from ``AUTO_TREE_FROM`` vertices on, else exact.
+* ``"auto"``: the tree from ``AUTO_TREE_FROM`` vertices on, else exact (the tangent-point
+  energy of open curves: always exact).
 
 This module is the one place for engines by name: their names (:data:`ENGINE_NAMES`), what
 "auto" picks (:func:`uses_tree`, both of its thresholds), the classes (:data:`ENGINES`,
@@ -34,7 +35,7 @@ import numpy as np
 from . import barnes_hut, energy_choice, hs_solve, hs_tree
 from ._layout import OPEN_TREE_REFUSAL, Layout, as_checked_layout
 from ._memory import check_memory
-from .banded import BANDED_METRICS, BandedSaddle
+from .banded import BANDED_METRICS, BandedSaddle, OpenBandedSaddle
 from .collision import contact_time_x
 from .constraints import Jacobian
 from .energy_choice import MOEBIUS, EnergyChoice, check_energy
@@ -150,6 +151,11 @@ class DenseEngine:
         """:meth:`holds_dense` for this engine's metric."""
         return self.holds_dense(self.metric)
 
+    def solves_pins(self, n_pinned: int) -> bool:
+        """Whether the saddle-point solves with ``n_pinned`` pinned vertices need no dense
+        matrix (the exact engine's always do)."""
+        return False
+
     # -- energy, gradient, contact -------------------------------------------------------------
 
     def energy(self, X: np.ndarray) -> float:
@@ -261,7 +267,12 @@ class TreeEngine(DenseEngine):
     ``exact_backprojection``. With up to ``pinned_solve.TREE_MAX_PINS`` pinned vertices
     these solvers are bordered by the pin rows (:mod:`.pinned_solve`; hs then without its
     coarse level); with more pins, or without one kind of constraint, the saddle-point
-    systems are solved as in the exact engine (dense; sizes are bounded)."""
+    systems are solved as in the exact engine (dense; sizes are bounded).
+
+    Layouts with open components (issue 28): the Möbius energy as above (O'Hara's regularized
+    kernel, :mod:`._arc_field`); every metric, the banded ones solved by
+    :class:`banded.OpenBandedSaddle` with any number of pins eliminated in the band, ``hs``
+    and ``hs_pure`` by conjugate gradients preconditioned with it (no coarse level)."""
 
     name = "tree"
     _frame = None  # the last frame and the polygon it was built at
@@ -286,11 +297,26 @@ class TreeEngine(DenseEngine):
     def holds_dense(cls, metric: str) -> bool:
         return metric not in BANDED_METRICS + hs_tree.METRICS
 
+    def solves_pins(self, n_pinned: int) -> bool:
+        # open layouts' band solver eliminates any number of pins (banded.OpenBandedSaddle),
+        # for the banded metrics and as hs's preconditioner
+        return self.layout.has_open or tree_borders(n_pinned)
+
     def update(self, X: np.ndarray, jac: Jacobian) -> None:
         con = jac.con
         pins = 0 if con.pinned is None else con.pinned.size
+        if self.layout.has_open and self.metric in BANDED_METRICS and (
+                con.edge_lengths and con.barycenter):
+            # open components: dummy edges and any number of pins eliminated in the band
+            old, self._saddle = self._saddle, None
+            if old is not None:
+                old.release()
+            self._saddle = OpenBandedSaddle(banded_parts(self.metric, X, self.layout), jac,
+                                            getattr(old, "base", old))
+            self._banded_factorizations += 1
+            return
         if self.dense_metric or not (con.edge_lengths and con.barycenter) or (
-                pins and not tree_borders(pins)):
+                pins and not self.solves_pins(pins)):
             # the tree's solvers need both kinds of rows, and few pins: else solve densely
             super().update(X, jac)
             return
@@ -418,8 +444,10 @@ def make_engine(name: str, layout: Layout, metric: str, **options) -> DenseEngin
     ValueError
         For an unknown name (the message lists the valid ones).
     """
-    # only "auto" looks at the size; open curves run on the exact engine (docs/api.md)
-    n = layout.n if name == "auto" and not layout.has_open else 0
+    # only "auto" looks at the size; open curves take the tree for the Möbius energy only
+    # (docs/api.md)
+    energy = options.get("energy", MOEBIUS)
+    n = layout.n if name == "auto" and (not layout.has_open or energy.open_tree) else 0
     return engine_class(name, n)(layout, metric, **options)
 
 
@@ -438,10 +466,10 @@ def engine_class(name: str, n: int) -> type[DenseEngine]:
 
 def _frame(X, layout, engine, theta, choice: EnergyChoice = MOEBIUS):
     """The Barnes–Hut frame of the energy ``choice`` for ``engine``/``theta`` at X (θ None:
-    the energy's own default), or None for the exact sum (always for open curves: "auto"
-    takes the exact sum, "tree" is refused)."""
+    the energy's own default), or None for the exact sum (always for the tangent-point energy
+    of open curves: "auto" takes the exact sum, "tree" is refused)."""
     theta = choice.default_theta if theta is None else barnes_hut.check_theta(theta)
-    if layout.has_open:
+    if layout.has_open and not choice.open_tree:
         if engine == "tree":
             raise ValueError(OPEN_TREE_REFUSAL)
         if engine not in ("exact", "auto"):
@@ -463,15 +491,14 @@ def moebius_energy(P, *, engine: str = "auto", theta: float | None = None,
         the components of a link.
     engine : {"exact", "tree", "auto"}
         "exact": the sum over all pairs; "tree": Barnes–Hut on a hierarchy of edges with
-        admissibility ``theta`` (relative error about 1e-4 at the default, O(N log N));
-        "auto": the tree from ``ENERGY_TREE_FROM`` edges on.
+        admissibility ``theta`` (relative error about 1e-4 at the default, O(N log N); open
+        curves too); "auto": the tree from ``ENERGY_TREE_FROM`` edges on.
     theta : float, optional
         Admissibility of the tree in (0, 2) (default ``barnes_hut.THETA``); smaller is more
         accurate and slower.
     closed : bool or sequence of bool
         False: ``P`` is an open polyline (for a link: one flag per component, or one for
-        all), whose energy is O'Hara's regularized sum (docs/api.md, "Open curves"; exact
-        engine only).
+        all), whose energy is O'Hara's regularized sum (docs/api.md, "Open curves").
 
     Returns
     -------
@@ -548,7 +575,7 @@ def energy(P, *, energy: str = "moebius", alpha: float | None = None, beta: floa
         (:func:`.energy_choice.check_energy`, the runs' check).
     engine : {"exact", "tree", "auto"}
         As in :func:`moebius_energy` ("auto": the tree from ``ENERGY_TREE_FROM`` edges on;
-        open curves: exact only).
+        the tangent-point energy of open curves: exact only).
     theta : float, optional
         Admissibility of the tree in (0, 2); default ``barnes_hut.THETA`` for "moebius",
         ``tangent_point_tree.THETA`` for "tangent_point".

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._layout import Layout, layout_from_sizes
-from .banded import BandedSaddle
+from .banded import BandedSaddle, OpenBandedSaddle
 from .collision import closest_pairs
 from .constraints import Jacobian, TangentProjector, jacobian, make_constraints
 from .hs_tree import HsOperator
@@ -322,7 +322,8 @@ class HsSaddle:
     jac : Jacobian
         Constraint Jacobian at the same polygon (edge-length and barycenter rows; with pins
         the constraint preconditioner is bordered, :mod:`.pinned_solve`, and the coarse level
-        is left out).
+        is left out; with open components it is :class:`.banded.OpenBandedSaddle`, pins
+        eliminated, and there is no coarse level either).
     rtol : float
         Relative tolerance of :meth:`solve`: the preconditioned residual norm
         ``sqrt(rᵀ K r)`` against that of the start.
@@ -353,6 +354,11 @@ class HsSaddle:
         self.max_iter = max_iter
         self.exact_backprojection = exact_backprojection
         old = None if recycle is None else getattr(recycle.K, "base", recycle.K)
+        if op.layout.has_open:  # dummy edges and pins eliminated in the band; no coarse level
+            self.K = OpenBandedSaddle(op.preconditioner_parts(), jac, old)
+            self.iterations = [] if log is None else log
+            self.coarse = None
+            return
         if jac.con.pinned is None:
             self.K = BandedSaddle(op.preconditioner_parts(), jac, old)
         else:  # the constraint preconditioner with pins: bordered (the iterates stay 0 there)

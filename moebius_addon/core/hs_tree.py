@@ -193,7 +193,7 @@ def _arc_gap(s0a, s1a, s0b, s1b, length):
 
 
 @nb.njit(cache=True, inline="always")
-def _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, theta2):
+def _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, closed, theta2):
     if nc[a] < 0 or nc[b] < 0:
         return False
     gap2 = bvh.box_gap2(bmin, bmax, a, b)
@@ -202,12 +202,15 @@ def _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, theta2):
     if nc[a] != nc[b]:
         return True
     span = max(s1[a] - s0[a], s1[b] - s0[b])
-    rho = _arc_gap(s0[a], s1[a], s0[b], s1[b], clen[nc[a]])
+    if closed[nc[a]]:
+        rho = _arc_gap(s0[a], s1[a], s0[b], s1[b], clen[nc[a]])
+    else:  # an open component: no way round its ends
+        rho = max(s0[b] - s1[a], s0[a] - s1[b])
     return span * span <= theta2 * rho * rho
 
 
 @nb.njit(cache=True)
-def _split(left, right, bmin, bmax, nc, s0, s1, clen, theta2):
+def _split(left, right, bmin, bmax, nc, s0, s1, clen, closed, theta2):
     """Dual traversal from (root, root): unordered far pairs of admissible clusters and near
     pairs of leaves (self pairs included)."""
     diam2 = bvh.node_diam2(bmin, bmax)
@@ -224,7 +227,7 @@ def _split(left, right, bmin, bmax, nc, s0, s1, clen, theta2):
         top -= 1
         a = stack[top, 0]
         b = stack[top, 1]
-        if a != b and _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, theta2):
+        if a != b and _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, closed, theta2):
             if nf == far.shape[0]:
                 grown = np.empty((2 * nf, 2), np.int64)
                 grown[:nf] = far
@@ -248,8 +251,8 @@ def _split(left, right, bmin, bmax, nc, s0, s1, clen, theta2):
 
 
 @nb.njit(cache=True, parallel=True)
-def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart, rowoff,
-                  low, expo, cross2, w, v, w1, v1, x1):
+def _near_weights(ln, mid, arc, clen, closed, nxt, starts, comp, lo, hi, leaves, noff, npart,
+                  rowoff, low, expo, cross2, w, v, w1, v1, x1):
     """Exact weights of every near pair, stored per target edge as one row over the edges of
     its leaf's partner leaves (in partner order), their row sums, and the row sums of ``v``
     over the folded pairs (other components, or ``ρ² ≥ cross2 · |d|²``). ``expo``:
@@ -273,8 +276,14 @@ def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart,
                     wq = 0.0
                     vq = 0.0
                     same = comp[r] == cq
-                    gap = (r - q) % sq if same else 2
-                    if gap >= 2 and gap != sq - 1:
+                    if not closed[cq] and same:  # along an open polyline: no way round
+                        gap = abs(r - q)
+                    else:
+                        gap = (r - q) % sq if same else 2
+                        if gap == sq - 1:
+                            gap = 1
+                    # an open component's dummy edge (length 0) is no edge
+                    if gap >= 2 and nxt[q] != q and nxt[r] != r:
                         dx = mid[q, 0] - mid[r, 0]
                         dy = mid[q, 1] - mid[r, 1]
                         dz = mid[q, 2] - mid[r, 2]
@@ -286,7 +295,7 @@ def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart,
                             wq = ln[q] * ln[r] * r2**-expo
                         if same:
                             fwd = abs(arc[r] - arc[q])
-                            rho = min(fwd, clen[cq] - fwd)
+                            rho = min(fwd, clen[cq] - fwd) if closed[cq] else fwd
                             vq = low * wq * (inv - 1.0 / (rho * rho))
                             if rho * rho * inv >= cross2:
                                 sx += vq
@@ -304,7 +313,8 @@ def _near_weights(ln, mid, arc, clen, starts, comp, lo, hi, leaves, noff, npart,
 
 
 @nb.njit(cache=True, parallel=True)
-def _far_weights(L, C, nc, s0, s1, clen, foff, fpart, low, expo, cross2, fw, fv, rw, rv, rx):
+def _far_weights(L, C, nc, s0, s1, clen, closed, foff, fpart, low, expo, cross2, fw, fv, rw, rv,
+                 rx):
     """One weight pair per ordered far pair of clusters (per unit length of both: ``w`` and
     ``v`` divided by ``l_I l_J``), and per target cluster the sums ``Σ_B ω L_B`` (what its
     edges' row sums receive, times their own length), those of ``v`` over folded pairs (see
@@ -330,7 +340,7 @@ def _far_weights(L, C, nc, s0, s1, clen, foff, fpart, low, expo, cross2, fw, fv,
                 ca = 0.5 * (s0[a] + s1[a])
                 cb = 0.5 * (s0[b] + s1[b])
                 fwd = abs(ca - cb)
-                rho = min(fwd, clen[nc[a]] - fwd)
+                rho = min(fwd, clen[nc[a]] - fwd) if closed[nc[a]] else fwd
                 vv = low * ww * max(0.0, inv - 1.0 / (rho * rho))
                 if rho * rho * inv >= cross2:
                     sx += vv * L[b]
@@ -376,7 +386,8 @@ def _edge_fields(U, nxt, ln):
         i = np.int64(ii)
         j = nxt[i]
         for d in range(3):
-            F[i, d] = (U[j, d] - U[i, d]) / ln[i]
+            # an open component's dummy edge (j = i, length 0) has no difference
+            F[i, d] = (U[j, d] - U[i, d]) / ln[i] if j != i else 0.0
             G[i, d] = 0.5 * (U[i, d] + U[j, d])
     return F, G
 
@@ -426,8 +437,8 @@ def _assemble(U, F, G, Y, w1, v1, ln, prv, comp, starts, beta, mass):
         q = prv[p]
         c = comp[p]
         for d in range(3):
-            hp = 2.0 * (w1[p] * F[p, d] - Y[p, d]) / ln[p]
-            hq = 2.0 * (w1[q] * F[q, d] - Y[q, d]) / ln[q]
+            hp = 2.0 * (w1[p] * F[p, d] - Y[p, d]) / ln[p] if ln[p] > 0.0 else 0.0
+            hq = 2.0 * (w1[q] * F[q, d] - Y[q, d]) / ln[q] if ln[q] > 0.0 else 0.0
             gp = 2.0 * (v1[p] * G[p, d] - Y[p, 3 + d])
             gq = 2.0 * (v1[q] * G[q, d] - Y[q, 3 + d])
             o = hq - hp + 0.5 * (gp + gq) + beta[p] * bu[c, d]
@@ -505,7 +516,8 @@ class HsOperator:
         nc, L, C, s0, s1 = _node_data(ln, mid, arc, lay.starts, tree.lo, tree.hi, tree.left,
                                       tree.right)
         bmin, bmax = bvh.segment_boxes(tree, X, lay)
-        far, near = _split(tree.left, tree.right, bmin, bmax, nc, s0, s1, clen,
+        closed = np.ones(lay.k, np.bool_) if lay.closed is None else lay.closed
+        far, near = _split(tree.left, tree.right, bmin, bmax, nc, s0, s1, clen, closed,
                            float(theta) ** 2)
         m = tree.size
         self.far_pairs, self.near_pairs = far.shape[0], near.shape[0]
@@ -523,13 +535,15 @@ class HsOperator:
         self.v = np.empty(total)
         rows = np.empty((3, lay.n))
         cross2 = FOLDED**2
-        _near_weights(ln, mid, arc, clen, lay.starts, lay.comp, tree.lo, tree.hi, self.leaves,
+        _near_weights(ln, mid, arc, clen, closed, lay.nxt, lay.starts, lay.comp, tree.lo,
+                      tree.hi, self.leaves,
                       self.noff, self.npart, self.rowoff, self.low, expo, cross2, self.w, self.v,
                       rows[0], rows[1], rows[2])
         self.fw = np.empty(self.fpart.shape[0])
         self.fv = np.empty(self.fpart.shape[0])
         rfar = np.empty((3, m))
-        _far_weights(L, C, nc, s0, s1, clen, self.foff, self.fpart, self.low, expo, cross2,
+        _far_weights(L, C, nc, s0, s1, clen, closed, self.foff, self.fpart, self.low, expo,
+                     cross2,
                      self.fw, self.fv, rfar[0], rfar[1], rfar[2])
         rows = np.ascontiguousarray(rows.T)
         _push_to_edges(np.ascontiguousarray(rfar.T), ln, tree.lo, tree.hi, tree.left,
@@ -542,6 +556,8 @@ class HsOperator:
         # hs_pure's small L² term, scaled like the metric (metrics._gram_hs_pure)
         self._mass = (_PURE_L2 / self.total**length_power(self.order)
                       if metric == "hs_pure" else 0.0)
+        if lay.has_open:  # and the L² term that keeps it definite on straight polylines
+            self._mass += 1.0 / self.total**length_power(self.order)  # (metrics._hs_family)
 
     @property
     def nbytes(self) -> int:
@@ -566,9 +582,10 @@ class HsOperator:
         """The diagonal of ``Ã`` (N,): ``2 Σ_{I ∋ p} W̃1_I / l_I² + ½ Σ_{I ∋ p} Ṽ1_I + β_p²``
         (the off-diagonal parts vanish there: edges through one vertex are not disjoint)."""
         lay, ln = self.layout, self.ln
-        e = 2.0 * self.w1 / ln**2 + 0.5 * self.v1
+        # 0 at an open component's dummy edge (length 0)
+        e = 2.0 * np.divide(self.w1, ln**2, out=np.zeros_like(ln), where=ln > 0) + 0.5 * self.v1
         d = e + e[lay.prv] + self.beta**2
-        if self.metric == "hs_pure":
+        if self._mass != 0.0:
             d += self._mass * (ln + ln[lay.prv]) / 3
         return d
 

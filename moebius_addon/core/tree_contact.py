@@ -194,8 +194,8 @@ def _better(d2, i, j, best, bi, bj):
 
 
 @nb.njit(cache=True, parallel=True)
-def _closest_search(X, nxt, starts, comp, perm, lo, hi, left, right, bmin, bmax, min_gap,
-                    nchunks, want):
+def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmin, bmax,
+                    min_gap, nchunks, want):
     diam2 = bvh.node_diam2(bmin, bmax)
     tasks = _frontier(left, right, bmin, bmax, diam2, False, want, bmin, bmax, 0.0, 0.0)
     big = np.iinfo(np.int64).max
@@ -230,7 +230,7 @@ def _closest_search(X, nxt, starts, comp, perm, lo, hi, left, right, bmin, bmax,
                             same = comp[j] == c
                             size = starts[c + 1] - starts[c]
                             gap = j - i
-                            if same:
+                            if same and closed[c]:  # an open one: no way round the ends
                                 gap = min(gap, size - gap)
                             if (not same) or gap >= min_gap:
                                 d2 = (X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (
@@ -238,8 +238,9 @@ def _closest_search(X, nxt, starts, comp, perm, lo, hi, left, right, bmin, bmax,
                                 ) ** 2
                                 if _better(d2, i, j, vb, vi0, vj0):
                                     vb, vi0, vj0 = d2, i, j
-                            if (not same) or gap >= 2:
-                                i1, j1 = nxt[i], nxt[j]
+                            i1, j1 = nxt[i], nxt[j]
+                            # an open component's dummy edge (a point) is no edge here
+                            if ((not same) or gap >= 2) and i1 != i and j1 != j:
                                 d2, s, u = segment_distance2(
                                     X[i, 0], X[i, 1], X[i, 2], X[i1, 0], X[i1, 1], X[i1, 2],
                                     X[j, 0], X[j, 1], X[j, 2], X[j1, 0], X[j1, 1], X[j1, 2],
@@ -259,8 +260,9 @@ def closest_pairs_tree(X: np.ndarray, layout: Layout, min_gap: int = 4):
     pairs at the same distance, the one with the smallest indices)."""
     tree = bvh.build(X, layout)
     bmin, bmax = bvh.segment_boxes(tree, X, layout)
-    vb, vi, eb, ei, ep = _closest_search(X, layout.nxt, layout.starts, layout.comp, *tree,
-                                         bmin, bmax, int(min_gap), _CHUNKS, _TASKS)
+    closed = np.ones(layout.k, np.bool_) if layout.closed is None else layout.closed
+    vb, vi, eb, ei, ep = _closest_search(X, layout.nxt, layout.starts, layout.comp, closed,
+                                         *tree, bmin, bmax, int(min_gap), _CHUNKS, _TASKS)
     a = min(range(len(vb)), key=lambda c: (vb[c], vi[c, 0], vi[c, 1]))
     b = min(range(len(eb)), key=lambda c: (eb[c], ei[c, 0], ei[c, 1]))
     return (

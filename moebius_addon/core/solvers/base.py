@@ -337,7 +337,7 @@ class Run:
                 f"method {name!r} cannot relax open curves (closed=False): use a "
                 f"feasible method, projected_gradient, projected_gradient_implicit or "
                 f"trust_region, on the exact engine")
-        if engine == "tree":
+        if engine == "tree" and not self.energy_choice.open_tree:
             raise ValueError(OPEN_TREE_REFUSAL)
 
     def _equal_lengths(self, ln: np.ndarray, equilateral: bool) -> np.ndarray:

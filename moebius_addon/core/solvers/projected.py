@@ -23,7 +23,6 @@ import time
 import numpy as np
 
 from ..constraints import Constraints, jacobian, make_constraints, residual
-from ..pinned_solve import tree_borders
 from ._interrupts import resumable
 from .base import HISTORY_KEYS, Run, Status, _check_names, check_dense_size, check_number
 
@@ -211,7 +210,7 @@ class Relaxation(Run):
             np.abs(self.X).max()) / float(real.min()))
         self.interpolate = bool(interpolate)
         if not self.engine.dense_metric:  # the tree's solvers need both rows and few pins
-            if self.pinned is not None and not tree_borders(self.pinned.size):
+            if self.pinned is not None and not self.engine.solves_pins(self.pinned.size):
                 check_dense_size(self.layout.n, "pins")
             elif not (edge_lengths and barycenter):
                 check_dense_size(self.layout.n, "constraints")
