@@ -172,6 +172,21 @@ def test_many_pins_stay_off_the_dense_solver(metric):
     assert run.history["energy"][-1] < run.history["energy"][0]
 
 
+def test_the_size_check_takes_many_pins_on_open_curves():
+    # the run takes them (above); the pre-check refused them above the dense size as for
+    # closed curves, where they do need the dense solver
+    from moebius_addon.core import check_size
+    from moebius_addon.core.solvers.base import DENSE_MAX_VERTICES
+
+    n, pins = DENSE_MAX_VERTICES + 1000, 2 * TREE_MAX_PINS
+    for metric in ("hs", "h1"):
+        with pytest.raises(ValueError, match="pin"):
+            check_size(n, metric, "projected_gradient", "tree", pinned=pins)
+        check_size(n, metric, "projected_gradient", "tree", pinned=pins, open_curves=True)
+    with pytest.raises(ValueError):  # the dense methods still say no
+        check_size(n, "hs", "lbfgs", "tree", open_curves=True)
+
+
 @pytest.mark.parametrize("method", ["projected_gradient_implicit", "trust_region"])
 def test_other_feasible_methods_on_the_tree(method):
     parts = cables(4, 60) + [ngon(40) * 0.1 + [0.4, 0.04, 0.5]]

@@ -117,14 +117,16 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
 
 def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
                engine: str = "auto", *, edge_lengths: bool = True,
-               barycenter: bool = True, pinned: int = 0) -> None:
+               barycenter: bool = True, pinned: int = 0, open_curves: bool = False) -> None:
     """Refuse, before any work, a polygon of ``n`` vertices (in all) that a run of ``method``
     in ``metric`` on ``engine`` would refuse for its size: the same ``ValueError`` (naming the
     way out) the run's constructor raises. Sizes are bounded where the metric is held as a
     dense matrix: the exact engine, the penalty methods on every engine, and a feasible
     method without one of its constraints (``edge_lengths``, ``barycenter``: the tree's
     solvers need both) or with more than ``pinned_solve.TREE_MAX_PINS`` pinned vertices
-    (``pinned``: how many, after ``pin_tangents``; ``True`` counts as one).
+    (``pinned``: how many, after ``pin_tangents``; ``True`` counts as one) on closed curves
+    (``open_curves``: the curve has an open component, whose band solver on the tree
+    eliminates any number of pins).
 
     Raises
     ------
@@ -145,7 +147,7 @@ def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
         check_dense_size(n, "method")
     elif engine_class(engine, n).holds_dense(metric):
         check_dense_size(n)
-    elif pinned and not tree_borders(int(pinned)):
+    elif pinned and not open_curves and not tree_borders(int(pinned)):
         check_dense_size(n, "pins")
     elif not (edge_lengths and barycenter):
         check_dense_size(n, "constraints")
