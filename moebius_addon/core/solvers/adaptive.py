@@ -337,14 +337,7 @@ class AdaptiveRun:
             "edges_after": self._edges(new.layout.n), "reason": reason,
             "energy_before": float(energy_at), "energy_after": float(new.E),
             "iterations_dropped": dropped})
-        self.run = new
-        self._run_nit = new.nit
-        # the last entry is the same iterate, refined: it becomes the new run's start
-        for k, v in new.history.items():
-            if k in self.history:
-                self.history[k][-1] = v[0]
-        self.history["edges"][-1] = new.layout.n
-        self.history["seconds"][-1] = time.perf_counter() - self.t0
+        self._go_on_with(new)  # the last entry, refined, becomes the new run's start
         self._checkpoint = (self.nit, None, len(self.history["energy"]))
         self._note_checkpoint(new)
         return True
@@ -372,14 +365,19 @@ class AdaptiveRun:
         self.fresh_starts.append({"iteration": self.nit, "energy": float(run.E),
                                   "message": run.message})
         self._retire(run)
+        self._go_on_with(new)
+        return True
+
+    def _go_on_with(self, new) -> None:
+        """Make ``new`` the current run, from the last iterate of the path: that entry of the
+        history becomes the new run's start (the same polygon, as the new run has it)."""
         self.run = new
         self._run_nit = new.nit
-        # the last entry is the same iterate: it becomes the new run's start
         for k, v in new.history.items():
             if k in self.history:
                 self.history[k][-1] = v[0]
+        self.history["edges"][-1] = new.layout.n
         self.history["seconds"][-1] = time.perf_counter() - self.t0
-        return True
 
     def _split_grown(self, run) -> None:
         """Go on from the current iterate of a growing run with every edge split in two once
@@ -409,12 +407,7 @@ class AdaptiveRun:
             "edges_after": self._edges(new.layout.n),
             "reason": f"edges grown to {sched.edge_ratio(run.lengths0):.2f} times the start's",
             "energy_before": float(run.E), "energy_after": float(new.E)})
-        self.run = new
-        self._run_nit = new.nit
-        for k, v in new.history.items():  # the same iterate, split: the new run's start
-            if k in self.history:
-                self.history[k][-1] = v[0]
-        self.history["edges"][-1] = new.layout.n
+        self._go_on_with(new)  # the same iterate, split: the new run's start
         self._checkpoint = (self.nit, None, len(self.history["energy"]))
         self._note_checkpoint(new)
 
