@@ -518,7 +518,7 @@ class PathChecker:
 
 def run(scene: Scene, iterations: int, max_seconds: float | None = None,
         frames: Path | None = None, metric: str = "hs", check: bool = True,
-        energy: str = "moebius", engine: str = "auto", say=print) -> dict:
+        energy: str = "moebius", engine: str = "auto", say=print, **energy_options) -> dict:
     """Relax ``scene``, check its path and return (and print) the measurements."""
     rng = np.random.default_rng(0)
     checker = PathChecker(scene)
@@ -555,7 +555,8 @@ def run(scene: Scene, iterations: int, max_seconds: float | None = None,
     say(f"[{scene.name}] {len(start)} curves ({scene.closed.count(False)} open), {e0} edges, "
         f"{n0} vertices, {npins} pins, {tris} triangles "
         f"({'container' if scene.container else 'obstacles'}); {scene.note}; metric {metric}, "
-        f"energy {energy}, NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'all')}, "
+        f"energy {energy} {energy_options or ''}, "
+        f"NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'all')}, "
         f"load {os.getloadavg()[0]:.2f}")
     P0 = start if len(start) > 1 else start[0]
     closed = scene.closed if len(start) > 1 else scene.closed[0]
@@ -565,7 +566,7 @@ def run(scene: Scene, iterations: int, max_seconds: float | None = None,
     res = core.relax(P0, metric=metric, max_iter=iterations, callback=callback, closed=closed,
                      pinned=pinned or None, obstacles=scene.obstacles or None,
                      container=scene.container, max_seconds=max_seconds, energy=energy,
-                     engine=engine, **scene.options)
+                     engine=engine, **energy_options, **scene.options)
     wall = time.perf_counter() - t0
     end = kept[-1]
     if check:
@@ -573,7 +574,8 @@ def run(scene: Scene, iterations: int, max_seconds: float | None = None,
     it = stamps["iter"]
     L = res.history.get("length", [np.nan])
     out = {"scene": scene.name, "curves": len(start), "edges_start": e0,
-           "edges_end": int(res.history["edges"][-1]) if "edges" in res.history else e0,
+           "edges_end": sum(len(P) - (0 if c else 1)
+                            for P, c in zip(end, scene.closed, strict=True)),
            "pins": npins, "triangles": tris, "iterations": res.nit,
            "first_s": it[0] if it else np.nan,
            "median_s": float(np.median(it[1:])) if len(it) > 1 else np.nan,
@@ -625,7 +627,8 @@ def make(name: str, args) -> Scene:
 
 
 VIEW = {"earbuds": (0.3, -1.0, 0.5), "rings": (0.2, -0.35, 1.0), "bunny": (0.2, -0.35, 1.0),
-        "cables": (1.0, -0.45, 0.35)}
+        "cables": (0.5, -0.9, 0.9)}
+BEVEL = {"earbuds": 0.005, "cables": 0.0025}  # tube radius, fraction of the scene's size
 TITLE = {"earbuds": "CableUntangle (earbuds)", "rings": "RingsPacking",
          "bunny": "BunnyCurvePacking", "cables": "100 cables and a torus"}
 
@@ -657,14 +660,12 @@ def render_sheets(folder: Path, out: Path, resolution: int) -> None:
             scene = bpy.context.scene
             setup_render(scene, resolution)
             _curves(parts, meta["closed"], max(0.3 * mean_edge(parts, meta["closed"]),
-                                               0.0025 * size))
+                                               BEVEL.get(name, 0.003) * size))
             for V, F in meshes:
                 me = bpy.data.meshes.new("mesh")
                 me.from_pydata(V.tolist(), [], F.tolist())
-                mat = bpy.data.materials.new("glass")
-                mat.diffuse_color = (0.55, 0.55, 0.6, 0.2)  # alpha < 1: Workbench blends it
-                me.materials.append(mat)
                 ob = bpy.data.objects.new("mesh", me)
+                ob.color = (0.6, 0.6, 0.65, 0.25)  # alpha < 1: Workbench draws it see-through
                 scene.collection.objects.link(ob)
             frame_camera(scene, pts, direction=VIEW.get(name, (0.3, -0.5, 1.0)))
             path = sub / f"tile_{k:05d}.png"
@@ -680,28 +681,24 @@ def render_sheets(folder: Path, out: Path, resolution: int) -> None:
 
 
 def _curves(parts, closed, bevel: float) -> None:
+    """The curves as bevelled poly splines, one object (one colour) per fifth of them."""
     import bpy
 
-    palette = [(0.13, 0.40, 0.75), (0.85, 0.33, 0.10), (0.20, 0.60, 0.25),
-               (0.55, 0.25, 0.65), (0.80, 0.65, 0.10)]
-    curve = bpy.data.curves.new("curves", "CURVE")
-    curve.dimensions = "3D"
-    curve.bevel_depth = bevel
-    curve.bevel_resolution = 2
-    for k, (P, c) in enumerate(zip(parts, closed, strict=True)):
-        sp = curve.splines.new("POLY")
-        sp.points.add(len(P) - 1)
-        sp.points.foreach_set("co", np.column_stack([P, np.ones(len(P))]).ravel())
-        sp.use_cyclic_u = bool(c)
-        sp.material_index = k % len(palette)
-    for col in palette:
-        m = bpy.data.materials.new("c")
-        m.diffuse_color = (*col, 1.0)
-        curve.materials.append(m)
-    obj = bpy.data.objects.new("curves", curve)
-    obj.color = (1, 1, 1, 1)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.scene.display.shading.color_type = "MATERIAL"
+    palette = [(0.10, 0.30, 0.70), (0.85, 0.30, 0.05), (0.10, 0.55, 0.20),
+               (0.55, 0.15, 0.60), (0.75, 0.55, 0.00)]
+    for g, col in enumerate(palette[:len(parts)]):
+        curve = bpy.data.curves.new(f"curves{g}", "CURVE")
+        curve.dimensions = "3D"
+        curve.bevel_depth = bevel
+        curve.bevel_resolution = 2
+        for P, c in list(zip(parts, closed, strict=True))[g::len(palette)]:
+            sp = curve.splines.new("POLY")
+            sp.points.add(len(P) - 1)
+            sp.points.foreach_set("co", np.column_stack([P, np.ones(len(P))]).ravel())
+            sp.use_cyclic_u = bool(c)
+        obj = bpy.data.objects.new(f"curves{g}", curve)
+        obj.color = (*col, 1.0)
+        bpy.context.scene.collection.objects.link(obj)
 
 
 def _sheet(images, labels, title: str, path: Path) -> None:
@@ -729,10 +726,12 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=Path, default=None, help="save every iterate here")
     ap.add_argument("--metric", default="hs")
     ap.add_argument("--energy", default="moebius")
+    ap.add_argument("--alpha", type=float, default=None, help="tangent-point exponent")
+    ap.add_argument("--beta", type=float, default=None, help="tangent-point exponent")
     ap.add_argument("--factor", type=float, default=None,
                     help="packing: grow to this many times the start's length (default: "
                          "Repulsive Curves' edge-length scale)")
-    ap.add_argument("--rate", type=float, default=0.05, help="packing: growth per iteration")
+    ap.add_argument("--rate", type=float, default=0.02, help="packing: growth per iteration")
     ap.add_argument("--gap", type=int, default=2, help="earbuds: edges cut at the junction")
     ap.add_argument("--cables", type=int, default=100)
     ap.add_argument("--edges", type=int, default=200)
@@ -746,9 +745,11 @@ def main(argv=None) -> int:
         return 0
     names = ["earbuds", "rings", "bunny", "cables"] if a.scene == "all" else [a.scene]
     bad = 0
+    tp = {k: v for k, v in (("alpha", a.alpha), ("beta", a.beta)) if v is not None}
     for name in names:
         out = run(make(name, a), a.iterations, a.max_seconds,
-                  a.frames / name if a.frames else None, a.metric, not a.no_check, a.energy)
+                  a.frames / name if a.frames else None, a.metric, not a.no_check, a.energy,
+                  **tp)
         bad += bool(out["failures"])
     return 1 if bad else 0
 
