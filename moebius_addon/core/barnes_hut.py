@@ -41,7 +41,7 @@ from . import bvh
 from ._arc_field import ArcField
 from ._far_field import _cluster_data, _far, _far_to_edges, _push_down
 from ._layout import Layout
-from ._near_field import _ROUND_SLOTS, _near, _to_vertices
+from ._near_field import _near, _to_vertices
 
 # Default admissibility: the largest of 0.15, 0.175, 0.2, 0.25 whose relative errors stay, with
 # a margin, below 1e-4 (energy) and 1e-3 (gradient) on 7_2, FHW, a link and a non-equilateral
@@ -369,12 +369,15 @@ def _by_target(pairs, m):
 
 
 @nb.njit(cache=True)
-def _neighbours(perm, nxt, prv):
-    """Per tree position the tree positions of the previous and the next edge along the curve
-    (always in a near partner: boxes of edges that share a vertex touch), and per edge its
-    tree position (−1 for the dummy edges of open components, which are not in the tree: the
-    ends of an open polyline have no neighbour there)."""
+def _near_lists(pairs, m, perm, nxt, prv):
+    """What the near field reads besides the edges: every leaf's near partners (CSR
+    ``(offsets, partners)`` of :func:`_by_target`: both directions of each pair, a self pair
+    once), per tree position the tree positions of the previous and the next edge along the
+    curve (always in a near partner: boxes of edges that share a vertex touch), and per edge
+    its tree position (−1 for the dummy edges of open components, which are not in the tree:
+    the ends of an open polyline have no neighbour there)."""
     n = perm.shape[0]
+    noff, npart = _by_target(pairs, m)
     at = np.full(nxt.shape[0], -1, np.int64)  # −1: a dummy edge of an open component
     for q in range(n):
         at[perm[q]] = q
@@ -383,57 +386,7 @@ def _neighbours(perm, nxt, prv):
         i = perm[q]
         nbr[q, 0] = at[prv[i]]
         nbr[q, 1] = at[nxt[i]]
-    return nbr, at
-
-
-@nb.njit(cache=True)
-def _owner_lists(pairs, m, leaves, round_slots):
-    """What :func:`._near_field._near` reads of the near pairs of leaves: each pair ``(a, b)``
-    owned by ``a`` (CSR ``(uoff, upart)`` per node, its slots in the order of ``pairs``), per
-    leaf the slots it is the partner of (CSR ``(toff, tslot)``, ascending; self pairs not),
-    and ``rounds``: the ranges ``rounds[k] … rounds[k + 1]`` of ``leaves`` (ascending nodes)
-    whose slots number at most ``round_slots`` (one leaf alone may have more)."""
-    uoff = np.zeros(m + 1, np.int64)
-    for p in range(pairs.shape[0]):
-        uoff[pairs[p, 0] + 1] += 1
-    for k in range(m):
-        uoff[k + 1] += uoff[k]
-    fill = uoff[:m].copy()
-    upart = np.empty(uoff[m], np.int64)
-    for p in range(pairs.shape[0]):
-        a = pairs[p, 0]
-        upart[fill[a]] = pairs[p, 1]
-        fill[a] += 1
-    toff = np.zeros(m + 1, np.int64)
-    for a in range(m):
-        for p in range(uoff[a], uoff[a + 1]):
-            if upart[p] != a:
-                toff[upart[p] + 1] += 1
-    for k in range(m):
-        toff[k + 1] += toff[k]
-    fill = toff[:m].copy()
-    tslot = np.empty(toff[m], np.int64)
-    for a in range(m):  # slots in ascending order
-        for p in range(uoff[a], uoff[a + 1]):
-            b = upart[p]
-            if b != a:
-                tslot[fill[b]] = p
-                fill[b] += 1
-    nl = leaves.shape[0]
-    rounds = np.zeros(nl + 1, np.int64)
-    if nl == 0:
-        return uoff, upart, toff, tslot, rounds[:1].copy()
-    nr = 0
-    start = uoff[leaves[0]]
-    for t in range(nl):
-        a = leaves[t]
-        if t > rounds[nr] and uoff[a + 1] - start > round_slots:
-            nr += 1
-            rounds[nr] = t
-            start = uoff[a]
-    nr += 1
-    rounds[nr] = nl
-    return uoff, upart, toff, tslot, rounds[:nr + 1].copy()
+    return noff, npart, nbr, at
 
 
 # ------------------------------------------------------------------------------------------------
@@ -487,15 +440,10 @@ class Frame:
         self.foff, self.fpart = _by_target(far, m)
         self.near = near
         self.leaves = np.flatnonzero(tree.left < 0).astype(np.int64)
-        nbr, self._at = _neighbours(tree.perm, layout.nxt, layout.prv)
-        self._near_lists = (*self._near_index(near, m), nbr)
+        *self._near_lists, self._at = _near_lists(near, m, tree.perm, layout.nxt, layout.prv)
         #: The arc-length part of the open components' energy (None: all closed).
         self.arc = (ArcField(layout, X, tree, self.foff, self.fpart) if layout.has_open
                     else None)
-
-    def _near_index(self, near: np.ndarray, m: int) -> tuple:
-        """The near field's lists of the near pairs of leaves (:func:`_owner_lists`)."""
-        return _owner_lists(near, m, self.leaves, _ROUND_SLOTS)
 
     def _edges(self, X: np.ndarray):
         """:func:`_edge_arrays` in tree order, an open component's edges of kind

@@ -42,7 +42,7 @@ from . import bvh
 from ._far_field import _cluster_data, _levels
 from ._layout import Layout
 from ._near_field import _to_vertices
-from .barnes_hut import Frame, _by_target, _edge_arrays, check_theta
+from .barnes_hut import Frame, _edge_arrays, check_theta
 from .energies.tangent_point import (
     DEFAULT_ALPHA,
     DEFAULT_BETA,
@@ -626,11 +626,6 @@ class TangentPointFrame(Frame):
         self.parent = parent
         self._hasfar = np.diff(self.foff) > 0
         self._cc_own = None
-
-    def _near_index(self, near: np.ndarray, m: int) -> tuple:
-        """Every leaf's near partners, both directions of each pair (CSR of
-        :func:`.barnes_hut._by_target`): this near field sums ordered pairs."""
-        return _by_target(near, m)
 
     def _evaluate(self, X: np.ndarray, grad: bool):
         lay, tree = self.layout, self.tree
