@@ -162,6 +162,12 @@ class DenseEngine:
         """The run's energy of ``X`` (N, 3) (plus the obstacles' weighted energy, if any)."""
         return self._plus_obstacles(self.energy_choice.exact(X, self.layout), X)
 
+    def trial_energy(self, X: np.ndarray) -> float:
+        """The energy of a line search's trial ``X``, to be compared with the iterate's (the
+        last :meth:`energy_gradient`): here :meth:`energy`. The tree engine may evaluate it
+        with the iterate's split (:meth:`TreeEngine.trial_energy`)."""
+        return self.energy(X)
+
     def energy_gradient(self, X: np.ndarray) -> tuple[float, np.ndarray]:
         """``(E, ∇E)`` at ``X``; ``∇E`` is (N, 3). Its ``E`` may differ from :meth:`energy`
         in the last bits (the two kernels sum in different orders)."""
@@ -252,11 +258,26 @@ class DenseEngine:
 EXACT_RESULT_MAX = 20000
 
 
+#: How far (in mean edge lengths, largest vertex displacement) a trial of the line search may
+#: be from the polygon of the last frame and still be evaluated with its split
+#: (:meth:`TreeEngine.trial_energy`): one leaf's length. A split kept for moved clusters is less
+#: admissible; at the trials the cable runs took (0.8–4.4 edge lengths, docs/benchmarks.md,
+#: "Open cables on the tree engine") the kept split's energy was as close to the exact one as a
+#: fresh split's (1.1–1.5e-6 both), and differed from it by 2e-8 to 2.6e-7.
+FRAME_REUSE = 8.0
+
+
+def _moved2(X0: np.ndarray, X: np.ndarray) -> float:
+    """The largest squared displacement of a vertex from ``X0`` to ``X``."""
+    return float(np.max(np.sum((X - X0) ** 2, axis=1))) if X.shape == X0.shape else np.inf
+
+
 class TreeEngine(DenseEngine):
     """:class:`DenseEngine` with the energy and its gradient by Barnes–Hut: a hierarchy and a
-    far/near split built at every evaluated polygon, so that the energy is one function of the
-    polygon (the line search compares values of the same approximated sum) and the gradient
-    its exact derivative. ``theta``: admissibility in (0, 2), default ``barnes_hut.THETA``.
+    far/near split built at every polygon whose gradient is evaluated, so that an iterate's
+    energy is one function of the polygon and the gradient its exact derivative; a line
+    search's trials nearby keep the iterate's split (:meth:`trial_energy`), so that it
+    compares values of one approximated sum. ``theta``: admissibility in (0, 2), default ``barnes_hut.THETA``.
 
     Nothing dense either in the metric (except the penalty methods' :meth:`penalty_solver`,
     dense as in the exact engine): the banded metrics (``l2``, ``h1``, ``h2``) are solved
@@ -371,14 +392,29 @@ class TreeEngine(DenseEngine):
     def krylov_iterations(self) -> list[int]:
         return super().krylov_iterations + self._tree_krylov
 
-    def _frame_at(self, X: np.ndarray) -> barnes_hut.Frame:
+    def _frame_at(self, X: np.ndarray, reuse: bool = False) -> barnes_hut.Frame:
         # a trial accepted by its energy is evaluated again with the gradient: same frame
-        if self._frame is None or not np.array_equal(self._frame[0], X):
-            self._frame = (X.copy(), self.energy_choice.frame(X, self.layout, self.theta))
+        if self._frame is not None:
+            X0, frame, reach2 = self._frame
+            if np.array_equal(X0, X) or (reuse and _moved2(X0, X) <= reach2):
+                return frame
+        lay = self.layout
+        ln2 = np.sum((X[lay.nxt] - X) ** 2, axis=1)
+        h = float(np.mean(np.sqrt(ln2[lay.real] if lay.has_open else ln2)))
+        self._frame = (X.copy(), self.energy_choice.frame(X, lay, self.theta),
+                       (FRAME_REUSE * h) ** 2)
         return self._frame[1]
 
     def energy(self, X: np.ndarray) -> float:
         return self._plus_obstacles(self._frame_at(X).energy(X), X)
+
+    def trial_energy(self, X: np.ndarray) -> float:
+        """The energy of a trial with the split of the last evaluated polygon (normally the
+        iterate's, whose gradient made the trial) while no vertex is more than
+        :data:`FRAME_REUSE` mean edge lengths from where it was built, else with a fresh one:
+        the line search compares values of one function, and an accepted trial's own
+        energy comes with its gradient from a frame built there (:meth:`energy_gradient`)."""
+        return self._plus_obstacles(self._frame_at(X, reuse=True).energy(X), X)
 
     def result_energy(self, X: np.ndarray, E: float) -> float:
         """The exact energy of the result up to :data:`EXACT_RESULT_MAX` vertices (``E``, the

@@ -8,6 +8,7 @@ import pytest
 from moebius_addon import core
 from moebius_addon.core import barnes_hut as bh
 from moebius_addon.core._layout import as_layout
+from moebius_addon.core.engine import FRAME_REUSE, TreeEngine
 from moebius_addon.core.moebius_dense import energy_gradient_x
 from tests.conftest import ngon, out_here_and_in_one_thread, trefoil
 
@@ -249,3 +250,23 @@ def test_bitwise_identical_across_thread_counts():
     # cost 60-70 s.
     here, there = out_here_and_in_one_thread(CODE)
     assert there == here
+
+
+def test_trial_energy_keeps_the_iterates_split_nearby(rng):
+    # a line search's trial within FRAME_REUSE edge lengths takes the split of the iterate whose
+    # gradient was evaluated last; farther, and for any gradient, a split built where it is
+    X, layout = as_layout(_perturbed_trefoil(600, rng))
+    engine = TreeEngine(layout, "h1")
+    engine.energy_gradient(X)
+    h = np.linalg.norm(X[layout.nxt] - X, axis=1).mean()
+    V = rng.standard_normal(X.shape)
+    V *= h / np.linalg.norm(V, axis=1).max()  # every vertex at most h
+    frame = engine.energy_choice.frame(X, layout, engine.theta)
+    near = X + 0.5 * FRAME_REUSE * V
+    assert engine.trial_energy(near) == frame.energy(near)
+    far = X + 3.0 * FRAME_REUSE * V
+    assert engine.trial_energy(far) == engine.energy_choice.frame(far, layout,
+                                                                  engine.theta).energy(far)
+    E, G = engine.energy_gradient(near)
+    Ef, Gf = engine.energy_choice.frame(near, layout, engine.theta).energy_gradient(near)
+    assert E == Ef and np.array_equal(G, Gf)

@@ -291,7 +291,7 @@ class Relaxation(Run):
         Q, ok = self._backproject(Q, _EARLY)
         if not ok or self._bp_size <= self.backproject_tol:
             return Q, ok, None
-        EQ = self.engine.energy(Q)
+        EQ = self.engine.trial_energy(Q)
         if EQ > target + self._energy_margin():
             return Q, True, EQ
         Q, ok = self._backproject(Q, resume=True)
@@ -343,7 +343,7 @@ class Relaxation(Run):
             # contact test of the path P → Q, then Armijo again on the energy that comes with
             # the gradient (the two kernels sum in different orders)
             if EQ is None:
-                EQ = self.engine.energy(Q) if ok else np.inf
+                EQ = self.engine.trial_energy(Q) if ok else np.inf
             if EQ <= target and self.engine.contact_time(X, X - Q, 1.0, self.eps) >= 1.0:
                 if self._growing:  # the length grows from the accepted trial
                     return self._accept_grown(self._grow(X, Q), tau, E)
