@@ -2,7 +2,12 @@
 monotonically, then held; inside a container never left (independent numpy checks of every
 iterate and every straight move between iterates)."""
 
+import json
 import math
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +17,7 @@ from tests.core.test_container import left_on_the_way, uv_sphere, wall_distance,
 
 # lengths agree with their targets to the back-projection's tolerance (1e-10 per log length)
 ROUND = 1e-9
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def length(X, closed=True):
@@ -109,6 +115,34 @@ def test_growth_with_no_room_left_stops_stalled_and_says_so(rng):
     assert np.all(np.diff(L) >= -ROUND * L[-1]) and L[-1] > 1.2 * L[0]
     assert L[-1] < 2 * np.pi * 0.8  # the sphere's great circle: it cannot be longer, round
     assert not left_on_the_way(xs, V, F, rng)
+
+
+_NO_ROOM = """
+import numpy as np
+from moebius_addon import core
+from tests.core.test_container import uv_sphere
+V, F = uv_sphere(0.8)
+t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+P = np.c_[0.6 * np.cos(t), 0.6 * np.sin(t), 0 * t]
+r = core.relax(P, container=(V, F), obstacle_weight=0.0, max_iter=80,
+               length_target=3 * 2 * np.pi * 0.6, length_growth=0.05, engine="exact",
+               refine=False)
+OUT = [int(r.status), r.nit, r.message]
+"""
+
+
+def test_growth_blocked_ends_the_run_whatever_the_blas_threads():
+    # the round circle's gradient is rounding noise: with one BLAS thread a descent step was
+    # still found at every iteration and the run went on, not growing, to max_iter (80); it
+    # now ends after projected._GROWTH_PATIENCE iterations whose growth was blocked
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
+    out = subprocess.run([sys.executable, "-c", _NO_ROOM + "\nimport json\nprint(json.dumps(OUT))"],
+                         env=env, cwd=ROOT, capture_output=True, text=True, check=True,
+                         timeout=600)
+    status, nit, message = json.loads(out.stdout.strip().splitlines()[-1])
+    assert status == int(core.Status.STALLED), message
+    assert message.startswith("growth blocked at length 4.9788")
+    assert nit < 80
 
 
 def test_growth_splits_edges_grown_past_twice_their_start():

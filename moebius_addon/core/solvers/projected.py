@@ -45,6 +45,11 @@ MIN_BACKPROJECT_TOL = 1e-14
 # A growth whose path meets something, or whose back-projection fails, is halved up to this
 # many times (1 % becomes 0.004 %) before the iteration goes on without growing.
 _GROWTH_HALVINGS = 8
+# A growing run whose growth was blocked this many iterations in a row ends STALLED ("growth
+# blocked"): its descent steps alone did not make room, and whether such a step is still found
+# on a curve with (almost) nothing to descend depends on the last bits of the sums (a round
+# circle in a sphere ran to max_iter with one BLAS thread and stopped at once with two).
+_GROWTH_PATIENCE = 20
 
 
 def check_line_search(armijo: float, growth: float) -> tuple[float, float]:
@@ -217,6 +222,7 @@ class Relaxation(Run):
         self.con: Constraints = make_constraints(self.X, self.layout, self.lengths0,
                                                  edge_lengths, barycenter, self.pinned)
         self.tau = initial_step / self.growth
+        self._blocked = 0  # iterations in a row whose growth was blocked (_GROWTH_PATIENCE)
         self._prepare(self.X, *self.engine.energy_gradient(self.X))
         self.history = {k: [] for k in (*HISTORY_KEYS, "length")}
         self._record(0.0)
@@ -414,6 +420,7 @@ class Relaxation(Run):
         EQ, gQ = self.engine.energy_gradient(Q)
         if con is None:
             self._prepare(Q, EQ, gQ)
+            self._blocked += 1
         else:
             old, self.con = self.con, con
             try:
@@ -423,16 +430,20 @@ class Relaxation(Run):
                 raise
             self.growth_schedule.commit(free)
             self.lengths0 = con.lengths0
+            self._blocked = 0
         self.tau = tau
         self.nit += 1
         self._record(tau if step is None else step)
         self._check_stop(E)
+        if not self.done and self._growing and self._blocked >= _GROWTH_PATIENCE:
+            return self._growth_blocked(f"for {self._blocked} iterations in a row")
         return not self.done
 
-    def _growth_blocked(self) -> bool:
-        """End a growing run that can neither descend nor grow."""
+    def _growth_blocked(self, how: str = "and no descent step left") -> bool:
+        """End a growing run that can neither descend nor grow, or has not grown for
+        :data:`_GROWTH_PATIENCE` iterations."""
         self._finish(False, f"growth blocked at {self.growth_schedule.words()}: no room to "
-                            f"grow without contact and no descent step left (the container or "
+                            f"grow without contact {how} (the container or "
                             f"the obstacles leave too little room, or strands are jammed)",
                      Status.STALLED)
         return False
