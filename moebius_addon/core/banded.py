@@ -141,12 +141,19 @@ def zigzag_positions(layout: Layout) -> np.ndarray:
 
 
 @nb.njit(cache=True)
-def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, kl, ku, ab):
+def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, has_row, fixed, kl, ku, ab):
     """The band of ``D [[A_band ⊗ I₃ + μ springs, C_eᵀ], [C_e, 0]] D`` in the storage of
     :func:`band_lu` (4 unknowns per vertex: x, y, z and the multiplier of its edge) and the
     diagonal ``D`` (4N,). ``D`` balances the blocks: h2's entries grow like N³ and C_e's like
     N, and without it pivoting on the unscaled band lost the constraints at 100 000 edges.
-    ``ab``: the memory of the band (4N, 2 kl + ku + 1), overwritten."""
+    ``ab``: the memory of the band (4N, 2 kl + ku + 1), overwritten.
+
+    Edge slots without a row (``has_row`` False: an open component's dummy edge, an edge
+    between two pins) and pinned vertices (``fixed``) are eliminated: their unknowns get the
+    row ``x = 0`` (identity, nothing coupled), so that the band is the system of the free
+    unknowns. With every slot a row and nothing fixed it adds the same terms in the same
+    order as before the two cases shared this function (closed iterates unchanged to the bit).
+    """
     n = pos.shape[0]
     diag = np.zeros(n)
     for t in range(rows.shape[0]):
@@ -157,13 +164,18 @@ def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, kl, ku, ab):
     D = np.empty(4 * n)
     for v in range(n):
         for d in range(3):
-            D[4 * pos[v] + d] = 1.0 / np.sqrt(diag[v])
-    for i in range(n):  # an edge row of C_e scaled to unit length
-        j = nxt[i]
-        s = (diag[i] ** -1.0 + diag[j] ** -1.0) / (ln[i] * ln[i])
-        D[4 * pos[i] + 3] = 1.0 / np.sqrt(s)
+            D[4 * pos[v] + d] = 1.0 if fixed[v] else 1.0 / np.sqrt(diag[v])
+    for i in range(n):
+        if has_row[i]:
+            j = nxt[i]
+            s = (diag[i] ** -1.0 + diag[j] ** -1.0) / (ln[i] * ln[i])
+            D[4 * pos[i] + 3] = 1.0 / np.sqrt(s)
+        else:
+            D[4 * pos[i] + 3] = 1.0
     ab[:] = 0.0
     for t in range(rows.shape[0]):
+        if fixed[rows[t]] or fixed[cols[t]]:
+            continue
         r0 = 4 * pos[rows[t]]
         c0 = 4 * pos[cols[t]]
         for d in range(3):
@@ -172,18 +184,28 @@ def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, kl, ku, ab):
         r0 = 4 * pos[anchors[c]]
         for d in range(3):
             ab[r0 + d, kl] += mu[c] * D[r0 + d] * D[r0 + d]
+    for v in range(n):
+        if fixed[v]:
+            for d in range(3):
+                ab[4 * pos[v] + d, kl] = 1.0
     for i in range(n):
         lam = 4 * pos[i] + 3
+        if not has_row[i]:
+            ab[lam, kl] = 1.0
+            continue
         xi = 4 * pos[i]
-        xj = 4 * pos[nxt[i]]
+        j = nxt[i]
+        xj = 4 * pos[j]
         for d in range(3):
             t = T[i, d] / ln[i] * D[lam]
-            a = -t * D[xi + d]  # d(log l_i)/d(x_i)
-            b = t * D[xj + d]  # d(log l_i)/d(x_{i+1})
-            ab[lam, xi + d - lam + kl] += a
-            ab[xi + d, lam - xi - d + kl] += a
-            ab[lam, xj + d - lam + kl] += b
-            ab[xj + d, lam - xj - d + kl] += b
+            if not fixed[i]:
+                a = -t * D[xi + d]  # d(log l_i)/d(x_i)
+                ab[lam, xi + d - lam + kl] += a
+                ab[xi + d, lam - xi - d + kl] += a
+            if not fixed[j]:
+                b = t * D[xj + d]  # d(log l_i)/d(x_{i+1})
+                ab[lam, xj + d - lam + kl] += b
+                ab[xj + d, lam - xj - d + kl] += b
     return D
 
 
@@ -235,8 +257,8 @@ class BandedSaddle:
         reuse = recycle is not None and recycle.ab.shape == shape
         ab = recycle.ab if reuse else np.empty(shape)
         recycle = None  # its band is overwritten now: it must not be used again
-        self.D = _fill(rows, cols, vals, pos, anchors, mu, T, 1.0 / inv_l, lay.nxt, self.kl,
-                       self.ku, ab)
+        self.D = _fill(rows, cols, vals, pos, anchors, mu, T, 1.0 / inv_l, lay.nxt,
+                       np.ones(lay.n, np.bool_), np.zeros(lay.n, np.bool_), self.kl, self.ku, ab)
         self.ab = ab
         self.piv, self.mult, bad = band_lu(ab, self.kl, self.ku)
         if bad >= 0:
@@ -352,71 +374,10 @@ class BandedSaddle:
 # layouts with open components, and pins by elimination (issue 28)
 
 
-@nb.njit(cache=True)
-def _fill_open(rows, cols, vals, pos, anchors, mu, T, ln, nxt, has_row, fixed, kl, ku, ab):
-    """:func:`_fill` with edge slots that have no row (``has_row`` False: an open component's
-    dummy edge, an edge between two pins) and pinned vertices (``fixed``) eliminated: their
-    unknowns get the row ``x = 0`` (identity, nothing coupled), so that the band is the
-    system of the free unknowns."""
-    n = pos.shape[0]
-    diag = np.zeros(n)
-    for t in range(rows.shape[0]):
-        if rows[t] == cols[t]:
-            diag[rows[t]] += vals[t]
-    for c in range(anchors.shape[0]):
-        diag[anchors[c]] += mu[c]
-    D = np.empty(4 * n)
-    for v in range(n):
-        for d in range(3):
-            D[4 * pos[v] + d] = 1.0 if fixed[v] else 1.0 / np.sqrt(diag[v])
-    for i in range(n):
-        if has_row[i]:
-            j = nxt[i]
-            s = (diag[i] ** -1.0 + diag[j] ** -1.0) / (ln[i] * ln[i])
-            D[4 * pos[i] + 3] = 1.0 / np.sqrt(s)
-        else:
-            D[4 * pos[i] + 3] = 1.0
-    ab[:] = 0.0
-    for t in range(rows.shape[0]):
-        if fixed[rows[t]] or fixed[cols[t]]:
-            continue
-        r0 = 4 * pos[rows[t]]
-        c0 = 4 * pos[cols[t]]
-        for d in range(3):
-            ab[r0 + d, c0 - r0 + kl] += vals[t] * D[r0 + d] * D[c0 + d]
-    for c in range(anchors.shape[0]):
-        r0 = 4 * pos[anchors[c]]
-        for d in range(3):
-            ab[r0 + d, kl] += mu[c] * D[r0 + d] * D[r0 + d]
-    for v in range(n):
-        if fixed[v]:
-            for d in range(3):
-                ab[4 * pos[v] + d, kl] = 1.0
-    for i in range(n):
-        lam = 4 * pos[i] + 3
-        if not has_row[i]:
-            ab[lam, kl] = 1.0
-            continue
-        xi = 4 * pos[i]
-        j = nxt[i]
-        xj = 4 * pos[j]
-        for d in range(3):
-            t = T[i, d] / ln[i] * D[lam]
-            if not fixed[i]:
-                a = -t * D[xi + d]  # d(log l_i)/d(x_i)
-                ab[lam, xi + d - lam + kl] += a
-                ab[xi + d, lam - xi - d + kl] += a
-            if not fixed[j]:
-                b = t * D[xj + d]  # d(log l_i)/d(x_{i+1})
-                ab[lam, xj + d - lam + kl] += b
-                ab[xj + d, lam - xj - d + kl] += b
-    return D
-
-
 class OpenBandedSaddle(BandedSaddle):
     """:class:`BandedSaddle` for layouts with open components and any number of pinned
     vertices: the edge slots without a row (dummy edges, edges between two pins) and the
-    pinned coordinates are eliminated in the band itself (:func:`_fill_open`), not bordered
+    pinned coordinates are eliminated in the band itself (:func:`_fill`), not bordered
     (:mod:`.pinned_solve`: three solves per pin and iterate). A component with a pin has no
     barycenter rows and needs no spring (the pin holds it): its correction is the barycenter
     term alone (rank 3), without pins the one of :class:`BandedSaddle` (rank 12). The
@@ -459,8 +420,8 @@ class OpenBandedSaddle(BandedSaddle):
         reuse = recycle is not None and recycle.ab.shape == shape
         ab = recycle.ab if reuse else np.empty(shape)
         recycle = None
-        self.D = _fill_open(rows, cols, vals, pos, anchors, mu, T, ln, lay.nxt, has_row, fixed,
-                            self.kl, self.ku, ab)
+        self.D = _fill(rows, cols, vals, pos, anchors, mu, T, ln, lay.nxt, has_row, fixed,
+                       self.kl, self.ku, ab)
         self.ab = ab
         self.piv, self.mult, bad = band_lu(ab, self.kl, self.ku)
         if bad >= 0:
