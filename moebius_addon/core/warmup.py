@@ -88,6 +88,16 @@ def _open() -> None:
     _relax(P, "projected_gradient", closed=False)
 
 
+def _cables() -> None:
+    # Presets ▸ Untangle Cables: open cables with both ends pinned; from engine.AUTO_TREE_FROM
+    # vertices on (6 × 171 here) the tree's open-curve kernels (the arc-length field, the open
+    # band solver), which a first run compiled for about a minute
+    t = np.linspace(0.0, 1.0, 171)
+    P = [np.c_[0.1 * (c % 3) + 0.01 * np.sin(3 * t + c), 0.1 * (c // 3) + 0.01 * np.cos(2 * t + c),
+               t] for c in range(6)]
+    _relax(P, "projected_gradient", closed=False, pinned=[[0, 170]] * 6)
+
+
 #: The paths, in the order a first session meets them.
 PATHS: dict[str, Callable[[], None]] = {
     "exact": _exact,
@@ -96,6 +106,7 @@ PATHS: dict[str, Callable[[], None]] = {
     "open": _open,
     "tree": _tree,
     "tangent_point": _tangent_point,
+    "cables": _cables,
 }
 
 

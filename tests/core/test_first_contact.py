@@ -54,7 +54,8 @@ def test_both_spellings_of_the_limits():
 
 
 def test_warmup_names_its_paths(capsys):
-    assert set(PATHS) == {"exact", "convert", "identify", "open", "tree", "tangent_point"}
+    assert set(PATHS) == {"exact", "convert", "identify", "open", "tree", "tangent_point",
+                          "cables"}
     with pytest.raises(SystemExit):
         main(["nope"])
     assert "unknown path(s) nope" in capsys.readouterr().err
