@@ -221,6 +221,20 @@ def _band_product(rows, cols, vals, V):
     return out
 
 
+def _capacitance(W: np.ndarray, mu: float) -> np.ndarray:
+    """The inverse of one component's 12 × 12 capacitance matrix (spring ``mu``, barycenter
+    term, barycenter rows, their multipliers) given ``W = Uᵀ A⁻¹ U`` (9, 9) of its columns."""
+    Sinv = np.zeros((12, 12))
+    Sinv[0:3, 0:3] = -np.eye(3) / mu
+    Sinv[3:6, 3:6] = np.eye(3)
+    Sinv[6:9, 6:9] = np.eye(3)
+    Sinv[6:9, 9:12] = np.eye(3)
+    Sinv[9:12, 6:9] = np.eye(3)
+    Sinv[0:9, 0:9] += W
+    Sinv[9:12, 9:12] += np.eye(3)
+    return np.linalg.inv(Sinv)
+
+
 class BandedSaddle:
     """The saddle-point solver of a banded metric at one iterate (see the module's text).
 
@@ -240,29 +254,11 @@ class BandedSaddle:
         lay = con.layout
         self.layout, self.jac = lay, jac
         self.rows, self.cols, self.vals, self.beta = rows, cols, vals, beta
-        pos = zigzag_positions(lay)
-        self.pos = pos
-        width = int(np.max(np.abs(pos[rows] - pos[cols]), initial=0))
-        width = max(width, int(np.max(np.abs(pos[lay.nxt] - pos), initial=0)))
-        self.kl = self.ku = 4 * width + 3
-        anchors = np.asarray(lay.starts[:-1], np.int64)
-        diag = np.zeros(lay.n)
-        np.add.at(diag, rows[rows == cols], vals[rows == cols])
-        mu = diag[anchors]  # a spring as stiff as the metric's own diagonal there
-        self.anchors, self.mu = anchors, mu
         T, inv_l = jac.edge_fields()
-        shape = (4 * lay.n, 2 * self.kl + self.ku + 1)
-        # the previous iterate's band memory (182 MB at 100 000 edges with h2: a fresh array
-        # costs its page faults again)
-        reuse = recycle is not None and recycle.ab.shape == shape
-        ab = recycle.ab if reuse else np.empty(shape)
+        n = lay.n
+        self._factor(rows, cols, vals, np.asarray(lay.starts[:-1], np.int64), T, 1.0 / inv_l,
+                     np.ones(n, np.bool_), np.zeros(n, np.bool_), recycle)
         recycle = None  # its band is overwritten now: it must not be used again
-        self.D = _fill(rows, cols, vals, pos, anchors, mu, T, 1.0 / inv_l, lay.nxt,
-                       np.ones(lay.n, np.bool_), np.zeros(lay.n, np.bool_), self.kl, self.ku, ab)
-        self.ab = ab
-        self.piv, self.mult, bad = band_lu(ab, self.kl, self.ku)
-        if bad >= 0:
-            raise np.linalg.LinAlgError(f"singular band at unknown {bad}")
         # the correction's columns per component: spring (3), barycenter term (3),
         # barycenter rows (3) as (N, 3) fields; the multipliers' unit columns (3) implicit
         k = lay.k
@@ -271,7 +267,7 @@ class BandedSaddle:
         for c in range(k):
             s = slice(lay.starts[c], lay.starts[c + 1])
             for d in range(3):
-                self.U[c, d, anchors[c], d] = 1.0
+                self.U[c, d, self.anchors[c], d] = 1.0
                 self.U[c, 3 + d, s, d] = beta[s]
                 self.U[c, 6 + d] = F[3 * c + d]
         Z = self._band_inverse(self.U.reshape(9 * k, lay.n, 3))  # (9k, N, 3) core x parts
@@ -279,15 +275,33 @@ class BandedSaddle:
         self.cap = np.empty((k, 12, 12))
         for c in range(k):
             W = self.U[c].reshape(9, -1) @ self.Z[9 * c:9 * c + 9].reshape(9, -1).T
-            Sinv = np.zeros((12, 12))
-            Sinv[0:3, 0:3] = -np.eye(3) / mu[c]
-            Sinv[3:6, 3:6] = np.eye(3)
-            Sinv[6:9, 6:9] = np.eye(3)
-            Sinv[6:9, 9:12] = np.eye(3)
-            Sinv[9:12, 6:9] = np.eye(3)
-            Sinv[0:9, 0:9] += W
-            Sinv[9:12, 9:12] += np.eye(3)
-            self.cap[c] = np.linalg.inv(Sinv)
+            self.cap[c] = _capacitance(W, self.mu[c])
+
+    def _factor(self, rows, cols, vals, anchors, T, ln, has_row, fixed, recycle):
+        """The band of the iterate (:func:`_fill`: ``has_row``, ``fixed`` as there) with a
+        spring at each of ``anchors`` as stiff as the metric's own diagonal there, in the
+        memory of ``recycle``'s band when it fits (182 MB at 100 000 edges with h2: a fresh
+        array costs its page faults again), and its LU factors; returns the metric's
+        diagonal (N,)."""
+        lay = self.layout
+        pos = zigzag_positions(lay)
+        self.pos = pos
+        width = int(np.max(np.abs(pos[rows] - pos[cols]), initial=0))
+        width = max(width, int(np.max(np.abs(pos[lay.nxt] - pos), initial=0)))
+        self.kl = self.ku = 4 * width + 3
+        diag = np.zeros(lay.n)
+        np.add.at(diag, rows[rows == cols], vals[rows == cols])
+        self.anchors, self.mu = anchors, diag[anchors]
+        shape = (4 * lay.n, 2 * self.kl + self.ku + 1)
+        reuse = recycle is not None and recycle.ab.shape == shape
+        ab = recycle.ab if reuse else np.empty(shape)
+        self.D = _fill(rows, cols, vals, pos, anchors, self.mu, T, ln, lay.nxt, has_row, fixed,
+                       self.kl, self.ku, ab)
+        self.ab = ab
+        self.piv, self.mult, bad = band_lu(ab, self.kl, self.ku)
+        if bad >= 0:
+            raise np.linalg.LinAlgError(f"singular band at unknown {bad}")
+        return diag
 
     def release(self) -> None:
         """Let go of everything but the band's memory, which the next iterate's solver takes
@@ -403,35 +417,17 @@ class OpenBandedSaddle(BandedSaddle):
         pinned_comp = np.zeros(k, bool)
         pinned_comp[lay.comp[fixed]] = True
         self.free_comps = np.flatnonzero(~pinned_comp)
-        pos = zigzag_positions(lay)
-        self.pos = pos
-        width = int(np.max(np.abs(pos[rows] - pos[cols]), initial=0))
-        width = max(width, int(np.max(np.abs(pos[lay.nxt] - pos), initial=0)))
-        self.kl = self.ku = 4 * width + 3
-        anchors = np.asarray(lay.starts[:-1], np.int64)[self.free_comps]
-        diag = np.zeros(n)
-        np.add.at(diag, rows[rows == cols], vals[rows == cols])
-        mu = diag[anchors]
-        self.anchors, self.mu = anchors, mu
         T, inv_l = jac.edge_fields()
         ln = np.where(inv_l > 0, 1.0 / np.where(inv_l > 0, inv_l, 1.0), 0.0)
-        has_row = con.edge_rows >= 0
-        shape = (4 * n, 2 * self.kl + self.ku + 1)
-        reuse = recycle is not None and recycle.ab.shape == shape
-        ab = recycle.ab if reuse else np.empty(shape)
+        diag = self._factor(rows, cols, vals, np.asarray(lay.starts[:-1], np.int64)[
+            self.free_comps], T, ln, con.edge_rows >= 0, fixed, recycle)
         recycle = None
-        self.D = _fill(rows, cols, vals, pos, anchors, mu, T, ln, lay.nxt, has_row, fixed,
-                       self.kl, self.ku, ab)
-        self.ab = ab
-        self.piv, self.mult, bad = band_lu(ab, self.kl, self.ku)
-        if bad >= 0:
-            raise np.linalg.LinAlgError(f"singular band at unknown {bad}")
         # the correction's columns, every component's in one field per column: spring (3),
         # barycenter term (3), barycenter rows (3)
         F = jac.barycenter_fields()  # (3k', N, 3), k' = the components with barycenter rows
         U = np.zeros((9, n, 3))
         for d in range(3):
-            U[d, anchors, d] = 1.0
+            U[d, self.anchors, d] = 1.0
             U[3 + d, :, d] = beta
         for r, c in enumerate(con.bary_components):
             s = slice(lay.starts[c], lay.starts[c + 1])
@@ -447,15 +443,7 @@ class OpenBandedSaddle(BandedSaddle):
             s = self.slices[c]
             W = U[:, s].reshape(9, -1) @ self.Z[:, s].reshape(9, -1).T
             if self.has_bary[c]:
-                Sinv = np.zeros((12, 12))
-                Sinv[0:3, 0:3] = -np.eye(3) / diag[lay.starts[c]]
-                Sinv[3:6, 3:6] = np.eye(3)
-                Sinv[6:9, 6:9] = np.eye(3)
-                Sinv[6:9, 9:12] = np.eye(3)
-                Sinv[9:12, 6:9] = np.eye(3)
-                Sinv[0:9, 0:9] += W
-                Sinv[9:12, 9:12] += np.eye(3)
-                self.cap.append(np.linalg.inv(Sinv))
+                self.cap.append(_capacitance(W, diag[lay.starts[c]]))
             else:  # the barycenter term alone: (K + β βᵀ)⁻¹ by Sherman–Morrison–Woodbury
                 self.cap.append(np.linalg.inv(np.eye(3) + W[3:6, 3:6]))
         self.bary_order = con.bary_components

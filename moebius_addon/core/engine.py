@@ -272,12 +272,21 @@ def _moved2(X0: np.ndarray, X: np.ndarray) -> float:
     return float(np.max(np.sum((X - X0) ** 2, axis=1))) if X.shape == X0.shape else np.inf
 
 
+def tree_solves_pins(n_pinned: int, open_curves: bool) -> bool:
+    """Whether the tree engine's solvers take ``n_pinned`` pinned vertices without a dense
+    matrix: any number on a layout with open components (its band solver eliminates them,
+    :class:`banded.OpenBandedSaddle`, for the banded metrics and as hs's preconditioner),
+    else up to ``pinned_solve.TREE_MAX_PINS`` (bordered)."""
+    return open_curves or tree_borders(n_pinned)
+
+
 class TreeEngine(DenseEngine):
     """:class:`DenseEngine` with the energy and its gradient by Barnes–Hut: a hierarchy and a
     far/near split built at every polygon whose gradient is evaluated, so that an iterate's
     energy is one function of the polygon and the gradient its exact derivative; a line
     search's trials nearby keep the iterate's split (:meth:`trial_energy`), so that it
-    compares values of one approximated sum. ``theta``: admissibility in (0, 2), default ``barnes_hut.THETA``.
+    compares values of one approximated sum. ``theta``: admissibility in (0, 2), default
+    ``barnes_hut.THETA``.
 
     Nothing dense either in the metric (except the penalty methods' :meth:`penalty_solver`,
     dense as in the exact engine): the banded metrics (``l2``, ``h1``, ``h2``) are solved
@@ -319,9 +328,7 @@ class TreeEngine(DenseEngine):
         return metric not in BANDED_METRICS + hs_tree.METRICS
 
     def solves_pins(self, n_pinned: int) -> bool:
-        # open layouts' band solver eliminates any number of pins (banded.OpenBandedSaddle),
-        # for the banded metrics and as hs's preconditioner
-        return self.layout.has_open or tree_borders(n_pinned)
+        return tree_solves_pins(n_pinned, self.layout.has_open)
 
     def update(self, X: np.ndarray, jac: Jacobian) -> None:
         con = jac.con

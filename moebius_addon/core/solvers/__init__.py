@@ -18,9 +18,8 @@ and reaches the numerics only through its engine (:mod:`..engine`).
 
 from __future__ import annotations
 
-from ..engine import engine_class
+from ..engine import engine_class, tree_solves_pins
 from ..metrics import METRICS
-from ..pinned_solve import tree_borders
 from ..spelling import take_spelling
 from .adaptive import RESTART_SCALE, AdaptiveRun
 from .base import Run, check_dense_size, check_number
@@ -147,7 +146,7 @@ def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",
         check_dense_size(n, "method")
     elif engine_class(engine, n).holds_dense(metric):
         check_dense_size(n)
-    elif pinned and not open_curves and not tree_borders(int(pinned)):
+    elif pinned and not tree_solves_pins(int(pinned), open_curves):
         check_dense_size(n, "pins")
     elif not (edge_lengths and barycenter):
         check_dense_size(n, "constraints")
