@@ -87,9 +87,10 @@ def one_run(P, method, metric, budget, **options) -> tuple[dict, dict]:
         options = {"precision": PRECISION, **{k: v for k, v in options.items() if k != "penalty"}}
     else:
         options = {k: v for k, v in options.items() if k != "precision"}
+    max_iter = options.pop("max_iter", 100000)  # --options '{"max_iter": 2}' caps every run
     t = time.perf_counter()
     try:
-        r = relax(P, metric=metric, max_iter=100000, method=method, max_seconds=budget,
+        r = relax(P, metric=metric, max_iter=max_iter, method=method, max_seconds=budget,
                   **options)
     except Exception as e:  # a failing combination is a result too
         r = None
