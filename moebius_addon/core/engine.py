@@ -106,6 +106,9 @@ class DenseEngine:
     """
 
     name = "exact"
+    #: Whether a trial's energy is worth testing before its back-projection finishes
+    #: (solvers.projected._EARLY): here an energy costs less than the Newton steps it saves.
+    early_energy_test = True
 
     def __init__(self, layout: Layout, metric: str, *, precision: str = "auto",
                  reuse_factorization: bool = False, theta: float | None = None,
@@ -265,6 +268,14 @@ EXACT_RESULT_MAX = 20000
 #: "Open cables on the tree engine") the kept split's energy was as close to the exact one as a
 #: fresh split's (1.1–1.5e-6 both), and differed from it by 2e-8 to 2.6e-7.
 FRAME_REUSE = 8.0
+#: How far (as :data:`FRAME_REUSE`) a polygon may be from the last frame's and still have its
+#: energy and gradient evaluated with that split: a trial of the line search then comes with
+#: its gradient, and an accepted trial is the next iterate without a second pass or a new
+#: frame. Against the exact sum (FHW 5 000 edges, 100 open cables of 200; docs/benchmarks.md),
+#: the kept split's gradient erred as a fresh split's after smooth moves of up to 16 edge
+#: lengths (5e-4 and 1e-4), and after random ones (every vertex its own way) of 4 at most twice
+#: as much (3e-7 to 5e-7); at 8 up to 4 times as much.
+GRADIENT_REUSE = 4.0
 
 
 def _moved2(X0: np.ndarray, X: np.ndarray) -> float:
@@ -305,7 +316,12 @@ class TreeEngine(DenseEngine):
     and ``hs_pure`` by conjugate gradients preconditioned with it (no coarse level)."""
 
     name = "tree"
-    _frame = None  # the last frame and the polygon it was built at
+    #: Not here: the energy (0.56 s for 20 000 edges of cables) costs far more than the
+    #: Newton steps it would save (15 ms each), and a finished trial's energy comes with its
+    #: gradient (:data:`GRADIENT_REUSE`), which an accepted trial keeps.
+    early_energy_test = False
+    _frame = None  # the last frame, the polygon it was built at and its mean edge length
+    _trial = None  # the last trial evaluated with its gradient: (X, E, ∇E)
     _saddle = None  # the solver of the current iterate (BandedSaddle or HsSaddle)
     #: Peak memory of a run per vertex: measured 5.3–7.4 kB over its first steps (7_2 at
     #: 20 000, 50 000 and 100 000 vertices, hs and h2, explicit and implicit; docs/api.md),
@@ -399,17 +415,18 @@ class TreeEngine(DenseEngine):
     def krylov_iterations(self) -> list[int]:
         return super().krylov_iterations + self._tree_krylov
 
-    def _frame_at(self, X: np.ndarray, reuse: bool = False) -> barnes_hut.Frame:
-        # a trial accepted by its energy is evaluated again with the gradient: same frame
+    def _frame_at(self, X: np.ndarray, reach: float = 0.0) -> barnes_hut.Frame:
+        """The frame of the last evaluation when ``X`` is its polygon or no vertex of ``X``
+        is more than ``reach`` mean edge lengths from it, else a fresh one built at ``X``."""
         if self._frame is not None:
-            X0, frame, reach2 = self._frame
-            if np.array_equal(X0, X) or (reuse and _moved2(X0, X) <= reach2):
+            X0, frame, h = self._frame
+            if np.array_equal(X0, X) or (reach > 0.0 and _moved2(X0, X) <= (reach * h) ** 2):
                 return frame
         lay = self.layout
         ln2 = np.sum((X[lay.nxt] - X) ** 2, axis=1)
         h = float(np.mean(np.sqrt(ln2[lay.real] if lay.has_open else ln2)))
-        self._frame = (X.copy(), self.energy_choice.frame(X, lay, self.theta),
-                       (FRAME_REUSE * h) ** 2)
+        self._frame = (X.copy(), self.energy_choice.frame(X, lay, self.theta), h)
+        self._trial = None  # evaluated with the frame it replaces
         return self._frame[1]
 
     def energy(self, X: np.ndarray) -> float:
@@ -419,9 +436,16 @@ class TreeEngine(DenseEngine):
         """The energy of a trial with the split of the last evaluated polygon (normally the
         iterate's, whose gradient made the trial) while no vertex is more than
         :data:`FRAME_REUSE` mean edge lengths from where it was built, else with a fresh one:
-        the line search compares values of one function, and an accepted trial's own
-        energy comes with its gradient from a frame built there (:meth:`energy_gradient`)."""
-        return self._plus_obstacles(self._frame_at(X, reuse=True).energy(X), X)
+        the line search compares values of one function. Within :data:`GRADIENT_REUSE` the
+        trial's gradient comes with it (one pass), kept for :meth:`energy_gradient` should
+        the trial be accepted; beyond, an accepted trial's energy and gradient come from a
+        frame built there."""
+        frame = self._frame_at(X, FRAME_REUSE)
+        if _moved2(self._frame[0], X) > (GRADIENT_REUSE * self._frame[2]) ** 2:
+            return self._plus_obstacles(frame.energy(X), X)
+        E, G = self._plus_obstacle_gradient(*frame.energy_gradient(X), X)
+        self._trial = (X.copy(), E, G)
+        return E
 
     def result_energy(self, X: np.ndarray, E: float) -> float:
         """The exact energy of the result up to :data:`EXACT_RESULT_MAX` vertices (``E``, the
@@ -432,7 +456,13 @@ class TreeEngine(DenseEngine):
         return self._plus_obstacles(self.energy_choice.exact(X, self.layout), X)
 
     def energy_gradient(self, X: np.ndarray) -> tuple[float, np.ndarray]:
-        return self._plus_obstacle_gradient(*self._frame_at(X).energy_gradient(X), X)
+        """``(E, ∇E)`` at ``X`` with the split of the last frame while no vertex is more than
+        :data:`GRADIENT_REUSE` mean edge lengths from where it was built (the trial's own
+        pass when ``X`` is the last trial), else with a fresh one."""
+        if self._trial is not None and np.array_equal(self._trial[0], X):
+            return self._trial[1], self._trial[2].copy()
+        return self._plus_obstacle_gradient(
+            *self._frame_at(X, GRADIENT_REUSE).energy_gradient(X), X)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -556,6 +556,49 @@ def _nearest(X, nxt, T):
     return which, dist2
 
 
+@nb.njit(cache=True, parallel=True)
+def _nearest_tree(X, nxt, T, lo, hi, left, right, bmin, bmax):
+    """:func:`_nearest` through the triangles' hierarchy: a node is skipped when the gap
+    between its box and the edge's box is no less than the best squared distance so far (no
+    triangle in it can be nearer). Ties go to the lower triangle index, as in the full scan,
+    so both give the same triangle and the same distance."""
+    n = X.shape[0]
+    which = np.empty(n, np.int64)
+    dist2 = np.empty(n)
+    for i in nb.prange(n):
+        stack = np.empty(128, np.int64)
+        j = nxt[i]
+        b = np.inf
+        w = -1
+        stack[0] = 0
+        top = 1
+        while top > 0:
+            top -= 1
+            node = stack[top]
+            g2 = 0.0
+            for d in range(3):
+                e0 = min(X[i, d], X[j, d])
+                e1 = max(X[i, d], X[j, d])
+                g = max(bmin[node, d] - e1, 0.0, e0 - bmax[node, d])
+                g2 += g * g
+            if g2 > b:
+                continue
+            if left[node] < 0:
+                for k in range(lo[node], hi[node]):
+                    d2 = _segment_triangle_distance2(X[i, 0], X[i, 1], X[i, 2],
+                                                     X[j, 0], X[j, 1], X[j, 2], T, k)
+                    if d2 < b or (d2 == b and k < w):
+                        b = d2
+                        w = k
+            else:
+                stack[top] = left[node]
+                stack[top + 1] = right[node]
+                top += 2
+        which[i] = w
+        dist2[i] = b
+    return which, dist2
+
+
 class ObstacleField:
     """The triangles of all obstacles in a run's coordinates (``(x − shift) / scale``), and
     what the flow asks of them.
@@ -634,9 +677,16 @@ class ObstacleField:
         return float(_contact_tree(X, U, nxt, self.T, self.centre, self.radius, *self.tree,
                                    float(tau_max), float(eps), chunks))
 
-    def nearest(self, X: np.ndarray, nxt: np.ndarray) -> tuple[int, int, float]:
-        """``(edge, triangle, distance)`` of the closest edge–triangle pair (0: they meet)."""
-        which, dist2 = _nearest(X, nxt, self.T)
+    def nearest(self, X: np.ndarray, nxt: np.ndarray, search: str = "tree"
+                ) -> tuple[int, int, float]:
+        """``(edge, triangle, distance)`` of the closest edge–triangle pair (0: they meet);
+        ``search`` "tree" (the triangles' hierarchy; 100 cables of 200 edges and 2 048
+        triangles: 2.9 s all pairs, docs/benchmarks.md) or "pairs": the same value."""
+        if search == "pairs":
+            which, dist2 = _nearest(X, nxt, self.T)
+        else:
+            lo, hi, left, right, bmin, bmax = self.tree
+            which, dist2 = _nearest_tree(X, nxt, self.T, lo, hi, left, right, bmin, bmax)
         i = int(np.argmin(dist2))
         return i, int(which[i]), float(np.sqrt(dist2[i]))
 

@@ -271,6 +271,22 @@ def test_the_step_bound_through_the_hierarchy_is_the_all_pairs_one(rng):
     assert hits >= 4  # most of these fields do reach the torus within τ = 1
 
 
+def test_the_nearest_pair_through_the_hierarchy_is_the_all_pairs_one(rng):
+    # the start check's nearest edge-triangle pair: the same edge, triangle and distance,
+    # for rings moved about near, through and far from a torus
+    V, F = torus(nu=40, nv=16)
+    fld = ob.ObstacleField(ob.check_obstacles([(V, F)]))
+    X, lay = as_layout(ring_around_tube(150))
+    met = 0
+    for scale in (0.0, 0.05, 0.3, 1.0, 3.0):
+        for _ in range(3):
+            Y = X + scale * rng.normal(size=3) + 0.02 * scale * rng.normal(size=X.shape)
+            tree = fld.nearest(Y, lay.nxt)
+            assert tree == fld.nearest(Y, lay.nxt, search="pairs")
+            met += tree[2] == 0.0
+    assert 0 < met < 15  # some of the moved rings cross the torus, most do not
+
+
 def test_triangle_tree_holds_every_triangle_once(rng):
     T = rng.normal(size=(1000, 3, 3))
     order, lo, hi, left, right, bmin, bmax = ob.triangle_tree(T)

@@ -8,7 +8,7 @@ import pytest
 from moebius_addon import core
 from moebius_addon.core import barnes_hut as bh
 from moebius_addon.core._layout import as_layout
-from moebius_addon.core.engine import FRAME_REUSE, TreeEngine
+from moebius_addon.core.engine import FRAME_REUSE, GRADIENT_REUSE, TreeEngine
 from moebius_addon.core.moebius_dense import energy_gradient_x
 from tests.conftest import ngon, out_here_and_in_one_thread, trefoil
 
@@ -254,7 +254,9 @@ def test_bitwise_identical_across_thread_counts():
 
 def test_trial_energy_keeps_the_iterates_split_nearby(rng):
     # a line search's trial within FRAME_REUSE edge lengths takes the split of the iterate whose
-    # gradient was evaluated last; farther, and for any gradient, a split built where it is
+    # gradient was evaluated last, within GRADIENT_REUSE with its gradient in the same pass
+    # (what energy_gradient then returns for it, without a new frame); farther, a split built
+    # where it is
     X, layout = as_layout(_perturbed_trefoil(600, rng))
     engine = TreeEngine(layout, "h1")
     engine.energy_gradient(X)
@@ -262,11 +264,24 @@ def test_trial_energy_keeps_the_iterates_split_nearby(rng):
     V = rng.standard_normal(X.shape)
     V *= h / np.linalg.norm(V, axis=1).max()  # every vertex at most h
     frame = engine.energy_choice.frame(X, layout, engine.theta)
-    near = X + 0.5 * FRAME_REUSE * V
-    assert engine.trial_energy(near) == frame.energy(near)
+    assert GRADIENT_REUSE < FRAME_REUSE
+    between = X + 0.5 * (GRADIENT_REUSE + FRAME_REUSE) * V
+    assert engine.trial_energy(between) == frame.energy(between)
+    near = X + 0.5 * GRADIENT_REUSE * V
+    E, G = frame.energy_gradient(near)
+    assert engine.trial_energy(near) == E
+    E1, G1 = engine.energy_gradient(near)
+    assert E1 == E and np.array_equal(G1, G)
+    G1[0] += 1.0  # the caller's copy: the kept gradient is not changed through it
+    assert np.array_equal(engine.energy_gradient(near)[1], G)
+    nearer = X + 0.25 * GRADIENT_REUSE * V  # not a trial: the kept split, a pass of its own
+    assert np.array_equal(engine.energy_gradient(nearer)[1], frame.energy_gradient(nearer)[1])
     far = X + 3.0 * FRAME_REUSE * V
     assert engine.trial_energy(far) == engine.energy_choice.frame(far, layout,
                                                                   engine.theta).energy(far)
-    E, G = engine.energy_gradient(near)
-    Ef, Gf = engine.energy_choice.frame(near, layout, engine.theta).energy_gradient(near)
+    engine = TreeEngine(layout, "h1")  # (reach counts edge lengths of the frame's polygon)
+    engine.energy_gradient(X)
+    beyond = X + 3.0 * GRADIENT_REUSE * V
+    E, G = engine.energy_gradient(beyond)
+    Ef, Gf = engine.energy_choice.frame(beyond, layout, engine.theta).energy_gradient(beyond)
     assert E == Ef and np.array_equal(G, Gf)

@@ -292,7 +292,9 @@ class Relaxation(Run):
         rejected at ``|Φ| ≤ _EARLY`` (it misses Armijo by more than the rest of the
         back-projection could change), −inf for one finished after passing that test (the
         energy with the gradient decides); None where the energy is still to be computed."""
-        if self.interpolate:  # the parabola needs the energy of the finished trial
+        if self.interpolate or not self.engine.early_energy_test:
+            # the parabola needs the energy of the finished trial; an engine whose energy
+            # costs more than the Newton steps the test saves finishes every trial
             return (*self._backproject(Q), None)
         Q, ok = self._backproject(Q, _EARLY)
         if not ok or self._bp_size <= self.backproject_tol:

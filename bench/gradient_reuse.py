@@ -1,0 +1,85 @@
+"""Before and after the tree engine's trials with their gradient (``engine.GRADIENT_REUSE``),
+alternated in one process. Prints measurements.
+
+    python bench/gradient_reuse.py [--rounds 2] [--iters 6] [--cases cables,torus,fhw]
+
+"before" is the line search as it was: a trial's energy alone tested against Armijo before its
+back-projection finished (``TreeEngine.early_energy_test``), then the accepted polygon's energy
+and gradient with a split built there. "after": the trial finished, its energy and gradient in
+one pass with the split of the last frame while no vertex moved more than ``GRADIENT_REUSE``
+mean edge lengths from it, kept when the trial is accepted.
+
+Cases: ``cables`` (bench/cables_tree.py: 100 open cables × 200 edges between two plates, ends
+pinned, ``h1``), ``torus`` (bench/scenes.py's cables scene: the same with a torus obstacle of
+2 048 triangles, ``hs``), ``fhw`` (the Freedman–He–Wang unknot at 1 648 edges, closed, ``hs``,
+relaxed to E ≤ 4.01 or 400 iterations on the tree). Per case and round each setting runs once;
+seconds per iteration are the median after the first (compilation and the start's checks left
+out); the load average is printed with each.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from cables_tree import plates_scene  # noqa: E402
+from scenes import cables_torus  # noqa: E402
+
+from moebius_addon import core  # noqa: E402
+from moebius_addon.core import engine  # noqa: E402
+
+SETTINGS = {"before": (0.0, True), "after": (engine.GRADIENT_REUSE, False)}
+
+
+def use(setting: str) -> None:
+    engine.GRADIENT_REUSE, engine.TreeEngine.early_energy_test = SETTINGS[setting]
+
+
+def timed(**kw) -> tuple[float, int, float]:
+    """(median seconds per iteration after the first, iterations, final energy)."""
+    stamps = []
+    res = core.relax(engine="tree", callback=lambda s: stamps.append(time.perf_counter()), **kw)
+    return float(np.median(np.diff(stamps))), res.nit, float(res.fun)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--iters", type=int, default=6)
+    ap.add_argument("--cases", default="cables,torus,fhw")
+    args = ap.parse_args()
+    cases = {}
+    parts = plates_scene()
+    cases["cables"] = dict(P=parts, closed=False, pinned=[[0, len(p) - 1] for p in parts],
+                           metric="h1", max_iter=args.iters + 1)
+    sc = cables_torus()
+    cases["torus"] = dict(P=sc.parts, closed=sc.closed, pinned=sc.pinned, metric="hs",
+                          obstacles=sc.obstacles, max_iter=args.iters + 1, **sc.options)
+    cases["fhw"] = dict(P=core.knots.freedman_unknot(1648), metric="hs", max_iter=400,
+                        energy_target=4.01)
+    use("after")
+    core.relax(cases["fhw"]["P"], engine="tree", max_iter=2)  # compile before timing
+    print(f"NUMBA_NUM_THREADS={os.environ.get('NUMBA_NUM_THREADS', 'all')}, "
+          f"GRADIENT_REUSE={SETTINGS['after'][0]}")
+    for name in args.cases.split(","):
+        for r in range(args.rounds):
+            for setting in (("before", "after") if r % 2 == 0 else ("after", "before")):
+                use(setting)
+                load = os.getloadavg()[0]
+                t0 = time.perf_counter()
+                s, nit, E = timed(**cases[name])
+                print(f"{name:6} round {r} {setting:6}: {s:.3f} s/iteration (median), {nit} "
+                      f"iterations in {time.perf_counter() - t0:.1f} s, energy {E:.10g}, "
+                      f"load {load:.2f}", flush=True)
+    use("after")
+
+
+if __name__ == "__main__":
+    main()
