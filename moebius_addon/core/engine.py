@@ -272,9 +272,9 @@ FRAME_REUSE = 8.0
 #: energy and gradient evaluated with that split: a trial of the line search then comes with
 #: its gradient, and an accepted trial is the next iterate without a second pass or a new
 #: frame. Against the exact sum (FHW 5 000 edges, 100 open cables of 200; docs/benchmarks.md),
-#: the kept split's gradient erred as a fresh split's after smooth moves of up to 16 edge
-#: lengths (5e-4 and 1e-4), and after random ones (every vertex its own way) of 4 at most twice
-#: as much (3e-7 to 5e-7); at 8 up to 4 times as much.
+#: the kept split's gradient erred within 25 % of a fresh split's after smooth moves of up to
+#: 16 edge lengths (5e-4 and 1e-4), and after random ones (every vertex its own way) of 4 about
+#: twice as much (3e-7 to 5e-7 against 2e-7); at 8 up to 4 times as much.
 GRADIENT_REUSE = 4.0
 
 
