@@ -388,6 +388,48 @@ class BandedSaddle:
 # layouts with open components, and pins by elimination (issue 28)
 
 
+@nb.njit(cache=True)
+def _open_correction(y, yb, U, Z, Zlam, starts, has_bary, cap, brow, u, lam_e, lam_b):
+    """The low-rank correction of :meth:`OpenBandedSaddle._solve`, every component in turn,
+    in place on ``u``, ``lam_e`` and ``lam_b``: a component with barycenter rows takes the
+    columns 0–8 of ``U``/``Z``/``Zlam`` and its 12×12 capacitance, one with a pin the columns
+    3–5 (barycenter term) and a 3×3 one (in ``cap[c, :3, :3]``). (A loop of small numpy
+    products per component before: 0.2 s per iteration for 100 cables.)"""
+    t = np.empty(12)
+    w = np.empty(12)
+    for c in range(starts.shape[0] - 1):
+        a0, a1 = starts[c], starts[c + 1]
+        first, cols, m = (0, 9, 12) if has_bary[c] else (3, 3, 3)
+        for a in range(cols):
+            acc = 0.0
+            for v in range(a0, a1):
+                acc += (U[first + a, v, 0] * y[v, 0] + U[first + a, v, 1] * y[v, 1]
+                        + U[first + a, v, 2] * y[v, 2])
+            t[a] = acc
+        r = brow[c]
+        if has_bary[c]:
+            for d in range(3):
+                t[9 + d] = yb[r, d]
+        for i in range(m):
+            acc = 0.0
+            for j in range(m):
+                acc += cap[c, i, j] * t[j]
+            w[i] = acc
+        for v in range(a0, a1):
+            for d in range(3):
+                acc = 0.0
+                for a in range(cols):
+                    acc += w[a] * Z[first + a, v, d]
+                u[v, d] -= acc
+            acc = 0.0
+            for a in range(cols):
+                acc += w[a] * Zlam[first + a, v]
+            lam_e[v] -= acc
+        if has_bary[c]:
+            for d in range(3):
+                lam_b[r, d] -= w[9 + d]
+
+
 class OpenBandedSaddle(BandedSaddle):
     """:class:`BandedSaddle` for layouts with open components and any number of pinned
     vertices: the edge slots without a row (dummy edges, edges between two pins) and the
@@ -447,6 +489,12 @@ class OpenBandedSaddle(BandedSaddle):
             else:  # the barycenter term alone: (K + β βᵀ)⁻¹ by Sherman–Morrison–Woodbury
                 self.cap.append(np.linalg.inv(np.eye(3) + W[3:6, 3:6]))
         self.bary_order = con.bary_components
+        # the same for _open_correction: capacitances stacked, barycenter rows by component
+        self._cap = np.zeros((k, 12, 12))
+        for c, m in enumerate(self.cap):
+            self._cap[c, :m.shape[0], :m.shape[1]] = m
+        self._brow = np.full(k, -1, np.int64)
+        self._brow[np.asarray(self.bary_order, np.int64)] = np.arange(len(self.bary_order))
 
     def _solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         con = self.jac.con
@@ -460,24 +508,8 @@ class OpenBandedSaddle(BandedSaddle):
         u = y.copy()
         lam_e = ylam.copy()
         lam_b = yb.copy()
-        row = {c: q for q, c in enumerate(self.bary_order)}
-        for c, s in enumerate(self.slices):
-            Ys = y[s].ravel()
-            if self.has_bary[c]:
-                t = np.empty(12)
-                t[:9] = self.U[:, s].reshape(9, -1) @ Ys
-                t[9:] = yb[row[c]]
-                w = self.cap[c] @ t
-                cols = slice(0, 9)
-            else:
-                t = self.U[3:6, s].reshape(3, -1) @ Ys
-                w = self.cap[c] @ t
-                cols = slice(3, 6)
-            wz = w[:9] if self.has_bary[c] else w
-            u[s] -= np.tensordot(wz, self.Z[cols, s], axes=1)
-            lam_e[s] -= wz @ self.Zlam[cols, s]
-            if self.has_bary[c]:
-                lam_b[row[c]] -= w[9:]
+        _open_correction(y, yb, self.U, self.Z, self.Zlam, self.layout.starts, self.has_bary,
+                         self._cap, self._brow, u, lam_e, lam_b)
         u[self.fixed] = 0.0
         return u, np.concatenate([lam_e[con.edge_index], lam_b.ravel()])
 
