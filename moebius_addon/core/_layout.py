@@ -77,12 +77,6 @@ def layout_from_sizes(sizes, is_link: bool, closed=None) -> Layout:
     return Layout(starts, nxt, prv, comp, is_link, closed)
 
 
-#: Why the tree engine refuses the tangent-point energy of open curves, and what works instead.
-OPEN_TREE_REFUSAL = ("the tangent-point energy of open curves (closed=False) runs on the exact "
-                     "engine only: pass engine='exact' (or 'auto', which takes it for them), "
-                     "or energy='moebius', which the tree evaluates for open curves too; the "
-                     "tangent-point tree's sums assume closed components")
-
 #: Fewest vertices of an open component (two edges; with fewer there is no curve to relax).
 MIN_OPEN_VERTICES = 3
 

@@ -407,6 +407,10 @@ class Frame:
         Edges per leaf at most.
     """
 
+    #: Whether open components take O'Hara's arc-length part (:mod:`._arc_field`; the Möbius
+    #: energy's).
+    arc_part = True
+
     def __init__(self, X: np.ndarray, layout: Layout, theta: float = THETA,
                  leaf_size: int = bvh.LEAF_SIZE):
         self.layout = layout
@@ -442,8 +446,8 @@ class Frame:
         self.leaves = np.flatnonzero(tree.left < 0).astype(np.int64)
         *self._near_lists, self._at = _near_lists(near, m, tree.perm, layout.nxt, layout.prv)
         #: The arc-length part of the open components' energy (None: all closed).
-        self.arc = (ArcField(layout, X, tree, self.foff, self.fpart) if layout.has_open
-                    else None)
+        self.arc = (ArcField(layout, X, tree, self.foff, self.fpart)
+                    if layout.has_open and self.arc_part else None)
 
     def _edges(self, X: np.ndarray):
         """:func:`_edge_arrays` in tree order, an open component's edges of kind

@@ -78,13 +78,6 @@ class EnergyChoice:
         """The tree's admissibility when none is given (each energy measured its own)."""
         return barnes_hut.THETA if self.name == "moebius" else tangent_point_tree.THETA
 
-    @property
-    def open_tree(self) -> bool:
-        """Whether the tree evaluates this energy on layouts with open components (the Möbius
-        energy: :mod:`._arc_field` adds O'Hara's arc-length part; the tangent-point energy's
-        tree assumes closed components)."""
-        return self.name == "moebius"
-
     # -- evaluations (X at the run's scale; layout of the run) ---------------------------------
 
     def exact(self, X: np.ndarray, layout: Layout) -> float:

@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import barnes_hut, energy_choice, hs_solve, hs_tree
-from ._layout import OPEN_TREE_REFUSAL, Layout, as_checked_layout
+from ._layout import Layout, as_checked_layout
 from ._memory import check_memory
 from .banded import BANDED_METRICS, BandedSaddle, OpenBandedSaddle
 from .collision import contact_time_x
@@ -517,11 +517,8 @@ def make_engine(name: str, layout: Layout, metric: str, **options) -> DenseEngin
     ValueError
         For an unknown name (the message lists the valid ones).
     """
-    # only "auto" looks at the size; open curves take the tree for the Möbius energy only
-    # (docs/api.md)
-    energy = options.get("energy", MOEBIUS)
-    n = layout.n if name == "auto" and (not layout.has_open or energy.open_tree) else 0
-    return engine_class(name, n)(layout, metric, **options)
+    # only "auto" looks at the size
+    return engine_class(name, layout.n if name == "auto" else 0)(layout, metric, **options)
 
 
 def engine_class(name: str, n: int) -> type[DenseEngine]:
@@ -539,15 +536,8 @@ def engine_class(name: str, n: int) -> type[DenseEngine]:
 
 def _frame(X, layout, engine, theta, choice: EnergyChoice = MOEBIUS):
     """The Barnes–Hut frame of the energy ``choice`` for ``engine``/``theta`` at X (θ None:
-    the energy's own default), or None for the exact sum (always for the tangent-point energy
-    of open curves: "auto" takes the exact sum, "tree" is refused)."""
+    the energy's own default), or None for the exact sum."""
     theta = choice.default_theta if theta is None else barnes_hut.check_theta(theta)
-    if layout.has_open and not choice.open_tree:
-        if engine == "tree":
-            raise ValueError(OPEN_TREE_REFUSAL)
-        if engine not in ("exact", "auto"):
-            uses_tree(engine, layout.n)  # its message for an unknown name
-        return None
     if not uses_tree(engine, layout.n):
         return None
     return choice.frame(X, layout, theta)
@@ -647,8 +637,7 @@ def energy(P, *, energy: str = "moebius", alpha: float | None = None, beta: floa
         scale-invariant). With "moebius" they are refused (ValueError), not ignored
         (:func:`.energy_choice.check_energy`, the runs' check).
     engine : {"exact", "tree", "auto"}
-        As in :func:`moebius_energy` ("auto": the tree from ``ENERGY_TREE_FROM`` edges on;
-        the tangent-point energy of open curves: exact only).
+        As in :func:`moebius_energy` ("auto": the tree from ``ENERGY_TREE_FROM`` edges on).
     theta : float, optional
         Admissibility of the tree in (0, 2); default ``barnes_hut.THETA`` for "moebius",
         ``tangent_point_tree.THETA`` for "tangent_point".

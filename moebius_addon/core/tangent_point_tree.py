@@ -601,8 +601,7 @@ class TangentPointFrame(Frame):
     Parameters
     ----------
     X : (N, 3) array
-        Stacked vertices of closed components (see ``_layout``; open curves are refused by the
-        public evaluators, as for the Möbius tree).
+        Stacked vertices of closed and open components (see ``_layout``).
     layout : Layout
     alpha, beta : float
         The exponents (:func:`.energies.tangent_point.check_exponents`).
@@ -611,6 +610,12 @@ class TangentPointFrame(Frame):
     leaf_size : int
         Edges per leaf at most.
     """
+
+    # open components: the same kernel as closed ones (pairs of neighbours along the curve left
+    # out; the first and last edge are none) and no arc-length part; pairs of clusters that may
+    # share one take θ · OPEN_THETA as for the Möbius energy (a single bent cable of 2 000
+    # edges, (2, 4): gradient error 1.1e-2 against 6.5e-2 with θ alone; docs/benchmarks.md)
+    arc_part = False
 
     def __init__(self, X: np.ndarray, layout: Layout, alpha: float = DEFAULT_ALPHA,
                  beta: float = DEFAULT_BETA,

@@ -251,10 +251,6 @@ def test_refusals():
         core.relax(P[:2], closed=False)
     with pytest.raises(ValueError, match="needs at least 3"):
         core.moebius_energy(P[:2], closed=False)
-    with pytest.raises(ValueError, match="exact engine only: pass engine='exact'"):
-        core.relax(P, closed=False, engine="tree", energy="tangent_point")
-    with pytest.raises(ValueError, match="exact engine only"):
-        core.energy(P, energy="tangent_point", closed=False, engine="tree")
     for method in ("ncg", "lbfgs", "nesterov"):
         with pytest.raises(ValueError, match=f"method '{method}' cannot relax open curves"):
             core.relax(P, closed=False, method=method)

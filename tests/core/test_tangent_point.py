@@ -203,10 +203,6 @@ def test_refusals():
             core.energy_gradient(P, energy="tangent_point", **kw)
     with pytest.raises(ValueError, match="energy"):
         core.energy(P, energy="coulomb")
-    with pytest.raises(ValueError, match="exact engine"):
-        core.energy(P, energy="tangent_point", closed=False, engine="tree")
-    with pytest.raises(ValueError, match="exact engine"):
-        core.energy_gradient(P, energy="tangent_point", closed=False, engine="tree")
-    # "auto" takes the exact sum for open curves
+    # "auto" takes the exact sum for small open curves (the tree from ENERGY_TREE_FROM on)
     X, lay = as_layout(P, False)
     assert core.energy(P, energy="tangent_point", closed=False) == tp_energy_x(X, lay)

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._checks import check_number  # noqa: F401 - public as core.check_number
-from .._layout import OPEN_TREE_REFUSAL, as_unit_layout
+from .._layout import as_unit_layout
 from ..container import check_container, check_inside
 from ..energy_choice import check_energy
 from ..engine import make_engine
@@ -337,8 +337,6 @@ class Run:
                 f"method {name!r} cannot relax open curves (closed=False): use a "
                 f"feasible method, projected_gradient, projected_gradient_implicit or "
                 f"trust_region, on the exact engine")
-        if engine == "tree" and not self.energy_choice.open_tree:
-            raise ValueError(OPEN_TREE_REFUSAL)
 
     def _equal_lengths(self, ln: np.ndarray, equilateral: bool) -> np.ndarray:
         layout = self.layout
