@@ -7,9 +7,10 @@ alternated in one process. Prints measurements.
 
 "before" is the line search as it was: a trial's energy alone tested against Armijo before its
 back-projection finished (``TreeEngine.early_energy_test``), then the accepted polygon's energy
-and gradient with a split built there. "after": the trial finished, its energy and gradient in
-one pass with the split of the last frame while no vertex moved more than ``GRADIENT_REUSE``
-mean edge lengths from it, kept when the trial is accepted.
+and gradient with a split built there. "after": from ``engine.EARLY_TEST_BELOW`` vertices on the
+trial finished first, its energy and gradient in one pass with the split of the last frame
+while no vertex moved more than ``GRADIENT_REUSE`` mean edge lengths from it, kept when the
+trial is accepted (below, the early test as before, then the gradient with the kept split).
 
 Cases: ``cables`` (bench/cables_tree.py: 100 open cables × 200 edges between two plates, ends
 pinned, ``h1``), ``torus`` (bench/scenes.py's cables scene: the same with a torus obstacle of
@@ -44,11 +45,11 @@ from scenes import cables_torus  # noqa: E402
 from moebius_addon import core  # noqa: E402
 from moebius_addon.core import engine  # noqa: E402
 
-SETTINGS = {"before": (0.0, True), "after": (engine.GRADIENT_REUSE, False)}
+SETTINGS = {"before": (0.0, np.inf), "after": (engine.GRADIENT_REUSE, engine.EARLY_TEST_BELOW)}
 
 
 def use(setting: str) -> None:
-    engine.GRADIENT_REUSE, engine.TreeEngine.early_energy_test = SETTINGS[setting]
+    engine.GRADIENT_REUSE, engine.EARLY_TEST_BELOW = SETTINGS[setting]
 
 
 def timed(**kw) -> tuple[float, int, float]:

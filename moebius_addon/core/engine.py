@@ -165,10 +165,11 @@ class DenseEngine:
         """The run's energy of ``X`` (N, 3) (plus the obstacles' weighted energy, if any)."""
         return self._plus_obstacles(self.energy_choice.exact(X, self.layout), X)
 
-    def trial_energy(self, X: np.ndarray) -> float:
+    def trial_energy(self, X: np.ndarray, gradient: bool = True) -> float:
         """The energy of a line search's trial ``X``, to be compared with the iterate's (the
         last :meth:`energy_gradient`): here :meth:`energy`. The tree engine may evaluate it
-        with the iterate's split (:meth:`TreeEngine.trial_energy`)."""
+        with the iterate's split, and with its gradient unless ``gradient`` is False (a trial
+        whose back-projection is not finished; :meth:`TreeEngine.trial_energy`)."""
         return self.energy(X)
 
     def energy_gradient(self, X: np.ndarray) -> tuple[float, np.ndarray]:
@@ -276,6 +277,13 @@ FRAME_REUSE = 8.0
 #: 16 edge lengths (5e-4 and 1e-4), and after random ones (every vertex its own way) of 4 about
 #: twice as much (3e-7 to 5e-7 against 2e-7); at 8 up to 4 times as much.
 GRADIENT_REUSE = 4.0
+#: Below this many vertices the tree engine tests a trial's energy before its back-projection
+#: finishes (as the exact engine); from here on it finishes every trial first. Seconds per
+#: iteration with the test on / off, alternated (two rounds, FHW, two threads, load 0.8–2):
+#: 1 648 edges 0.039, 0.053 / 0.047, 0.061; the (2, 5) torus knot at 5 000 edges 0.143, 0.192
+#: / 0.160, 0.185; FHW 10 000 0.295, 0.328 / 0.231, 0.269; 100 cables of 200 (off) 1.7×
+#: faster than before (docs/benchmarks.md).
+EARLY_TEST_BELOW = 5000
 
 
 def _moved2(X0: np.ndarray, X: np.ndarray) -> float:
@@ -316,10 +324,13 @@ class TreeEngine(DenseEngine):
     and ``hs_pure`` by conjugate gradients preconditioned with it (no coarse level)."""
 
     name = "tree"
-    #: Not here: the energy (0.56 s for 20 000 edges of cables) costs far more than the
-    #: Newton steps it would save (15 ms each), and a finished trial's energy comes with its
-    #: gradient (:data:`GRADIENT_REUSE`), which an accepted trial keeps.
-    early_energy_test = False
+    @property
+    def early_energy_test(self) -> bool:
+        """Below :data:`EARLY_TEST_BELOW` vertices; above, the energy (0.56 s for 20 000
+        edges of cables) costs more than the Newton steps it saves (15 ms each there), and a
+        finished trial's energy comes with its gradient (:data:`GRADIENT_REUSE`), which an
+        accepted trial keeps."""
+        return self.layout.n < EARLY_TEST_BELOW
     _frame = None  # the last frame, the polygon it was built at and its mean edge length
     _trial = None  # the last trial evaluated with its gradient: (X, E, ∇E)
     _saddle = None  # the solver of the current iterate (BandedSaddle or HsSaddle)
@@ -432,7 +443,7 @@ class TreeEngine(DenseEngine):
     def energy(self, X: np.ndarray) -> float:
         return self._plus_obstacles(self._frame_at(X).energy(X), X)
 
-    def trial_energy(self, X: np.ndarray) -> float:
+    def trial_energy(self, X: np.ndarray, gradient: bool = True) -> float:
         """The energy of a trial with the split of the last evaluated polygon (normally the
         iterate's, whose gradient made the trial) while no vertex is more than
         :data:`FRAME_REUSE` mean edge lengths from where it was built, else with a fresh one:
@@ -441,7 +452,7 @@ class TreeEngine(DenseEngine):
         the trial be accepted; beyond, an accepted trial's energy and gradient come from a
         frame built there."""
         frame = self._frame_at(X, FRAME_REUSE)
-        if _moved2(self._frame[0], X) > (GRADIENT_REUSE * self._frame[2]) ** 2:
+        if not gradient or _moved2(self._frame[0], X) > (GRADIENT_REUSE * self._frame[2]) ** 2:
             return self._plus_obstacles(frame.energy(X), X)
         E, G = self._plus_obstacle_gradient(*frame.energy_gradient(X), X)
         self._trial = (X.copy(), E, G)

@@ -268,6 +268,9 @@ def test_trial_energy_keeps_the_iterates_split_nearby(rng):
     between = X + 0.5 * (GRADIENT_REUSE + FRAME_REUSE) * V
     assert engine.trial_energy(between) == frame.energy(between)
     near = X + 0.5 * GRADIENT_REUSE * V
+    # a trial whose back-projection is unfinished: the energy alone, nothing kept
+    assert engine.trial_energy(near, gradient=False) == frame.energy(near)
+    assert engine._trial is None
     E, G = frame.energy_gradient(near)
     assert engine.trial_energy(near) == E
     E1, G1 = engine.energy_gradient(near)

@@ -299,7 +299,7 @@ class Relaxation(Run):
         Q, ok = self._backproject(Q, _EARLY)
         if not ok or self._bp_size <= self.backproject_tol:
             return Q, ok, None
-        EQ = self.engine.trial_energy(Q)
+        EQ = self.engine.trial_energy(Q, gradient=False)  # Q moves on if it passes
         if EQ > target + self._energy_margin():
             return Q, True, EQ
         Q, ok = self._backproject(Q, resume=True)
