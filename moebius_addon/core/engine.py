@@ -324,13 +324,6 @@ class TreeEngine(DenseEngine):
     and ``hs_pure`` by conjugate gradients preconditioned with it (no coarse level)."""
 
     name = "tree"
-    @property
-    def early_energy_test(self) -> bool:
-        """Below :data:`EARLY_TEST_BELOW` vertices; above, the energy (0.56 s for 20 000
-        edges of cables) costs more than the Newton steps it saves (15 ms each there), and a
-        finished trial's energy comes with its gradient (:data:`GRADIENT_REUSE`), which an
-        accepted trial keeps."""
-        return self.layout.n < EARLY_TEST_BELOW
     _frame = None  # the last frame, the polygon it was built at and its mean edge length
     _trial = None  # the last trial evaluated with its gradient: (X, E, ∇E)
     _saddle = None  # the solver of the current iterate (BandedSaddle or HsSaddle)
@@ -353,6 +346,14 @@ class TreeEngine(DenseEngine):
     @classmethod
     def holds_dense(cls, metric: str) -> bool:
         return metric not in BANDED_METRICS + hs_tree.METRICS
+
+    @property
+    def early_energy_test(self) -> bool:
+        """Below :data:`EARLY_TEST_BELOW` vertices; above, the energy (0.56 s for 20 000
+        edges of cables) costs more than the Newton steps it saves (15 ms each there), and a
+        finished trial's energy comes with its gradient (:data:`GRADIENT_REUSE`), which an
+        accepted trial keeps."""
+        return self.layout.n < EARLY_TEST_BELOW
 
     def solves_pins(self, n_pinned: int) -> bool:
         return tree_solves_pins(n_pinned, self.layout.has_open)

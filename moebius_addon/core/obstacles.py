@@ -558,10 +558,10 @@ def _nearest(X, nxt, T):
 
 @nb.njit(cache=True, parallel=True)
 def _nearest_tree(X, nxt, T, lo, hi, left, right, bmin, bmax):
-    """:func:`_nearest` through the triangles' hierarchy: a node is skipped when the gap
-    between its box and the edge's box is no less than the best squared distance so far (no
-    triangle in it can be nearer). Ties go to the lower triangle index, as in the full scan,
-    so both give the same triangle and the same distance."""
+    """:func:`_nearest` through the triangles' hierarchy: a node is skipped when the squared
+    gap between its box and the edge's box exceeds the best squared distance so far (no
+    triangle in it can be nearer, or as near). Ties go to the lower triangle index, as in
+    the full scan, so both give the same triangle and the same distance."""
     n = X.shape[0]
     which = np.empty(n, np.int64)
     dist2 = np.empty(n)
@@ -681,7 +681,8 @@ class ObstacleField:
                 ) -> tuple[int, int, float]:
         """``(edge, triangle, distance)`` of the closest edge–triangle pair (0: they meet);
         ``search`` "tree" (the triangles' hierarchy; 100 cables of 200 edges and 2 048
-        triangles: 2.9 s all pairs, docs/benchmarks.md) or "pairs": the same value."""
+        triangles: 0.43 s against 2.7 s for all pairs, docs/benchmarks.md) or "pairs": the
+        same value."""
         if search == "pairs":
             which, dist2 = _nearest(X, nxt, self.T)
         else:
