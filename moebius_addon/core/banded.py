@@ -389,25 +389,26 @@ class BandedSaddle:
 
 
 @nb.njit(cache=True)
-def _open_correction(y, yb, U, Z, Zlam, starts, has_bary, cap, brow, u, lam_e, lam_b):
+def _open_correction(y, yb, U, Z, Zlam, starts, brow, cap, u, lam_e, lam_b):
     """The low-rank correction of :meth:`OpenBandedSaddle._solve`, every component in turn,
-    in place on ``u``, ``lam_e`` and ``lam_b``: a component with barycenter rows takes the
-    columns 0–8 of ``U``/``Z``/``Zlam`` and its 12×12 capacitance, one with a pin the columns
-    3–5 (barycenter term) and a 3×3 one (in ``cap[c, :3, :3]``). (A loop of small numpy
-    products per component before: 0.2 s per iteration for 100 cables.)"""
+    in place on ``u``, ``lam_e`` and ``lam_b``: a component with barycenter rows (row
+    ``brow[c]`` of ``yb``) takes the columns 0–8 of ``U``/``Z``/``Zlam`` and its 12×12
+    capacitance, one with a pin (``brow[c]`` −1) the columns 3–5 (barycenter term) and a 3×3
+    one (in ``cap[c, :3, :3]``). (Small numpy products per component before: 17 700
+    ``tensordot`` calls, 0.9 s, in 6 iterations of the 100 cables with the torus.)"""
     t = np.empty(12)
     w = np.empty(12)
     for c in range(starts.shape[0] - 1):
         a0, a1 = starts[c], starts[c + 1]
-        first, cols, m = (0, 9, 12) if has_bary[c] else (3, 3, 3)
+        r = brow[c]
+        first, cols, m = (0, 9, 12) if r >= 0 else (3, 3, 3)
         for a in range(cols):
             acc = 0.0
             for v in range(a0, a1):
                 acc += (U[first + a, v, 0] * y[v, 0] + U[first + a, v, 1] * y[v, 1]
                         + U[first + a, v, 2] * y[v, 2])
             t[a] = acc
-        r = brow[c]
-        if has_bary[c]:
+        if r >= 0:
             for d in range(3):
                 t[9 + d] = yb[r, d]
         for i in range(m):
@@ -425,7 +426,7 @@ def _open_correction(y, yb, U, Z, Zlam, starts, has_bary, cap, brow, u, lam_e, l
             for a in range(cols):
                 acc += w[a] * Zlam[first + a, v]
             lam_e[v] -= acc
-        if has_bary[c]:
+        if r >= 0:
             for d in range(3):
                 lam_b[r, d] -= w[9 + d]
 
@@ -478,23 +479,19 @@ class OpenBandedSaddle(BandedSaddle):
         self.U = U
         self.Z, self.Zlam = self._band_inverse(U)
         self.slices = [slice(int(lay.starts[c]), int(lay.starts[c + 1])) for c in range(k)]
-        self.has_bary = np.zeros(k, bool)
-        self.has_bary[con.bary_components] = True
-        self.cap = []
+        # per component its row among the barycenter rows (−1: it has none, it is pinned) and
+        # its capacitance's inverse: 12 × 12, or 3 × 3 in the corner (:func:`_open_correction`)
+        self.brow = np.full(k, -1, np.int64)
+        self.brow[np.asarray(con.bary_components, np.int64)] = np.arange(
+            len(con.bary_components))
+        self.cap = np.zeros((k, 12, 12))
         for c in range(k):
             s = self.slices[c]
             W = U[:, s].reshape(9, -1) @ self.Z[:, s].reshape(9, -1).T
-            if self.has_bary[c]:
-                self.cap.append(_capacitance(W, diag[lay.starts[c]]))
+            if self.brow[c] >= 0:
+                self.cap[c] = _capacitance(W, diag[lay.starts[c]])
             else:  # the barycenter term alone: (K + β βᵀ)⁻¹ by Sherman–Morrison–Woodbury
-                self.cap.append(np.linalg.inv(np.eye(3) + W[3:6, 3:6]))
-        self.bary_order = con.bary_components
-        # the same for _open_correction: capacitances stacked, barycenter rows by component
-        self._cap = np.zeros((k, 12, 12))
-        for c, m in enumerate(self.cap):
-            self._cap[c, :m.shape[0], :m.shape[1]] = m
-        self._brow = np.full(k, -1, np.int64)
-        self._brow[np.asarray(self.bary_order, np.int64)] = np.arange(len(self.bary_order))
+                self.cap[c, :3, :3] = np.linalg.inv(np.eye(3) + W[3:6, 3:6])
 
     def _solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         con = self.jac.con
@@ -508,8 +505,8 @@ class OpenBandedSaddle(BandedSaddle):
         u = y.copy()
         lam_e = ylam.copy()
         lam_b = yb.copy()
-        _open_correction(y, yb, self.U, self.Z, self.Zlam, self.layout.starts, self.has_bary,
-                         self._cap, self._brow, u, lam_e, lam_b)
+        _open_correction(y, yb, self.U, self.Z, self.Zlam, self.layout.starts, self.brow,
+                         self.cap, u, lam_e, lam_b)
         u[self.fixed] = 0.0
         return u, np.concatenate([lam_e[con.edge_index], lam_b.ravel()])
 

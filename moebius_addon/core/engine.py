@@ -275,7 +275,7 @@ FRAME_REUSE = 8.0
 #: frame. Against the exact sum (FHW 5 000 edges, 100 open cables of 200; docs/benchmarks.md),
 #: the kept split's gradient erred within 25 % of a fresh split's after smooth moves of up to
 #: 16 edge lengths (5e-4 and 1e-4), and after random ones (every vertex its own way) of 4 about
-#: twice as much (3e-7 to 5e-7 against 2e-7); at 8 up to 4 times as much.
+#: twice as much (3e-7 to 5e-7 against 2e-7); at 8 about 4 times as much.
 GRADIENT_REUSE = 4.0
 #: Below this many vertices the tree engine tests a trial's energy before its back-projection
 #: finishes (as the exact engine); from here on it finishes every trial first. Seconds per

@@ -203,10 +203,10 @@ def test_public_evaluators_take_open_curves_on_the_tree(rng):
 def test_tangent_point_tree_close_to_exact(name, ab, rng):
     # the tangent-point energy on the tree with open components: the kernel of closed ones
     # (neighbours along a cable left out, not the first and last edge), no arc-length part,
-    # pairs that may share a cable at θ · OPEN_THETA. Measured at the default θ: energy
-    # 3.3e-4 to 1.5e-3, gradient 8.0e-4 to 1.7e-2 (the closed FHW at 2 400 edges: 1.0e-3 and
-    # 1.9e-2); a small θ that leaves no far pair gives the exact sums (the split leaves out or
-    # doubles no pair at the open ends)
+    # pairs that may share a cable at θ · OPEN_THETA. Measured at the default θ on these
+    # layouts: energy 4.5e-4 to 1.6e-3, gradient 8.3e-4 to 1.9e-2 (the closed FHW at 2 400
+    # edges: 1.0e-3 and 1.9e-2); a small θ that leaves no far pair gives the exact sums (the
+    # split leaves out or doubles no pair at the open ends)
     from moebius_addon.core.tangent_point_dense import tp_energy_gradient_x
     from moebius_addon.core.tangent_point_tree import TangentPointFrame
 
