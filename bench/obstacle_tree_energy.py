@@ -1,9 +1,10 @@
 """The obstacle energy and gradient through the triangles' hierarchy against all pairs (issue
 28): seconds (best of ``--repeat``, the two alternated in one process) and the errors, for a
 loop of ``--edges`` edges around the tube of a torus of ``--triangles`` triangles, at each
-``--tol``::
+``--tol``; or, with ``--cables``, for the start of bench/scenes.py's 100 cables with the torus
+(20 000 edges, 2 048 triangles)::
 
-    NUMBA_NUM_THREADS=2 .venv/bin/python bench/obstacle_tree_energy.py
+    NUMBA_NUM_THREADS=2 .venv/bin/python bench/obstacle_tree_energy.py [--cables]
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ def main(argv=None) -> int:
     ap.add_argument("--triangles", type=int, default=80000)
     ap.add_argument("--tol", type=float, nargs="+", default=[1e-2, 1e-3, 1e-4])
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--cables", action="store_true", help="the 100 cables with the torus")
     args = ap.parse_args(argv)
     nv = max(4, int(round(np.sqrt(args.triangles / 8))))
     nu = args.triangles // (2 * nv)
@@ -52,9 +54,16 @@ def main(argv=None) -> int:
     P = np.stack([1.0 + 0.6 * np.cos(t) + 0.1 * np.cos(3 * t), 0.15 * np.sin(5 * t),
                   0.6 * np.sin(t)], -1)
     X, layout = as_layout(P, True)
+    if args.cables:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from scenes import cables_torus
+
+        scene = cables_torus()
+        X, layout = as_layout(scene.parts, closed=scene.closed)
+        (V, F), = scene.obstacles
     exact = ObstacleField([(V, F)])
     fields = {tol: ObstacleField([(V, F)], tol=tol) for tol in args.tol}
-    print(f"{args.edges} edges, {exact.triangles} triangles, {os.environ.get('NUMBA_NUM_THREADS')}"
+    print(f"{layout.n} vertices, {exact.triangles} triangles, {os.environ.get('NUMBA_NUM_THREADS')}"
           f" threads, load {os.getloadavg()[0]:.1f}")
     for f in (exact, *fields.values()):  # compile / load
         f.energy_gradient(X[:8], layout.nxt[:8] % 8, layout.prv[:8] % 8)

@@ -31,18 +31,29 @@ differ from the kernel's nearest-point distances to first order in the triangle 
 error in the energy at θ = 0.1 on a torus of 20 000 triangles.
 
 The far field (``tol > 0``, :func:`_edge_terms_tree`) keeps the kernel's nearest points in its
-bounds instead. For a box of the triangle hierarchy (area ``A``, area-weighted centre ``c`` of
-its triangles' centroids, all its triangles within ``R`` of ``c``, none of radius above ``h``)
-and a midpoint at ``D = |m − c| > R + h``: Σ A_k |m − c_k|⁻³ lies within ``6 A R² / (D − R)⁵``
-of ``A / D³`` (Taylor; the first-order term vanishes about ``c``), and each nearest point is
-nearer than its centroid by at most ``h``, so the box's sum lies in ``[L, U]`` with
-``L = A/D³ − 6AR²/(D−R)⁵`` and ``U = (A/D³ + 6AR²/(D−R)⁵)·((D−R)/(D−R−h))³``. Visiting the
-nearer box first, a box counts ``(L + U)/2`` when ``U − L ≤ tol (U + L)`` or when
-``(U − L)/2 ≤ tol · (A / total area) · (lower bound of the edge's sum so far)``: each edge's sum
-is then within ``2 tol / (1 − tol)`` of its exact value, relatively (proven; measured far
-below, docs/benchmarks.md).
-The gradient of an accepted box is the monopole's, scaled to its value: no proven bound,
-measured.
+bounds instead (:func:`_box_bounds`). For a box of the triangle hierarchy (area ``A``,
+area-weighted centre ``c`` of its triangles' centroids ``c_k``, all within ``Rc`` of ``c``,
+second moments ``Q`` and ``S3 = Σ A_k |c_k − c|³``, triangles of radius at most ``h``) and a
+midpoint at ``r = m − c``, ``D = |r|``:
+
+* Σ A_k |m − c_k|⁻³ lies within ``10 S3 / (D − Rc)⁶`` of its second-order Taylor value
+  ``T = A/D³ + 3/2 (5 rᵀQr/D⁷ − tr Q/D⁵)`` (no first-order term about ``c``; the third
+  derivative of ``r⁻³`` along a line is at most ``60 r⁻⁶``);
+* each nearest point is nearer than its centroid by at most ``h |P_k u_k|`` (``u_k`` the unit
+  vector from the centroid to ``m``, ``P_k`` the projection onto the triangle's plane), and
+  with the box's cone of normal lines (axis, half-angle ``φ``) ``|P_k u_k| ≤ sin(ψ + φ +
+  asin(Rc/D))``, ``ψ`` the angle of ``r`` to the axis: a box seen face-on has a small gain.
+
+So the box's sum lies in ``[L, U]``, ``L = T − 10 S3/(D − Rc)⁶``, ``U = (T + 10 S3/(D −
+Rc)⁶)·((D − Rc)/(D − Rc − gain))³``. Visiting the nearer box first, a box is accepted when
+``U − L ≤ tol (U + L)`` or ``(U − L)/2 ≤ tol · (A / total area) · (lower bound of the edge's
+sum so far)``, and counts ``G``: ``T`` with its nearest points ``GAIN_GUESS`` (0.5) times
+``hbar sin ψ`` nearer (``hbar`` the mean triangle radius), clipped to ``[L, U]``, so off by
+at most ``U − L``: each edge's sum is then within ``4 tol / (1 − tol)`` of its exact value,
+relatively (proven; measured far below, docs/benchmarks.md). The gradient of an accepted box
+is its Taylor value's, scaled to ``G``: no proven bound, measured. The previous bounds (a
+first-order Taylor bound and the gain ``h`` in every direction, counting ``(L + U)/2``)
+summed 3.5 times as many triangles exactly on the 100 cables with the torus.
 """
 
 from __future__ import annotations
@@ -53,6 +64,11 @@ import numpy as np
 from ._pairs import SLACK, segment_distance2
 
 _MAX_ADVANCE = 100_000
+# An accepted box's value: its Taylor value with the nearest points this fraction of the bound's
+# gain nearer (h |P u| on the box's axis), clipped to the proven bounds. Measured (fractions 0.3
+# to 0.8, docs/benchmarks.md): 0.5 erred least in energy on both test scenes, 0.5-10x below the
+# bounds' midpoint at the same speed.
+GAIN_GUESS = 0.5
 
 
 def check_obstacles(obstacles) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -223,6 +239,24 @@ def _segment_triangle_distance2(p0x, p0y, p0z, p1x, p1y, p1z, T, k):
     return best
 
 
+#: ``obstacle_tol=None`` (the default): the hierarchy at this tolerance from
+#: ``OBSTACLE_TREE_FROM`` edge–triangle pairs on, every pair exactly below.
+AUTO_OBSTACLE_TOL = 0.1
+#: All pairs cost about 12 ms per pass there; the hierarchy paid 1.6x at 0.37M pairs, 5x at
+#: 2.9M (docs/benchmarks.md, "obstacle energy through the triangle hierarchy").
+OBSTACLE_TREE_FROM = 1_000_000
+
+
+def auto_obstacle_tol(tol, layout, meshes) -> float:
+    """The obstacle energy's tolerance of a run: ``tol`` if given, else
+    :data:`AUTO_OBSTACLE_TOL` when the run's edges times the meshes' triangles reach
+    :data:`OBSTACLE_TREE_FROM`, else 0 (every pair, exactly)."""
+    if tol is not None:
+        return float(tol)
+    pairs = int(layout.real.sum() if layout.has_open else layout.n) * sum(len(F) for _, F in meshes)
+    return AUTO_OBSTACLE_TOL if pairs >= OBSTACLE_TREE_FROM else 0.0
+
+
 # -- energy and gradient ----------------------------------------------------------------------
 
 
@@ -267,36 +301,119 @@ def _edge_terms(X, nxt, T, area, grad):
 
 @nb.njit(cache=True)
 def _node_moments(T, area, centre, radius, lo, hi):
-    """Per node of the hierarchy: its area ``A``, the area-weighted centre ``c`` of its
-    triangles' centroids, the radius ``R`` about ``c`` of a ball holding its triangles and the
-    largest triangle radius ``h`` (about the triangle's own centroid)."""
+    """Per node of the hierarchy, what :func:`_box_bounds` needs: its area ``A``; the
+    area-weighted centre ``c`` of its triangles' centroids ``c_k``; ``Q`` (xx, yy, zz, xy, xz,
+    yz), the area-weighted second moment of the ``c_k − c``; ``S3 = Σ A_k |c_k − c|³``; ``Rc``,
+    the largest ``|c_k − c|``; ``h`` and ``hbar``, the largest and the area-weighted mean
+    triangle radius (about the triangle's own centroid); and the cone of its triangles' normal
+    lines: an axis ``nrm`` and the cosine and sine of the largest angle between a triangle's
+    normal line and it (triangles of zero area, whose terms are zero, left out)."""
     m = lo.shape[0]
     A = np.zeros(m)
     c = np.zeros((m, 3))
-    R = np.zeros(m)
+    Q = np.zeros((m, 6))
+    S3 = np.zeros(m)
+    Rc = np.zeros(m)
     h = np.zeros(m)
+    hbar = np.zeros(m)
+    nrm = np.zeros((m, 3))
+    phi = np.zeros(m)
+    nk = np.zeros((T.shape[0], 3))
+    for k in range(T.shape[0]):
+        ux, uy, uz = T[k, 1, 0] - T[k, 0, 0], T[k, 1, 1] - T[k, 0, 1], T[k, 1, 2] - T[k, 0, 2]
+        vx, vy, vz = T[k, 2, 0] - T[k, 0, 0], T[k, 2, 1] - T[k, 0, 1], T[k, 2, 2] - T[k, 0, 2]
+        wx, wy, wz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+        w = np.sqrt(wx * wx + wy * wy + wz * wz)
+        if w > 0.0:
+            nk[k, 0], nk[k, 1], nk[k, 2] = wx / w, wy / w, wz / w
+    N = np.zeros((3, 3))
     for node in range(m):
+        N[:] = 0.0
         for k in range(lo[node], hi[node]):
             A[node] += area[k]
+            hbar[node] += area[k] * radius[k]
+            h[node] = max(h[node], radius[k])
             for d in range(3):
                 c[node, d] += area[k] * centre[k, d]
-            h[node] = max(h[node], radius[k])
+                for e in range(3):
+                    N[d, e] += area[k] * nk[k, d] * nk[k, e]
+        hbar[node] /= A[node]
         for d in range(3):
             c[node, d] /= A[node]
+        _, vec = np.linalg.eigh(N)  # the axis: the normal lines' principal direction
+        for d in range(3):
+            nrm[node, d] = vec[d, 2]
         for k in range(lo[node], hi[node]):
-            for v in range(3):
-                R[node] = max(R[node], np.sqrt((T[k, v, 0] - c[node, 0]) ** 2
-                                               + (T[k, v, 1] - c[node, 1]) ** 2
-                                               + (T[k, v, 2] - c[node, 2]) ** 2))
-    return A, c, R, h
+            dx = centre[k, 0] - c[node, 0]
+            dy = centre[k, 1] - c[node, 1]
+            dz = centre[k, 2] - c[node, 2]
+            Q[node, 0] += area[k] * dx * dx
+            Q[node, 1] += area[k] * dy * dy
+            Q[node, 2] += area[k] * dz * dz
+            Q[node, 3] += area[k] * dx * dy
+            Q[node, 4] += area[k] * dx * dz
+            Q[node, 5] += area[k] * dy * dz
+            dk = np.sqrt(dx * dx + dy * dy + dz * dz)
+            S3[node] += area[k] * dk * dk * dk
+            Rc[node] = max(Rc[node], dk)
+            if area[k] > 0.0:
+                cosa = abs(nk[k, 0] * nrm[node, 0] + nk[k, 1] * nrm[node, 1]
+                           + nk[k, 2] * nrm[node, 2])
+                phi[node] = max(phi[node], np.arccos(min(1.0, cosa)))
+    phi = np.minimum(0.5 * np.pi, phi * (1.0 + 1e-12) + 1e-12)  # rounding: widened a little
+    return A, c, Q, S3, Rc, h, hbar, nrm, np.cos(phi), np.sin(phi)
+
+
+@nb.njit(cache=True, inline="always")
+def _box_bounds(rx, ry, rz, node, A, Q, S3, Rc, h, hbar, nrm, cphi, sphi):
+    """For a midpoint ``m`` at ``r = m − c`` from a node's centre: ``(L, U, T, G)`` with the
+    node's sum ``Σ A_k / d(m, T_k)³`` proven within ``[L, U]``, ``T`` its second-order Taylor
+    value at the centroids and ``G`` the estimate an accepted node counts (module text, "the
+    far field"); ``L = U = −1`` when the node is too near for bounds."""
+    D2 = rx * rx + ry * ry + rz * rz
+    D = np.sqrt(D2)
+    near = D - Rc[node]  # no centroid nearer than this
+    if near <= 0.0:
+        return -1.0, -1.0, 0.0, 0.0
+    # the nearest point's gain over a centroid: at most h |P_k u_k|, u_k the unit vector from
+    # the centroid to m, P_k the projection onto the triangle's plane; the angle of u_k to the
+    # normal line is at most ψ + φ + asin(Rc / D), ψ the angle of u = r / D to the axis
+    # (sines and cosines of the sum, no trigonometric calls; past π/2 the sine is taken as 1)
+    cp = min(1.0, abs(rx * nrm[node, 0] + ry * nrm[node, 1] + rz * nrm[node, 2]) / D)
+    sp = np.sqrt(1.0 - cp * cp)
+    c2 = cp * cphi[node] - sp * sphi[node]
+    s2 = sp * cphi[node] + cp * sphi[node]
+    sb = Rc[node] / D
+    cb = np.sqrt(1.0 - sb * sb)
+    c3 = c2 * cb - s2 * sb
+    gain = h[node] * (min(1.0, s2 * cb + c2 * sb) if c2 > 0.0 and c3 > 0.0 else 1.0)
+    if near - gain <= 0.0:
+        return -1.0, -1.0, 0.0, 0.0
+    inv2 = 1.0 / D2
+    inv3 = inv2 / D
+    inv5 = inv3 * inv2
+    qr = (Q[node, 0] * rx * rx + Q[node, 1] * ry * ry + Q[node, 2] * rz * rz
+          + 2.0 * (Q[node, 3] * rx * ry + Q[node, 4] * rx * rz + Q[node, 5] * ry * rz))
+    tr = Q[node, 0] + Q[node, 1] + Q[node, 2]
+    # Σ A_k |r − δ_k|⁻³ = A/D³ + ½ Σ A_k δ_kᵀ H δ_k + remainder, H = 3 D⁻⁵ (5 r̂ r̂ᵀ − I)
+    # (no first-order term: c is the area-weighted centre); the third derivative of r⁻³ along
+    # any line is at most 60 r⁻⁶, so the remainder is at most 10 Σ A_k |δ_k|³ / (D − Rc)⁶
+    val = A[node] * inv3 + 1.5 * inv5 * (5.0 * qr * inv2 - tr)
+    rem = 10.0 * S3[node] / near ** 6
+    lw = max(val - rem, 0.0)
+    up = (val + rem) * (near / (near - gain)) ** 3
+    guess = val * (near / (near - GAIN_GUESS * hbar[node] * sp)) ** 3
+    return lw, up, val, min(up, max(lw, guess))
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def _edge_terms_tree(X, nxt, T, area, left, right, lo, hi, A, c, R, h, tol, grad):
+def _edge_terms_tree(X, nxt, T, area, left, right, lo, hi, A, c, Q, S3, Rc, h, hbar, nrm,
+                     cphi, sphi, tol, grad):
     """:func:`_edge_terms` through the triangles' hierarchy, each edge's sum within relative
     ``tol`` of the exact one (module text, "the far field"). Nodes are visited nearer centre
-    first; a node whose bounds ``[L, U]`` on its sum are accepted counts ``(L + U) / 2`` and
-    its gradient as the monopole's, scaled to that value; leaves are summed exactly."""
+    first; a node whose bounds ``[L, U]`` on its sum are accepted counts the estimate ``G``
+    and its gradient as its Taylor value's (:func:`_box_bounds`), scaled to ``G``; leaves are
+    summed exactly."""
     n = X.shape[0]
     e = np.zeros(n)
     gm = np.zeros((n, 3))
@@ -321,29 +438,35 @@ def _edge_terms_tree(X, nxt, T, area, left, right, lo, hi, A, c, R, h, tol, grad
             top -= 1
             node = stack[top]
             rx, ry, rz = mx - c[node, 0], my - c[node, 1], mz - c[node, 2]
-            D = np.sqrt(rx * rx + ry * ry + rz * rz)
-            near = D - R[node]
-            if near - h[node] > 0.0:
-                mono = A[node] / (D * D * D)
-                # Taylor's remainder of Σ A_k |m − c_k|⁻³ about c (no first-order term: c
-                # is the area-weighted centre); |Hessian of r⁻³| ≤ 12 r⁻⁵
-                rem = 6.0 * A[node] * R[node] * R[node] / near ** 5
-                # the nearest point is at most h nearer than the triangle's centroid
-                up = (mono + rem) * (near / (near - h[node])) ** 3
-                lw = max(mono - rem, 0.0)
-                # accepted when its error is within tol of its own value or of its area's
-                # share of the sum so far: either way the accepted errors add up to at most
-                # tol times the edge's sum (twice that, both together)
-                if up - lw <= tol * (up + lw) or 0.5 * (up - lw) <= tol * (A[node] / total) * low:
-                    est = 0.5 * (up + lw)
-                    s += est
-                    low += lw
-                    if grad:
-                        f = -3.0 * est / (D * D)  # the monopole's gradient, scaled to est
-                        sx += f * rx
-                        sy += f * ry
-                        sz += f * rz
-                    continue
+            lw, up, val, guess = _box_bounds(rx, ry, rz, node, A, Q, S3, Rc, h, hbar, nrm,
+                                             cphi, sphi)
+            # accepted when its error is within tol of its own value or of its area's share
+            # of the sum so far: either way the accepted errors add up to at most tol times
+            # the edge's sum (twice that, both together)
+            if up >= 0.0 and (up - lw <= tol * (up + lw)
+                              or 0.5 * (up - lw) <= tol * (A[node] / total) * low):
+                est = guess
+                s += est
+                low += lw
+                if grad and val > 0.0:
+                    # the gradient of the Taylor value, scaled to est
+                    D2 = rx * rx + ry * ry + rz * rz
+                    inv2 = 1.0 / D2
+                    inv5 = inv2 * inv2 / np.sqrt(D2)
+                    inv7 = inv5 * inv2
+                    qx = Q[node, 0] * rx + Q[node, 3] * ry + Q[node, 4] * rz
+                    qy = Q[node, 3] * rx + Q[node, 1] * ry + Q[node, 5] * rz
+                    qz = Q[node, 4] * rx + Q[node, 5] * ry + Q[node, 2] * rz
+                    qr = qx * rx + qy * ry + qz * rz
+                    tr = Q[node, 0] + Q[node, 1] + Q[node, 2]
+                    # ∇(A D⁻³) = −3 A D⁻⁵ r; ∇ 3/2 (5 rᵀQr D⁻⁷ − tr Q D⁻⁵)
+                    #   = 15/2 (2 Q r D⁻⁷ − 7 rᵀQr D⁻⁹ r + tr Q D⁻⁷ r)
+                    radial = -3.0 * A[node] * inv5 + 7.5 * (tr * inv7 - 7.0 * qr * inv7 * inv2)
+                    f = est / val
+                    sx += f * (radial * rx + 15.0 * qx * inv7)
+                    sy += f * (radial * ry + 15.0 * qy * inv7)
+                    sz += f * (radial * rz + 15.0 * qz * inv7)
+                continue
             if left[node] < 0:
                 for k in range(lo[node], hi[node]):
                     qx, qy, qz = _closest_on_triangle(mx, my, mz, T, k)

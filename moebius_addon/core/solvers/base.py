@@ -37,7 +37,7 @@ from ..container import check_container, check_inside
 from ..energy_choice import check_energy
 from ..engine import make_engine
 from ..metrics import METRICS
-from ..obstacles import ObstacleField, check_obstacles
+from ..obstacles import ObstacleField, auto_obstacle_tol, check_obstacles
 from ..pinned_solve import TREE_MAX_PINS
 from ..pins import check_pins
 from ..polygon import check_polygon
@@ -211,7 +211,7 @@ class Run:
                  target_lengths: str, check: bool, equilateral: bool, engine: str = "auto",
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
                  fixed_lengths: bool = True, obstacles=None, obstacle_weight: float = 1.0,
-                 container=None, obstacle_tol: float = 0.0, closed=True, energy="moebius",
+                 container=None, obstacle_tol: float | None = None, closed=True, energy="moebius",
                  alpha=None, beta=None, length_target=None, length_growth=None,
                  **engine_options):
         _check_names(metric, target_lengths)
@@ -226,10 +226,12 @@ class Run:
         self.max_seconds = None if max_seconds is None else check_number("max_seconds",
                                                                          max_seconds, 0)
         obstacle_weight = check_number("obstacle_weight", obstacle_weight, 0)
-        obstacle_tol = check_number("obstacle_tol", obstacle_tol, 0)
-        if obstacle_tol >= 1.0:
+        if obstacle_tol is not None:
+            obstacle_tol = check_number("obstacle_tol", obstacle_tol, 0)
+        if obstacle_tol is not None and obstacle_tol >= 1.0:
             raise ValueError(f"obstacle_tol must be below 1 (a relative error bound of the "
-                             f"obstacle energy; 0: every pair exactly), got {obstacle_tol!r}")
+                             f"obstacle energy; 0: every pair exactly; None: chosen by size), "
+                             f"got {obstacle_tol!r}")
         meshes = None if obstacles is None else check_obstacles(obstacles)
         container = None if container is None else check_container(container)
         X, layout, e2 = as_unit_layout(P, closed)  # exact scaling of curves far from size 1
@@ -283,7 +285,7 @@ class Run:
                 meshes.append(container)
                 labels.append("the container")
             field = ObstacleField(meshes, self._shift, self._scale, obstacle_weight, labels,
-                                  obstacle_tol)
+                                  auto_obstacle_tol(obstacle_tol, layout, meshes))
             field.check_clear(self.X, layout, self.eps)
             self.engine.obstacles = field
         self.nit = 0

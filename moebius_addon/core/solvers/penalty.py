@@ -79,7 +79,7 @@ class _PenaltyRun(Run):
                  target_lengths: str = "equal", check: bool = True, engine: str = "auto",
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
                  obstacles=None, obstacle_weight: float = 1.0, container=None,
-                 obstacle_tol: float = 0.0, closed=True,
+                 obstacle_tol: float | None = None, closed=True,
                  energy="moebius", alpha=None, beta=None, length_target=None,
                  length_growth=None, **ignored):
         unknown = set(ignored) - _FEASIBLE_ONLY

@@ -175,7 +175,7 @@ class Relaxation(Run):
         obstacles=None,
         obstacle_weight: float = 1.0,
         container=None,
-        obstacle_tol: float = 0.0,
+        obstacle_tol: float | None = None,
         closed=True,
         energy="moebius",
         alpha: float | None = None,
