@@ -214,6 +214,11 @@ def packing(which: str, factor: float | None, rate: float) -> Scene:
                       f"here x{f:g} at {100 * rate:g} % per iteration")
 
 
+#: The Untangle Cables preset's θ (moebius_addon.blender.options.PRESETS; not imported here:
+#: that package is the add-on's).
+CABLES_THETA = 0.3
+
+
 def cables_torus(cables: int = 100, edges: int = 200, R: float = 0.25, r: float = 0.04,
                  clear: float = 0.07) -> Scene:
     """``cables`` open cables of ``edges`` edges between the plates z = 0 and z = 1
@@ -240,8 +245,9 @@ def cables_torus(cables: int = 100, edges: int = 200, R: float = 0.25, r: float 
     V, F = torus(R, r, 64, 16)
     V = V + np.array([c, c, 0.5])
     return Scene("cables", parts, [False] * cables, [[0, edges] for _ in range(cables)],
-                 obstacles=[(V, F)], options={"obstacle_tol": 0.1},
-                 note=f"torus R {R}, r {r}, start bent to {clear} from its core circle")
+                 obstacles=[(V, F)], options={"obstacle_tol": 0.1, "theta": CABLES_THETA},
+                 note=f"torus R {R}, r {r}, start bent to {clear} from its core circle; "
+                      f"theta {CABLES_THETA} (the Untangle Cables preset's)")
 
 
 # -- the independent check -------------------------------------------------------------------

@@ -51,6 +51,7 @@ def test_untangle_cables_keeps_them_open_pins_the_ends_and_takes_the_obstacles(s
     assert bpy.ops.moebius.apply_preset(preset="untangle_cables") == {"FINISHED"}
     assert s.keep_open and not s.close_open and s.pin_selected and not s.use_length_target
     assert s.method == "projected_gradient" and s.obstacles == obstacles
+    assert s.theta == pytest.approx(0.3)  # the tree's far field looser than for knots
     for spline in obj.data.splines:  # exactly the two ends of each cable selected
         sel = [p.select for p in spline.points]
         assert sel[0] and sel[-1] and not any(sel[1:-1])
