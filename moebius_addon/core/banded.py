@@ -34,6 +34,9 @@ from .constraints import Jacobian
 
 #: Metrics whose Gram matrix is banded along the curve (plus the barycenter term).
 BANDED_METRICS = ("l2", "h1", "h2")
+# The band of several components is factored and solved in up to this many blocks of whole
+# components, in parallel (the same bits: no entry crosses a block's edge).
+_BLOCKS = 64
 
 
 @nb.njit(cache=True)
@@ -47,7 +50,33 @@ def band_lu(ab, kl, ku):
     n = ab.shape[0]
     piv = np.empty(n, np.int64)
     mult = np.zeros((n, max(kl, 1)))
-    for k in range(n):
+    return piv, mult, _lu_range(ab, kl, ku, piv, mult, 0, n)
+
+
+@nb.njit(cache=True, parallel=True)
+def band_lu_blocks(ab, kl, ku, cuts):
+    """:func:`band_lu` of a block-diagonal band whose blocks are the rows ``cuts[b] …
+    cuts[b + 1]`` (:func:`block_cuts`), the blocks in parallel: no pivot, multiplier or fill-in
+    crosses a block's edge (the rows beyond it hold zeros in its columns), so the factors are
+    the same bits as :func:`band_lu`'s. The first zero pivot is the least one found."""
+    n = ab.shape[0]
+    piv = np.empty(n, np.int64)
+    mult = np.zeros((n, max(kl, 1)))
+    nb_ = cuts.shape[0] - 1
+    bad = np.full(nb_, -1, np.int64)
+    for b in nb.prange(nb_):
+        bad[b] = _lu_range(ab, kl, ku, piv, mult, cuts[b], cuts[b + 1])
+    for b in range(nb_):
+        if bad[b] >= 0:
+            return piv, mult, bad[b]
+    return piv, mult, -1
+
+
+@nb.njit(cache=True)
+def _lu_range(ab, kl, ku, piv, mult, lo, n):
+    """:func:`band_lu`'s elimination for the columns ``lo … n − 1``, with no row beyond
+    ``n − 1``; the first zero pivot's index (−1: none)."""
+    for k in range(lo, n):
         last = min(n - 1, k + kl)
         p = k
         best = abs(ab[k, kl])
@@ -58,7 +87,7 @@ def band_lu(ab, kl, ku):
                 p = r
         piv[k] = p
         if best == 0.0:
-            return piv, mult, k
+            return k
         jmax = min(n - 1, k + kl + ku)
         if p != k:
             for j in range(k, jmax + 1):
@@ -72,27 +101,33 @@ def band_lu(ab, kl, ku):
             if f != 0.0:
                 for j in range(k + 1, jmax + 1):
                     ab[r, j - r + kl] -= f * ab[k, j - k + kl]
-    return piv, mult, -1
+    return -1
 
 
 @nb.njit(cache=True)
 def _solve_vector(ab, mult, piv, kl, ku, x):
-    n = x.shape[0]
-    for k in range(n):
+    _solve_range(ab, mult, piv, kl, ku, x, 0, x.shape[0])
+
+
+@nb.njit(cache=True)
+def _solve_range(ab, mult, piv, kl, ku, x, lo, n):
+    """:func:`_solve_vector` for the unknowns ``lo … n − 1`` of a block (factored alone),
+    ``x`` holding just those (``x[k − lo]``)."""
+    for k in range(lo, n):
         p = piv[k]
         if p != k:
-            a = x[k]
-            x[k] = x[p]
-            x[p] = a
-        xk = x[k]
+            a = x[k - lo]
+            x[k - lo] = x[p - lo]
+            x[p - lo] = a
+        xk = x[k - lo]
         if xk != 0.0:
             for t in range(min(kl, n - 1 - k)):
-                x[k + 1 + t] -= mult[k, t] * xk
-    for k in range(n - 1, -1, -1):
-        s = x[k]
+                x[k + 1 + t - lo] -= mult[k, t] * xk
+    for k in range(n - 1, lo - 1, -1):
+        s = x[k - lo]
         for j in range(k + 1, min(n - 1, k + kl + ku) + 1):
-            s -= ab[k, j - k + kl] * x[j]
-        x[k] = s / ab[k, kl]
+            s -= ab[k, j - k + kl] * x[j - lo]
+        x[k - lo] = s / ab[k, kl]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -106,27 +141,65 @@ def band_solve(ab, mult, piv, kl, ku, b):
 
 
 @nb.njit(cache=True, parallel=True)
-def _solve_fields(ab, mult, piv, kl, ku, D, pos, G, lam):
+def _solve_fields(ab, mult, piv, kl, ku, D, pos, G, lam, cuts):
     """Band solves for right-hand sides given as fields ``G`` (m, N, 3) and edge values
     ``lam`` (m, N) (or (0, N): none), scaled by ``D`` on both sides; the solutions' fields
-    and edge multipliers."""
+    and edge multipliers. In parallel over the right-hand sides and the blocks of the band
+    (``cuts``, :func:`block_cuts`: whole components, whose vertices are the rows'
+    ``cuts / 4``): each block's unknowns are solved alone, the same bits for any thread
+    count."""
     m, n = G.shape[0], G.shape[1]
     X = np.empty((m, n, 3))
     L = np.empty((m, n))
-    for q in nb.prange(m):
-        x = np.empty(4 * n)
-        for v in range(n):
+    nblocks = cuts.shape[0] - 1
+    for t in nb.prange(m * nblocks):
+        q = t // nblocks
+        b = t - q * nblocks
+        lo, hi = cuts[b], cuts[b + 1]
+        x = np.empty(hi - lo)
+        for v in range(lo // 4, hi // 4):  # a component's vertices are its rows' places
             i = 4 * pos[v]
             for d in range(3):
-                x[i + d] = G[q, v, d] * D[i + d]
-            x[i + 3] = lam[q, v] * D[i + 3] if lam.shape[0] > 0 else 0.0
-        _solve_vector(ab, mult, piv, kl, ku, x)
-        for v in range(n):
+                x[i + d - lo] = G[q, v, d] * D[i + d]
+            x[i + 3 - lo] = lam[q, v] * D[i + 3] if lam.shape[0] > 0 else 0.0
+        _solve_range(ab, mult, piv, kl, ku, x, lo, hi)
+        for v in range(lo // 4, hi // 4):
             i = 4 * pos[v]
             for d in range(3):
-                X[q, v, d] = x[i + d] * D[i + d]
-            L[q, v] = x[i + 3] * D[i + 3]
+                X[q, v, d] = x[i + d - lo] * D[i + d]
+            L[q, v] = x[i + 3 - lo] * D[i + 3]
     return X, L
+
+
+@nb.njit(cache=True)
+def block_cuts(ab, kl, ku, starts, least):
+    """The rows where the band splits into blocks that share no entry: of the components'
+    first rows ``4 starts`` those where the band holds only zeros across (checked), merged
+    into blocks of at least ``least`` rows; ``[0, …, n]``."""
+    n = ab.shape[0]
+    cuts = np.empty(starts.shape[0] + 1, np.int64)
+    cuts[0] = 0
+    nc = 1
+    for c in range(1, starts.shape[0]):
+        b = 4 * starts[c]
+        if b <= 0 or b >= n or b - cuts[nc - 1] < least:
+            continue
+        clear = True
+        for r in range(max(0, b - kl - ku), b):  # rows above: nothing in columns ≥ b
+            for j in range(b, min(n - 1, r + kl + ku) + 1):
+                if ab[r, j - r + kl] != 0.0:
+                    clear = False
+        for r in range(b, min(n, b + kl + ku)):  # rows below: nothing in columns < b
+            for j in range(max(0, r - kl), b):
+                if ab[r, j - r + kl] != 0.0:
+                    clear = False
+        if clear:
+            cuts[nc] = b
+            nc += 1
+    if n - cuts[nc - 1] < least and nc > 1:
+        nc -= 1  # the last block too small: merged with the one before
+    cuts[nc] = n
+    return cuts[:nc + 1].copy()
 
 
 def zigzag_positions(layout: Layout) -> np.ndarray:
@@ -298,7 +371,10 @@ class BandedSaddle:
         self.D = _fill(rows, cols, vals, pos, anchors, self.mu, T, ln, lay.nxt, has_row, fixed,
                        self.kl, self.ku, ab)
         self.ab = ab
-        self.piv, self.mult, bad = band_lu(ab, self.kl, self.ku)
+        # blocks of whole components, some 64 at most (none for one component)
+        self.cuts = block_cuts(ab, self.kl, self.ku, np.asarray(lay.starts[:-1], np.int64),
+                               max(4 * lay.n // _BLOCKS, 1))
+        self.piv, self.mult, bad = band_lu_blocks(ab, self.kl, self.ku, self.cuts)
         if bad >= 0:
             raise np.linalg.LinAlgError(f"singular band at unknown {bad}")
         return diag
@@ -316,7 +392,7 @@ class BandedSaddle:
         G = np.ascontiguousarray(G, dtype=np.float64)
         lam = np.zeros((0, G.shape[1])) if lam is None else np.ascontiguousarray(lam, float)
         return _solve_fields(self.ab, self.mult, self.piv, self.kl, self.ku, self.D, self.pos,
-                             G, lam)
+                             G, lam, self.cuts)
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(u, λ)`` of ``[[G, Cᵀ], [C, 0]] [u; λ] = [g; r]`` (λ: edge rows, then three

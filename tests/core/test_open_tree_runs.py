@@ -40,6 +40,34 @@ def ends(parts):
     return [[0, len(p) - 1] for p in parts]
 
 
+@pytest.mark.parametrize("metric", ["h1", "h2"])
+def test_the_band_in_blocks_gives_the_bits_of_one_band(metric, rng, monkeypatch):
+    """The band of several components factored and solved block by block, in parallel
+    (banded._BLOCKS), against one band: the same bits; a single component is one block."""
+    from moebius_addon.core import banded
+
+    parts = cables(6, 30) + [ngon(24) * 0.1 + [0.1, 0.1, 0.5]]
+    X, layout = as_layout(parts, [False] * 6 + [True])
+    ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
+    ln[~layout.real] = 1.0
+    con = make_constraints(X, layout, ln, True, True, np.array([0, 30, 31, 61]))
+    jac = jacobian(X, con)
+    g = rng.standard_normal(X.shape)
+    r = rng.standard_normal(con.size)
+    out = {}
+    for blocks in (1, banded._BLOCKS):
+        monkeypatch.setattr(banded, "_BLOCKS", blocks)
+        solver = OpenBandedSaddle(banded_parts(metric, X, layout), jac)
+        out[blocks] = (len(solver.cuts) - 1, solver.piv, solver.mult, *solver.solve(g, r))
+    assert out[1][0] == 1 and out[banded._BLOCKS][0] == 7  # a block per component
+    for a, b in zip(out[1][1:], out[banded._BLOCKS][1:], strict=True):
+        assert np.array_equal(a, b)
+    single = as_layout(parts[0], False)[1]
+    ab = np.ones((4 * single.n, 10))
+    assert np.array_equal(banded.block_cuts(ab, 3, 3, single.starts[:-1].astype(np.int64), 1),
+                          [0, 4 * single.n])
+
+
 @pytest.mark.parametrize("metric", ["h1", "h2", "l2"])
 def test_open_banded_solver_matches_dense_solve(metric, rng):
     # three pinned cables, one free cable and a free ring: every kind of component
