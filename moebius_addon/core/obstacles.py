@@ -64,10 +64,10 @@ import numpy as np
 from ._pairs import SLACK, segment_distance2
 
 _MAX_ADVANCE = 100_000
-# An accepted box's value: its Taylor value with the nearest points this fraction of the bound's
-# gain nearer (h |P u| on the box's axis), clipped to the proven bounds. Measured (fractions 0.3
-# to 0.8, docs/benchmarks.md): 0.5 erred least in energy on both test scenes, 0.5-10x below the
-# bounds' midpoint at the same speed.
+# An accepted box's value: its Taylor value with the nearest points this fraction of hbar sin ψ
+# nearer (the mean triangle radius, ψ the angle to the box's axis), clipped to the proven
+# bounds. Fractions 0.3 to 0.8 measured on two scenes (docs/benchmarks.md): 0.5 erred least in
+# energy overall, 3 to 8 times less than the bounds' midpoint.
 GAIN_GUESS = 0.5
 
 
