@@ -308,46 +308,6 @@ def _capacitance(W: np.ndarray, mu: float) -> np.ndarray:
     return np.linalg.inv(Sinv)
 
 
-@nb.njit(cache=True, parallel=True)
-def _closed_correction(y, yb, U, Z, Zlam, starts, cap, u, lam_e, lam_b):
-    """The low-rank correction of :meth:`BandedSaddle._solve`, in place on ``u``, ``lam_e``
-    and ``lam_b``: per component ``c`` (in parallel; each writes its own vertices) ``w =
-    cap_c [U_c y; yb_c]``, then ``u −= w[:9] Z_c``, ``λ_e −= w[:9] Zλ_c``, ``λ_b,c −= w[9:]``,
-    over the component's vertices only: ``U_c`` is supported there and so are ``Z_c`` and
-    ``Zλ_c``, the band's solutions for it (the band is block diagonal by component). One
-    loop, no BLAS: its threads took 1.1-1.4 ms for these 9-row products at 10 000 edges
-    while a core was busy, 0.03-0.07 ms with one thread."""
-    for c in nb.prange(starts.shape[0] - 1):
-        s, e = starts[c], starts[c + 1]
-        t = np.zeros(12)
-        for j in range(9):
-            acc = 0.0
-            for v in range(s, e):
-                for d in range(3):
-                    acc += U[c, j, v, d] * y[v, d]
-            t[j] = acc
-        for d in range(3):
-            t[9 + d] = yb[c, d]
-        w = np.zeros(12)
-        for i in range(12):
-            acc = 0.0
-            for j in range(12):
-                acc += cap[c, i, j] * t[j]
-            w[i] = acc
-        for v in range(s, e):
-            for d in range(3):
-                acc = 0.0
-                for j in range(9):
-                    acc += w[j] * Z[9 * c + j, v, d]
-                u[v, d] -= acc
-            acc = 0.0
-            for j in range(9):
-                acc += w[j] * Zlam[9 * c + j, v]
-            lam_e[v] -= acc
-        for d in range(3):
-            lam_b[c, d] -= w[9 + d]
-
-
 class BandedSaddle:
     """The saddle-point solver of a banded metric at one iterate (see the module's text).
 
@@ -454,8 +414,14 @@ class BandedSaddle:
         u = y.copy()
         lam_e = ylam.copy()
         lam_b = yb.copy()
-        _closed_correction(y, yb, self.U, self.Z, self.Zlam, lay.starts, self.cap, u, lam_e,
-                           lam_b)
+        for c in range(k):
+            t = np.empty(12)
+            t[:9] = self.U[c].reshape(9, -1) @ y.ravel()
+            t[9:] = yb[c]
+            w = self.cap[c] @ t
+            u -= (w[:9] @ self.Z[9 * c:9 * c + 9].reshape(9, -1)).reshape(u.shape)
+            lam_e -= w[:9] @ self.Zlam[9 * c:9 * c + 9]
+            lam_b[c] -= w[9:]
         return u, np.concatenate([lam_e, lam_b.ravel()])
 
     def solve_many(self, G: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
