@@ -172,6 +172,22 @@ def _solve_fields(ab, mult, piv, kl, ku, D, pos, G, lam, cuts):
 
 
 @nb.njit(cache=True)
+def _band_clear_at(ab, kl, ku, b):
+    """Whether the band holds only zeros across row and column ``b``: nothing in the rows
+    above in columns ≥ ``b``, nothing in the rows below in columns < ``b``."""
+    n = ab.shape[0]
+    for r in range(max(0, b - kl - ku), b):
+        for j in range(b, min(n - 1, r + kl + ku) + 1):
+            if ab[r, j - r + kl] != 0.0:
+                return False
+    for r in range(b, min(n, b + kl + ku)):
+        for j in range(max(0, r - kl), b):
+            if ab[r, j - r + kl] != 0.0:
+                return False
+    return True
+
+
+@nb.njit(cache=True)
 def block_cuts(ab, kl, ku, starts, least):
     """The rows where the band splits into blocks that share no entry: of the components'
     first rows ``4 starts`` those where the band holds only zeros across (checked), merged
@@ -184,16 +200,7 @@ def block_cuts(ab, kl, ku, starts, least):
         b = 4 * starts[c]
         if b <= 0 or b >= n or b - cuts[nc - 1] < least:
             continue
-        clear = True
-        for r in range(max(0, b - kl - ku), b):  # rows above: nothing in columns ≥ b
-            for j in range(b, min(n - 1, r + kl + ku) + 1):
-                if ab[r, j - r + kl] != 0.0:
-                    clear = False
-        for r in range(b, min(n, b + kl + ku)):  # rows below: nothing in columns < b
-            for j in range(max(0, r - kl), b):
-                if ab[r, j - r + kl] != 0.0:
-                    clear = False
-        if clear:
+        if _band_clear_at(ab, kl, ku, b):
             cuts[nc] = b
             nc += 1
     if n - cuts[nc - 1] < least and nc > 1:

@@ -440,16 +440,15 @@ def _edge_terms_tree(X, nxt, T, area, left, right, lo, hi, A, c, Q, S3, Rc, h, h
             rx, ry, rz = mx - c[node, 0], my - c[node, 1], mz - c[node, 2]
             lw, up, val, guess = _box_bounds(rx, ry, rz, node, A, Q, S3, Rc, h, hbar, nrm,
                                              cphi, sphi)
-            # accepted when its error is within tol of its own value or of its area's share
-            # of the sum so far: either way the accepted errors add up to at most tol times
-            # the edge's sum (twice that, both together)
+            # accepted when its bounds' spread is within tol of its own value or of its
+            # area's share of the sum so far; G is off by at most the spread, so the accepted
+            # errors add up to at most 4 tol / (1 − tol) of the edge's sum (module text)
             if up >= 0.0 and (up - lw <= tol * (up + lw)
                               or 0.5 * (up - lw) <= tol * (A[node] / total) * low):
-                est = guess
-                s += est
+                s += guess
                 low += lw
                 if grad and val > 0.0:
-                    # the gradient of the Taylor value, scaled to est
+                    # the gradient of the Taylor value, scaled to G
                     D2 = rx * rx + ry * ry + rz * rz
                     inv2 = 1.0 / D2
                     inv5 = inv2 * inv2 / np.sqrt(D2)
@@ -462,7 +461,7 @@ def _edge_terms_tree(X, nxt, T, area, left, right, lo, hi, A, c, Q, S3, Rc, h, h
                     # ∇(A D⁻³) = −3 A D⁻⁵ r; ∇ 3/2 (5 rᵀQr D⁻⁷ − tr Q D⁻⁵)
                     #   = 15/2 (2 Q r D⁻⁷ − 7 rᵀQr D⁻⁹ r + tr Q D⁻⁷ r)
                     radial = -3.0 * A[node] * inv5 + 7.5 * (tr * inv7 - 7.0 * qr * inv7 * inv2)
-                    f = est / val
+                    f = guess / val
                     sx += f * (radial * rx + 15.0 * qx * inv7)
                     sy += f * (radial * ry + 15.0 * qy * inv7)
                     sz += f * (radial * rz + 15.0 * qz * inv7)

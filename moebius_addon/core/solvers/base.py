@@ -228,10 +228,10 @@ class Run:
         obstacle_weight = check_number("obstacle_weight", obstacle_weight, 0)
         if obstacle_tol is not None:
             obstacle_tol = check_number("obstacle_tol", obstacle_tol, 0)
-        if obstacle_tol is not None and obstacle_tol >= 1.0:
-            raise ValueError(f"obstacle_tol must be below 1 (a relative error bound of the "
-                             f"obstacle energy; 0: every pair exactly; None: chosen by size), "
-                             f"got {obstacle_tol!r}")
+            if obstacle_tol >= 1.0:
+                raise ValueError(f"obstacle_tol must be below 1 (a relative error bound of the "
+                                 f"obstacle energy; 0: every pair exactly; None: chosen by "
+                                 f"size), got {obstacle_tol!r}")
         meshes = None if obstacles is None else check_obstacles(obstacles)
         container = None if container is None else check_container(container)
         X, layout, e2 = as_unit_layout(P, closed)  # exact scaling of curves far from size 1
