@@ -90,7 +90,7 @@ def row(name, n, pre, m) -> str:
             f" {np.median(secs):9.3f} {np.median(it_s):9.2f}")
 
 
-def plot(results: list[dict]) -> None:
+def plot(results: list[dict], path: Path = IMG) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -112,8 +112,8 @@ def plot(results: list[dict]) -> None:
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     IMG.parent.mkdir(exist_ok=True)
-    fig.savefig(IMG, dpi=110)
-    print(f"wrote {IMG}")
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}")
 
 
 def main() -> None:
@@ -123,10 +123,16 @@ def main() -> None:
     ap.add_argument("--iterations", type=int, default=3)
     ap.add_argument("--pre", nargs="+", default=["two_level", "multilevel"])
     ap.add_argument("--out", default="out/krylov_scaling.json")
-    ap.add_argument("--plot", help="plot a saved JSON table and stop")
+    ap.add_argument("--plot", nargs="+", metavar="JSON",
+                    help="plot saved JSON tables (rows of later files replace earlier ones') "
+                         "to docs/img/krylov_scaling.png and stop")
     args = ap.parse_args()
     if args.plot:
-        plot(json.loads(Path(args.plot).read_text()))
+        rows = {}
+        for path in args.plot:
+            for r in json.loads(Path(path).read_text()):
+                rows[(r["curve"], r["n"], r["preconditioner"])] = r
+        plot(list(rows.values()))
         return
     print(f"load {os.getloadavg()}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}")
     print(f"{'curve':10s} {'N':>8s} {'precond':11s} {'#':>4s} {'median':>7s} {'max':>5s}"
@@ -142,7 +148,7 @@ def main() -> None:
                 print(row(name, n, pre, m), flush=True)
                 Path(args.out).write_text(json.dumps(results))
     print(f"load {os.getloadavg()}")
-    plot(results)
+    plot(results, Path(args.out).with_suffix(".png"))  # docs' plot: --plot
 
 
 if __name__ == "__main__":

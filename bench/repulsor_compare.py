@@ -4,6 +4,7 @@
                                                             # threads, 5 alternated rounds
     python bench/repulsor_compare.py --sizes 100000 --reps 2
     python bench/repulsor_compare.py --million              # adds 10^6 edges (slow)
+    python bench/repulsor_compare.py --moebius              # also our Möbius iteration
     python bench/repulsor_compare.py --core-from DIR        # our side imported from DIR (e.g. an
                                                             # export of another branch)
 
@@ -96,8 +97,11 @@ def _ours_eg(core, P: np.ndarray, engine: str, theta: float | None):
     return "tangent_point", E, np.asarray(G)
 
 
-def _ours_relax(core, P: np.ndarray, theta: float | None):
-    """(energy name, result) of one iteration of the tangent-point flow on the tree."""
+def _ours_relax(core, P: np.ndarray, theta: float | None, energy: str = "tangent_point"):
+    """(energy name, result) of one iteration of the tangent-point (or Möbius) flow on the
+    tree."""
+    if energy == "moebius":
+        return "moebius", core.relax(P, max_iter=1, engine="tree", theta=theta)
     return "tangent_point", core.relax(P, max_iter=1, engine="tree", theta=theta,
                                        energy="tangent_point", alpha=ALPHA, beta=BETA)
 
@@ -111,6 +115,7 @@ def worker(args) -> None:
     small = core.resample(P, 600)  # warm-up: load (or compile) every kernel used below
     _ours_eg(core, small, "tree", theta)
     _ours_relax(core, small, theta)
+    _ours_relax(core, small, theta, "moebius")
     if args.worker == "error":
         _ours_eg(core, small, "exact", theta)
     before = peak_rss_mb()
@@ -121,13 +126,16 @@ def worker(args) -> None:
         s = time.perf_counter() - t0
         print(f"{head} energy_name={name} seconds={s:.6f} energy={E:.12e} "
               f"diff_norm={np.linalg.norm(G):.12e}", flush=True)
-    elif args.worker == "iter":
+    elif args.worker in ("iter", "iter_moebius"):
         t0 = time.perf_counter()
-        name, r = _ours_relax(core, P, theta)
+        name, r = _ours_relax(core, P, theta,
+                              "moebius" if args.worker == "iter_moebius" else "tangent_point")
         wall = time.perf_counter() - t0
         sec = r.history["seconds"]
+        its = r.stats.get("krylov_iterations") if hasattr(r, "stats") else None
         print(f"{head} energy_name={name} seconds={sec[1] - sec[0]:.6f} "
               f"setup_seconds={sec[0]:.6f} wall_seconds={wall:.6f} "
+              f"krylov={','.join(map(str, its)) if its else '-'} "
               f"energy={r.history['energy'][0]:.12e} energy_new={r.history['energy'][1]:.12e} "
               f"step={r.history['step'][1]:.6e}", flush=True)
     elif args.worker == "error":
@@ -239,7 +247,10 @@ def main() -> None:
                     help="Repulsor's far_field_separation_parameter (its default 0.5)")
     ap.add_argument("--core-from", default=None)
     ap.add_argument("--json", default=str(ROOT / "out" / "repulsor_compare.json"))
-    ap.add_argument("--worker", choices=("eg", "iter", "error"), help=argparse.SUPPRESS)
+    ap.add_argument("--moebius", action="store_true",
+                    help="also time one iteration of our Möbius flow (issue 27's target)")
+    ap.add_argument("--worker", choices=("eg", "iter", "iter_moebius", "error"),
+                    help=argparse.SUPPRESS)
     ap.add_argument("--curve", help=argparse.SUPPRESS)
     ap.add_argument("--threads-of-worker", type=int, dest="worker_threads", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -297,6 +308,9 @@ def main() -> None:
                                  str(args.repulsor_theta)], env)
                     measure(me + ["--worker", mode, "--curve", str(path), "--threads-of-worker",
                                   str(t)] + extra, env)
+                if args.moebius:
+                    measure(me + ["--worker", "iter_moebius", "--curve", str(path),
+                                  "--threads-of-worker", str(t)] + extra, env)
             if n <= EXACT_UP_TO:  # both sides' all-pairs sums (Repulsor's: 300 s at 10^5)
                 if have_driver:
                     measure([str(driver), str(path), "error", str(t), "--theta",
@@ -304,7 +318,7 @@ def main() -> None:
                 measure(me + ["--worker", "error", "--curve", str(path), "--threads-of-worker",
                               str(t)] + extra, env)
             for side in ("repulsor", "ours"):
-                for mode in ("eg", "iter"):
+                for mode in ("eg", "iter", "iter_moebius"):
                     s = summary(rows, side, mode, n, t)
                     if s:
                         print(f"summary side={side} mode={mode} edges={n} threads={t} "

@@ -11,16 +11,20 @@ update) preconditioned by
   again along the curve, and other components), which carry the strong coupling of strands
   close in space (without them the iterates' errors moved such strands against each other and
   the collision bound stalled the flow);
-* from ``COARSE_FROM`` vertices on, plus a coarse level (:class:`CoarseLevel`, two-level
-  additive Schwarz): what the banded ``H`` misses most on smooth curves are the lowest modes.
+* from ``MULTILEVEL_FROM`` vertices on, plus the coarser levels of :class:`Multilevel` (the
+  curve quartered again and again, each level's own banded ``H``; additive, BPX): what the
+  banded ``H`` misses most on smooth curves are the low modes, at every scale below its own.
+  (``PRECONDITIONER = "two_level"``: one dense coarse level, :class:`CoarseLevel`, instead;
+  its count grew with N and the curve, to the cap of 200 at 10⁶ on FHW.)
 
 Every iterate stays on ``C u = r`` to rounding, whatever the tolerance. Measured iterations
-(docs/benchmarks.md, "hs on the tree"): 6–15 per gradient at the start of FHW and 7_2 from
-1 000 to 100 000 edges, 10–12 along their flows.
+(docs/benchmarks.md, "Krylov iterations against N"): 4–15 per solve below 2·10⁴ vertices
+on the banded ``H`` alone, 5–15 with the levels from 2·10⁴ to 10⁵, 9 at 10⁶ (FHW).
 """
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from ._layout import Layout, layout_from_sizes
@@ -45,10 +49,11 @@ COARSE_FROM = 20000
 #: Which preconditioner :class:`HsSaddle` builds: "two_level" (the banded constraint
 #: preconditioner plus :class:`CoarseLevel`) or "multilevel" (plus :class:`Multilevel`).
 PRECONDITIONERS = ("two_level", "multilevel")
-#: "two_level" stays the default until "multilevel" is measured at 10⁶ and on an idle machine:
-#: at 10⁵ it needed 8–17 iterations per solve where two_level needed 14–37, at 10³–10⁴ its
-#: set-up cost more seconds than it saved (docs/benchmarks.md, "Krylov iterations against N").
-PRECONDITIONER = "two_level"
+#: "multilevel" from ``MULTILEVEL_FROM`` vertices on: with a level at every second halving it
+#: took 5-15 iterations per solve where two_level took 9-38 at 2·10⁴-10⁵ and was as fast or
+#: faster per iteration (alternated, 27 November 2026); at 10⁶ (FHW) 9 where two_level hit
+#: its cap of 200 (docs/benchmarks.md, "Krylov iterations against N").
+PRECONDITIONER = "multilevel"
 #: "multilevel" from this many vertices on (below, the banded constraint preconditioner alone).
 MULTILEVEL_FROM = COARSE_FROM
 
@@ -153,25 +158,49 @@ class CoarseLevel:
 COARSEST = 400
 MIN_CONTACT = 0.5
 DENSE_MAX = 1200
+#: Levels at every ``STRIDE``-th halving (the curve quartered from level to level), the
+#: coarsest always: at 10⁵ vertices every second level left out took FHW's count per solve
+#: from 8 to 7-8 and the Borromean rings' from 17 to 15, and a level's set-up and solve cost
+#: about its vertices (docs/benchmarks.md, "Krylov iterations against N").
+STRIDE = 2
+
+
+@nb.njit(cache=True, parallel=True)
+def _csr_product(ptr, cols, vals, Y, out):
+    """``out = S Y`` for ``S`` in compressed rows and ``Y`` (m, d): rows in parallel, each
+    summed in its own order (the same bits for any thread count)."""
+    for i in nb.prange(out.shape[0]):
+        for d in range(out.shape[1]):
+            s = 0.0
+            for t in range(ptr[i], ptr[i + 1]):
+                s += vals[t] * Y[cols[t], d]
+            out[i, d] = s
 
 
 class _Sparse:
     """A sparse matrix by its entries ``(rows, cols, vals)``, with ``@`` on vectors and on
     (n, 3) arrays: the levels' interpolations (no scipy here: the extension ships numpy and
-    numba only)."""
+    numba only). Kept in compressed rows for a numba product: ``np.add.at`` took 19-21 ms per
+    transfer between 10⁵ and 5·10⁴ vertices, two thirds of the hierarchy's application."""
 
     def __init__(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, shape: tuple):
         self.rows, self.cols, self.vals, self.shape = rows, cols, vals, shape
+        order = np.argsort(rows, kind="stable")
+        self._cols = np.ascontiguousarray(cols[order], dtype=np.int64)
+        self._vals = np.ascontiguousarray(vals[order], dtype=np.float64)
+        self._ptr = np.zeros(shape[0] + 1, np.int64)
+        np.cumsum(np.bincount(rows, minlength=shape[0]), out=self._ptr[1:])
 
     @property
     def T(self) -> _Sparse:
         return _Sparse(self.cols, self.rows, self.vals, (self.shape[1], self.shape[0]))
 
     def __matmul__(self, y: np.ndarray) -> np.ndarray:
-        y = np.asarray(y)
-        out = np.zeros((self.shape[0],) + y.shape[1:], dtype=np.result_type(y, self.vals))
-        np.add.at(out, self.rows, self.vals.reshape((-1,) + (1,) * (y.ndim - 1)) * y[self.cols])
-        return out
+        y = np.asarray(y, dtype=np.float64)
+        Y = np.ascontiguousarray(y.reshape(y.shape[0], -1))
+        out = np.empty((self.shape[0], Y.shape[1]))
+        _csr_product(self._ptr, self._cols, self._vals, Y, out)
+        return out.reshape((self.shape[0],) + y.shape[1:])
 
     def toarray(self) -> np.ndarray:
         A = np.zeros(self.shape)
@@ -255,39 +284,47 @@ class Multilevel:
                  order: float = PAPER_ORDER, fine: BandedSaddle | None = None):
         self.jac = jac
         self.fine = BandedSaddle(_parts(X, layout, metric, order), jac) if fine is None else fine
-        self.transfers: list[tuple[_Sparse, _Sparse]] = []
-        polygons = []
+        halvings = []
         Xl, lay = X, layout
         while lay.n > COARSEST:
             idx, clay, P = _halve(lay)
             if clay.n == lay.n:
                 break
-            Xc = Xl[idx]
-            ln = np.linalg.norm(Xc[clay.nxt] - Xc, axis=1)
+            Xl, lay = Xl[idx], clay
+            halvings.append((Xl, lay, P))
+        # every STRIDE-th halving is a level, and the coarsest, while its strands stay apart
+        depths = [d for d in range(len(halvings))
+                  if (d + 1) % STRIDE == 0 or d == len(halvings) - 1]
+        used = []
+        for d in depths:
+            Xl, lay, _ = halvings[d]
+            ln = np.linalg.norm(Xl[lay.nxt] - Xl, axis=1)
             # a level whose strands cross is not the curve's shape (FHW at 100 000 vertices,
             # levels down to 390 vertices with this rule: 10 iterations per solve; with ratio
             # ≥ 2, down to 1 562 vertices and that level banded: 19)
-            if closest_pairs(Xc, clay, CONTACT_GAP)[0][0] < MIN_CONTACT * ln.mean():
+            if closest_pairs(Xl, lay, CONTACT_GAP)[0][0] < MIN_CONTACT * ln.mean():
                 break
-            self.transfers.append((P, P.T))
-            polygons.append((Xc, clay, ln))
-            Xl, lay = Xc, clay
-        self.solves = []
-        for i, (Xl, lay, ln) in enumerate(polygons):
+            used.append((d, ln))
+        depth = used[-1][0] + 1 if used else 0
+        self.transfers: list[tuple[_Sparse, _Sparse]] = [(P, P.T) for *_, P in halvings[:depth]]
+        #: per halving, its level's solve and constraint count, or None (no level there)
+        self.solves: list = [None] * depth
+        for i, (d, ln) in enumerate(used):
+            Xl, lay, _ = halvings[d]
             jc = jacobian(Xl, make_constraints(Xl, lay, ln))
-            if i == len(polygons) - 1 and lay.n <= DENSE_MAX:
+            if i == len(used) - 1 and lay.n <= DENSE_MAX:
                 # double precision, as CoarseLevel's
                 fac = Factorization(gram_x(metric, Xl, lay, order=order), jc, np.float64)
-                self.solves.append((fac.solve, jc.con.size))
+                self.solves[d] = (fac.solve, jc.con.size)
             else:
                 op = HsOperator(Xl, lay, metric, order=order)
-                self.solves.append((BandedSaddle(op.preconditioner_parts(), jc)._solve,
-                                    jc.con.size))
+                self.solves[d] = (BandedSaddle(op.preconditioner_parts(), jc)._solve,
+                                  jc.con.size)
 
     @property
     def levels(self) -> int:
         """Coarse levels (the fine one not counted)."""
-        return len(self.solves)
+        return sum(s is not None for s in self.solves)
 
     def __call__(self, R: np.ndarray) -> np.ndarray:
         """The correction for a residual ``R`` already free of its ``range Cᵀ`` part in the
@@ -299,10 +336,13 @@ class Multilevel:
             r = Pt @ r
             rs.append(r)
         y = None
-        for lvl in range(len(self.solves) - 1, -1, -1):
-            solve, m = self.solves[lvl]
-            z = solve(rs[lvl], np.zeros(m))[0]
-            y = z if y is None else z + self.transfers[lvl + 1][0] @ y
+        for d in range(len(self.solves) - 1, -1, -1):
+            if y is not None:
+                y = self.transfers[d + 1][0] @ y
+            if self.solves[d] is not None:
+                solve, m = self.solves[d]
+                z = solve(rs[d], np.zeros(m))[0]
+                y = z if y is None else y + z
         v = self.transfers[0][0] @ y
         # back onto C v = 0 by the H-smallest change (one more band solve)
         return v - self.fine._solve(np.zeros_like(v), self.jac.matvec(v))[0]

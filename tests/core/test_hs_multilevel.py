@@ -60,7 +60,7 @@ def _small_hierarchy(monkeypatch):
 
 def test_correction_is_symmetric_semidefinite_and_tangent(monkeypatch, rng):
     _small_hierarchy(monkeypatch)
-    X, lay = _unit(core.resample(CURVES["link"](), [200, 180, 160]))
+    X, lay = _unit(core.resample(CURVES["link"](), [400, 360, 320]))
     ln = np.linalg.norm(X[lay.nxt] - X, axis=1)
     jac = jacobian(X, make_constraints(X, lay, ln))
     levels = hs_solve.Multilevel(X, lay, "hs", jac)
@@ -85,7 +85,9 @@ def test_a_level_closer_than_its_edges_ends_the_hierarchy(monkeypatch):
     jac = jacobian(X, make_constraints(X, lay, ln))
     assert hs_solve.Multilevel(X, lay, "hs", jac).levels == 0
     monkeypatch.setattr(hs_solve, "MIN_CONTACT", 0.0)
-    assert hs_solve.Multilevel(X, lay, "hs", jac).levels >= 3
+    # halved four times (300 … 38 vertices): levels at the second and the fourth
+    levels = hs_solve.Multilevel(X, lay, "hs", jac)
+    assert levels.levels == 2 and len(levels.transfers) == 4
 
 
 @pytest.mark.parametrize("name", ["trefoil", "link"])
@@ -114,16 +116,17 @@ def _iterations(P, rng) -> int:
 
 
 def test_krylov_count_bounded_as_n_grows(monkeypatch, rng):
-    # the hierarchy down to at most 70 vertices on a family of growing N: the count stays
-    # flat, where the banded constraint preconditioner alone needs more as N grows (its h1
-    # part is one order too low for the smooth modes) and so does today's single coarse level
+    # the hierarchy down to at most 70 vertices on a family of growing N: the count grows
+    # slowly (7, 9, 11 with a level at every second halving; 8, 9, 10 at every one), where
+    # the banded constraint preconditioner alone needs 17 at 8 000 (its h1 part is one order
+    # too low for the smooth modes) and so does today's single coarse level
     _small_hierarchy(monkeypatch)
     P = core.knots.named("5_2")
     sizes = (500, 2000, 8000)
     its = [_iterations(core.resample(P, n), rng) for n in sizes]
-    assert max(its) <= 30 and its[-1] <= its[0] + 2
+    assert max(its) <= 30 and its[-1] <= its[0] + 4
     monkeypatch.setattr(hs_solve, "MULTILEVEL_FROM", 10**9)
-    assert _iterations(core.resample(P, sizes[-1]), rng) > its[-1] + 2
+    assert _iterations(core.resample(P, sizes[-1]), rng) > its[-1] + 4
 
 
 def test_two_level_count_at_growing_n(monkeypatch, rng):
