@@ -35,7 +35,9 @@ engine="tree")``, the seconds of its one iteration from the run's history (``his
 ["seconds"][1] − [0]``; ``[0]`` is the setup with the first energy, gradient and solve): the
 projected Sobolev (hs) gradient under edge-length and barycenter constraints, Armijo line
 search with a collision-free step bound, back-projection onto the constraints, and the next
-energy, gradient and solve.
+energy, gradient and solve. With ``--moebius`` also the same iteration of
+our Möbius-energy flow (``iter_moebius``; issue 27 compares it with Repulsor's tangent-point
+iteration). Our iteration lines give the Krylov iterations of each hs solve (``krylov=``).
 
 Repulsor is never a dependency of the add-on and nothing of it is in this repository: the driver
 binary (``--driver``, default /work/repulsor-build/driver/driver) is a small C++ program that

@@ -17,7 +17,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from . import knots
+from . import hs_solve, knots
+from ._layout import layout_from_sizes
 from .engine import energy, moebius_energy
 from .identify import identify
 from .invariants import knot_determinant
@@ -57,6 +58,9 @@ def _tree() -> None:
     # (3 000) the energy shown by Add Knot and Convert is the tree's too
     _knot("3_1", 3000)
     _relax(knots.named("3_1", 3000), "projected_gradient")
+    # from hs_solve.MULTILEVEL_FROM (2·10⁴) vertices the hs solve's hierarchy: its transfers
+    _, _, P = hs_solve._halve(layout_from_sizes([64], False))
+    P.T @ (P @ np.zeros((32, 3)))
 
 
 def _tangent_point() -> None:

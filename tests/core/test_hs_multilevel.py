@@ -150,3 +150,31 @@ def test_krylov_count_bounded_at_large_n(monkeypatch, name, rng):
         else:
             P = core.resample(core.knots.named(name), n)
         assert _iterations(P, rng) <= 30
+
+
+def test_the_default_takes_the_hierarchy_from_multilevel_from(rng):
+    # FHW at MULTILEVEL_FROM (20 000) vertices with the module's defaults: levels at the
+    # second, fourth and sixth halving (5 003, 1 253 and 316 vertices, the last one dense)
+    n = hs_solve.MULTILEVEL_FROM
+    X = core.knots.freedman_unknot(n)
+    lay = layout_from_sizes([n], False)
+    ln = np.linalg.norm(X[lay.nxt] - X, axis=1)
+    jac = jacobian(X, make_constraints(X, lay, ln))
+    op = hs_tree.HsOperator(X, lay, "hs")
+    solver = hs_solve.HsSaddle(op, jac, X=X)
+    assert isinstance(solver.coarse, hs_solve.Multilevel)
+    assert [s is not None for s in solver.coarse.solves] == [False, True] * 3
+    g = rng.standard_normal((n, 3))
+    u, _ = solver.solve(g, np.zeros(jac.con.size))
+    # 6 iterations measured; the banded preconditioner alone needed 56 to 1e-8
+    banded = hs_solve.HsSaddle(op, jac, X=X, coarse=0)
+    assert banded.coarse is None
+    exact, _ = banded.solve(g, np.zeros(jac.con.size), rtol=1e-8)
+    assert solver.iterations[-1] <= 10 < banded.iterations[-1]
+    assert np.linalg.norm(u - exact) < 1e-2 * np.linalg.norm(exact)
+    assert np.abs(jac.matvec(u)).max() < 1e-10 * np.abs(u).max()
+    # one vertex fewer: the banded preconditioner alone
+    Y = core.resample(X, n - 1)
+    lay1 = layout_from_sizes([n - 1], False)
+    jac1 = jacobian(Y, make_constraints(Y, lay1, np.linalg.norm(Y[lay1.nxt] - Y, axis=1)))
+    assert hs_solve.HsSaddle(hs_tree.HsOperator(Y, lay1, "hs"), jac1, X=Y).coarse is None
