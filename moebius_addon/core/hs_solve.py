@@ -251,12 +251,13 @@ def _halve(layout: Layout) -> tuple[np.ndarray, Layout, _Sparse]:
 class Multilevel:
     """The coarse levels of the multilevel preconditioner: the curve halved again and again
     (every second vertex per component, :func:`_halve`) down to at most ``COARSEST`` vertices,
-    each level with its own constraints and its own constraint preconditioner (the banded
-    ``H`` of its own hs operator, :meth:`HsOperator.preconditioner_parts`), the coarsest
-    solved densely. Applied to a residual ``R`` it returns ``Π_H P₁ (z₁ + P₂ (z₂ + …))`` with
-    ``R₁ = P₁ᵀ Π_Hᵀ R``, ``R_l = P_lᵀ R_{l−1}`` and ``z_l`` level ``l``'s constrained solve of
-    ``R_l``: added to the fine constraint preconditioner, an additive multilevel (BPX)
-    preconditioner. Each level's banded ``H`` matches the hs operator near its own grid's
+    a level at every ``STRIDE``-th halving and at the last, each with its own constraints and
+    its own constraint preconditioner (the banded ``H`` of its own hs operator,
+    :meth:`HsOperator.preconditioner_parts`), the coarsest solved densely. Applied to a
+    residual ``R`` it returns ``Π_H P₁ (z₁ + P₂ (z₂ + …))`` with ``R₁ = P₁ᵀ Π_Hᵀ R``,
+    ``R_l = P_lᵀ R_{l−1}`` and ``z_l`` the constrained solve of ``R_l`` at a level's halving
+    (0 at the others): added to the fine constraint preconditioner, an additive multilevel
+    (BPX) preconditioner. Each level's banded ``H`` matches the hs operator near its own grid's
     frequency and is too stiff below it (h1 grows as k², hs as k^{2s}); the sum over the levels
     covers every frequency, which one coarse level cannot do once N/COARSE_MAX grows.
     The interpolated sum leaves ``ker C``; it is brought back by ``Π_H = I − H⁻¹Cᵀ(CH⁻¹Cᵀ)⁻¹C``
@@ -265,8 +266,9 @@ class Multilevel:
     projection of :class:`CoarseLevel` instead made coarse levels far below the fine one correct
     wrongly (5_2 at 8 000 vertices, one dense level of 63 vertices: 200 iterations, the cap,
     against 10 with ``Π_H``; docs/benchmarks.md).
-    Pins are not supported (the caller leaves it out). No level (:attr:`levels` 0) when the
-    first halving already comes too close or the curve has at most ``COARSEST`` vertices.
+    Pins are not supported (the caller leaves it out). Levels stop at the first whose strands
+    come too close (``MIN_CONTACT``); none (:attr:`levels` 0) when that is the first or the
+    curve has at most ``COARSEST`` vertices.
 
     Parameters
     ----------
