@@ -283,9 +283,12 @@ def test_bad_krylov_tolerance_refused_by_name():
             core.relax(P, max_iter=1, krylov_rtol=bad)
 
 
-def test_flow_with_the_coarse_level(monkeypatch):
-    # the coarse level starts at 10 000 vertices; the same path on a smaller curve
+@pytest.mark.parametrize("preconditioner", hs_solve.PRECONDITIONERS)
+def test_flow_with_the_coarse_level(monkeypatch, preconditioner):
+    # the coarse levels start at 20 000 vertices; the same paths on a smaller curve
+    monkeypatch.setattr(hs_solve, "PRECONDITIONER", preconditioner)
     monkeypatch.setattr(hs_solve, "COARSE_FROM", 1000)
+    monkeypatch.setattr(hs_solve, "MULTILEVEL_FROM", 1000)
     P = core.resample(core.knots.named("5_2"), 2000)
     r = core.relax(P, max_iter=6, engine="tree")
     assert r.nit == 6 and np.all(np.diff(r.history["energy"]) < 0)
@@ -333,6 +336,8 @@ def test_the_previous_iterates_solver_is_let_go_before_the_next_is_built(monkeyp
     from moebius_addon.core import engine as engines
 
     monkeypatch.setattr(hs_solve, "COARSE_FROM", 100)
+    monkeypatch.setattr(hs_solve, "MULTILEVEL_FROM", 100)
+    monkeypatch.setattr(hs_solve, "COARSEST", 100)
     P = core.resample(core.knots.named("5_2"), 400)
     X, lay = as_layout(P)
     jac = jacobian(X, make_constraints(X, lay, np.linalg.norm(X[lay.nxt] - X, axis=1)))
@@ -343,9 +348,12 @@ def test_the_previous_iterates_solver_is_let_go_before_the_next_is_built(monkeyp
     held = weakref.ref(old.op if metric == "hs" else old.U)
     alive_at_build = []
     if metric == "hs":
+        assert isinstance(old.coarse, hs_solve.Multilevel) and old.coarse.levels == 1
+        levels = weakref.ref(old.coarse)
+
         class Spy(hs_tree.HsOperator):
             def __init__(self, *args, **kwargs):
-                alive_at_build.append(held() is not None)
+                alive_at_build.append(held() is not None or levels() is not None)
                 super().__init__(*args, **kwargs)
 
         monkeypatch.setattr(hs_tree, "HsOperator", Spy)
@@ -371,15 +379,16 @@ def test_memory_does_not_grow_across_iterations(monkeypatch):
     # numpy allocations (tracemalloc) and the process's resident set (numba's own allocations);
     # measured flat at 2 000 vertices: 7.57-7.67 MB traced and 226.3 MB resident at every
     # iteration (5_2, the coarse level on); here 1 200 vertices, where one vertex array kept per
-    # iteration would add 0.23 MB over the second half
+    # iteration would add 0.23 MB over the second half, with the hierarchy of coarse levels on
     import tracemalloc
 
-    monkeypatch.setattr(hs_solve, "COARSE_FROM", 600)
+    monkeypatch.setattr(hs_solve, "MULTILEVEL_FROM", 600)
     P = core.resample(core.knots.named("5_2"), 1200)
     run = core.make_run("projected_gradient_implicit", P, "hs", 40, 1e-6, engine="tree",
                         refine=False)
     for _ in range(3):
         run.step()
+    assert isinstance(run.engine._saddle.coarse, hs_solve.Multilevel)
 
     def resident_mb():
         with open("/proc/self/statm") as f:
