@@ -134,7 +134,7 @@ def worker(args) -> None:
                               "moebius" if args.worker == "iter_moebius" else "tangent_point")
         wall = time.perf_counter() - t0
         sec = r.history["seconds"]
-        its = r.stats.get("krylov_iterations") if hasattr(r, "stats") else None
+        its = r.stats.get("krylov_iterations")
         print(f"{head} energy_name={name} seconds={sec[1] - sec[0]:.6f} "
               f"setup_seconds={sec[0]:.6f} wall_seconds={wall:.6f} "
               f"krylov={','.join(map(str, its)) if its else '-'} "

@@ -50,9 +50,10 @@ COARSE_FROM = 20000
 #: preconditioner plus :class:`CoarseLevel`) or "multilevel" (plus :class:`Multilevel`).
 PRECONDITIONERS = ("two_level", "multilevel")
 #: "multilevel" from ``MULTILEVEL_FROM`` vertices on: with a level at every second halving it
-#: took 5-15 iterations per solve where two_level took 9-38 at 2·10⁴-10⁵ and was as fast or
-#: faster per iteration (alternated, 27 November 2026); at 10⁶ (FHW) 9 where two_level hit
-#: its cap of 200 (docs/benchmarks.md, "Krylov iterations against N").
+#: took 5-15 iterations per solve where two_level took 9-38 at 2·10⁴-10⁵, 1.3-1.9x faster
+#: per iteration from 5·10⁴ on and mixed at 2·10⁴ (alternated, 27 November 2026); at 10⁶
+#: 9-25 on four curves where two_level hit its cap of 200 on FHW (docs/benchmarks.md,
+#: "Krylov iterations against N").
 PRECONDITIONER = "multilevel"
 #: "multilevel" from this many vertices on (below, the banded constraint preconditioner alone).
 MULTILEVEL_FROM = COARSE_FROM
@@ -180,8 +181,9 @@ def _csr_product(ptr, cols, vals, Y, out):
 class _Sparse:
     """A sparse matrix by its entries ``(rows, cols, vals)``, with ``@`` on vectors and on
     (n, 3) arrays: the levels' interpolations (no scipy here: the extension ships numpy and
-    numba only). Kept in compressed rows for a numba product: ``np.add.at`` took 19-21 ms per
-    transfer between 10⁵ and 5·10⁴ vertices, two thirds of the hierarchy's application."""
+    numba only). Kept in compressed rows for a numba product: with ``np.add.at`` the first
+    restriction and the last prolongation alone took 0.040 s of the 0.134 s of one application
+    at 10⁵ vertices (0.0025 s now)."""
 
     def __init__(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, shape: tuple):
         self.rows, self.cols, self.vals, self.shape = rows, cols, vals, shape
