@@ -42,11 +42,12 @@ _BLOCKS = 64
 @nb.njit(cache=True)
 def band_lu(ab, kl, ku):
     """LU factorization with partial pivoting of a band matrix, in place (LAPACK's ``gbtrf``
-    scheme). Row ``r`` of ``ab`` (shape ``(n, 2 kl + ku + 1)``) holds the columns
-    ``r − kl … r + kl + ku`` of the matrix (``A[r, j]`` at ``ab[r, j − r + kl]``; the first
-    ``kl`` places of the upper side take the fill-in of the row exchanges). Returns the pivot
-    rows, the multipliers of every column (``(n, kl)``, contiguous for the solves) and the
-    first zero pivot's index (−1: none)."""
+    scheme). Row ``r`` of ``ab`` (shape ``(n, kl + ku + 1)``) holds the columns
+    ``r − kl … r + ku`` of the matrix (``A[r, j]`` at ``ab[r, j − r + kl]``); on return it
+    holds row ``r`` of ``U``, the columns ``r … r + kl + ku`` (the row exchanges' fill-in
+    widens ``U`` by ``kl``; ``U[r, j]`` at ``ab[r, j − r]``). Returns the pivot rows, the
+    multipliers of every column (``(n, kl)``, contiguous for the solves) and the first zero
+    pivot's index (−1: none)."""
     n = ab.shape[0]
     piv = np.empty(n, np.int64)
     mult = np.zeros((n, max(kl, 1)))
@@ -72,16 +73,35 @@ def band_lu_blocks(ab, kl, ku, cuts):
     return piv, mult, -1
 
 
+@nb.njit(cache=True, inline="always")
+def _load_row(win, ab, r, kl, ku):
+    """Row ``r`` of the band (``ab``'s input layout) into its place of the working window
+    (``2 kl + ku + 1`` wide, the columns ``r − kl … r + kl + ku``; the fill-in's zero)."""
+    w = win[r % win.shape[0]]
+    for t in range(kl + ku + 1):
+        w[t] = ab[r, t]
+    for t in range(kl + ku + 1, w.shape[0]):
+        w[t] = 0.0
+
+
 @nb.njit(cache=True)
 def _lu_range(ab, kl, ku, piv, mult, lo, n):
     """:func:`band_lu`'s elimination for the columns ``lo … n − 1``, with no row beyond
-    ``n − 1``; the first zero pivot's index (−1: none)."""
+    ``n − 1``; the first zero pivot's index (−1: none). The ``kl + 1`` rows a column's
+    elimination touches live in a small window (in the cache, with room for the fill-in), and
+    a row goes back to ``ab`` as a row of ``U`` when its column is done, so ``ab`` needs no
+    room for the fill-in (a third less memory than LAPACK's layout, whose rows are ``kl``
+    wider); the same operations in the same order as on the wide layout, the same bits."""
+    h = kl + 1
+    win = np.empty((h, 2 * kl + ku + 1))
+    for r in range(lo, min(n, lo + h)):
+        _load_row(win, ab, r, kl, ku)
     for k in range(lo, n):
         last = min(n - 1, k + kl)
         p = k
-        best = abs(ab[k, kl])
+        best = abs(win[k % h, kl])
         for r in range(k + 1, last + 1):
-            v = abs(ab[r, k - r + kl])
+            v = abs(win[r % h, k - r + kl])
             if v > best:
                 best = v
                 p = r
@@ -89,18 +109,25 @@ def _lu_range(ab, kl, ku, piv, mult, lo, n):
         if best == 0.0:
             return k
         jmax = min(n - 1, k + kl + ku)
+        wk = win[k % h]
         if p != k:
+            wp = win[p % h]
             for j in range(k, jmax + 1):
-                a = ab[k, j - k + kl]
-                ab[k, j - k + kl] = ab[p, j - p + kl]
-                ab[p, j - p + kl] = a
-        d = ab[k, kl]
+                a = wk[j - k + kl]
+                wk[j - k + kl] = wp[j - p + kl]
+                wp[j - p + kl] = a
+        d = wk[kl]
         for r in range(k + 1, last + 1):
-            f = ab[r, k - r + kl] / d
+            wr = win[r % h]
+            f = wr[k - r + kl] / d
             mult[k, r - k - 1] = f
             if f != 0.0:
                 for j in range(k + 1, jmax + 1):
-                    ab[r, j - r + kl] -= f * ab[k, j - k + kl]
+                    wr[j - r + kl] -= f * wk[j - k + kl]
+        for t in range(kl + ku + 1):  # row k of U, done: back to ab (its input was read)
+            ab[k, t] = wk[t + kl]
+        if k + h < n:
+            _load_row(win, ab, k + h, kl, ku)
     return -1
 
 
@@ -126,8 +153,8 @@ def _solve_range(ab, mult, piv, kl, ku, x, lo, n):
     for k in range(n - 1, lo - 1, -1):
         s = x[k - lo]
         for j in range(k + 1, min(n - 1, k + kl + ku) + 1):
-            s -= ab[k, j - k + kl] * x[j - lo]
-        x[k - lo] = s / ab[k, kl]
+            s -= ab[k, j - k] * x[j - lo]
+        x[k - lo] = s / ab[k, 0]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -176,11 +203,11 @@ def _band_clear_at(ab, kl, ku, b):
     """Whether the band holds only zeros across row and column ``b``: nothing in the rows
     above in columns ≥ ``b``, nothing in the rows below in columns < ``b``."""
     n = ab.shape[0]
-    for r in range(max(0, b - kl - ku), b):
-        for j in range(b, min(n - 1, r + kl + ku) + 1):
+    for r in range(max(0, b - ku), b):
+        for j in range(b, min(n - 1, r + ku) + 1):
             if ab[r, j - r + kl] != 0.0:
                 return False
-    for r in range(b, min(n, b + kl + ku)):
+    for r in range(b, min(n, b + kl)):
         for j in range(max(0, r - kl), b):
             if ab[r, j - r + kl] != 0.0:
                 return False
@@ -226,7 +253,7 @@ def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, has_row, fixed, kl, ku
     :func:`band_lu` (4 unknowns per vertex: x, y, z and the multiplier of its edge) and the
     diagonal ``D`` (4N,). ``D`` balances the blocks: h2's entries grow like N³ and C_e's like
     N, and without it pivoting on the unscaled band lost the constraints at 100 000 edges.
-    ``ab``: the memory of the band (4N, 2 kl + ku + 1), overwritten.
+    ``ab``: the memory of the band (4N, kl + ku + 1), overwritten.
 
     Edge slots without a row (``has_row`` False: an open component's dummy edge, an edge
     between two pins) and pinned vertices (``fixed``) are eliminated: their unknowns get the
@@ -360,7 +387,7 @@ class BandedSaddle:
     def _factor(self, rows, cols, vals, anchors, T, ln, has_row, fixed, recycle):
         """The band of the iterate (:func:`_fill`: ``has_row``, ``fixed`` as there) with a
         spring at each of ``anchors`` as stiff as the metric's own diagonal there, in the
-        memory of ``recycle``'s band when it fits (182 MB at 100 000 edges with h2: a fresh
+        memory of ``recycle``'s band when it fits (125 MB at 100 000 edges with h2: a fresh
         array costs its page faults again), and its LU factors; returns the metric's
         diagonal (N,)."""
         lay = self.layout
@@ -372,7 +399,7 @@ class BandedSaddle:
         diag = np.zeros(lay.n)
         np.add.at(diag, rows[rows == cols], vals[rows == cols])
         self.anchors, self.mu = anchors, diag[anchors]
-        shape = (4 * lay.n, 2 * self.kl + self.ku + 1)
+        shape = (4 * lay.n, self.kl + self.ku + 1)
         reuse = recycle is not None and recycle.ab.shape == shape
         ab = recycle.ab if reuse else np.empty(shape)
         self.D = _fill(rows, cols, vals, pos, anchors, self.mu, T, ln, lay.nxt, has_row, fixed,

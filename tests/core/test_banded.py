@@ -69,7 +69,7 @@ def test_band_lu_pivots_like_a_dense_solve():
         for j in range(max(0, i - kl), min(n, i + ku + 1)):
             M[i, j] = rng.standard_normal()
     M[np.arange(0, n, 2), np.arange(0, n, 2)] = 0.0
-    ab = np.zeros((n, 2 * kl + ku + 1))
+    ab = np.zeros((n, kl + ku + 1))
     for i in range(n):
         for j in range(max(0, i - kl), min(n, i + ku + 1)):
             ab[i, j - i + kl] = M[i, j]
@@ -79,6 +79,26 @@ def test_band_lu_pivots_like_a_dense_solve():
     x = b.copy()
     banded.band_solve(ab, mult, piv, kl, ku, x)
     assert np.allclose(x, np.linalg.solve(M, b), rtol=1e-9, atol=1e-9)
+    # the same bits as the elimination on LAPACK's wide layout (room for the fill-in in every
+    # row), written out here in plain Python: the window changes where rows live, not the sums
+    wide = np.zeros((n, 2 * kl + ku + 1))
+    wide[:, :kl + ku + 1] = [[M[i, j] if 0 <= j < n else 0.0 for j in range(i - kl, i + ku + 1)]
+                             for i in range(n)]
+    mult0 = np.zeros((n, kl))
+    for k in range(n):
+        last = min(n - 1, k + kl)
+        p = k + int(np.argmax([abs(wide[r, k - r + kl]) for r in range(k, last + 1)]))
+        assert p == piv[k]
+        jmax = min(n - 1, k + kl + ku)
+        for j in range(k, jmax + 1):
+            wide[k, j - k + kl], wide[p, j - p + kl] = wide[p, j - p + kl], wide[k, j - k + kl]
+        for r in range(k + 1, last + 1):
+            f = wide[r, k - r + kl] / wide[k, kl]
+            mult0[k, r - k - 1] = f
+            for j in range(k + 1, jmax + 1):
+                wide[r, j - r + kl] -= f * wide[k, j - k + kl]
+    assert np.array_equal(mult, mult0)
+    assert np.array_equal(ab, wide[:, kl:])  # row k of U: the columns k … k + kl + ku
 
 
 def test_zigzag_order_makes_every_closed_loop_a_band():

@@ -63,7 +63,7 @@ def test_the_band_in_blocks_gives_the_bits_of_one_band(metric, rng, monkeypatch)
     for a, b in zip(out[1][1:], out[banded._BLOCKS][1:], strict=True):
         assert np.array_equal(a, b)
     single = as_layout(parts[0], False)[1]
-    ab = np.ones((4 * single.n, 10))
+    ab = np.ones((4 * single.n, 7))
     assert np.array_equal(banded.block_cuts(ab, 3, 3, single.starts[:-1].astype(np.int64), 1),
                           [0, 4 * single.n])
 
