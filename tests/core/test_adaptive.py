@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import knots
+from moebius_addon.core import barnes_hut, knots
 from moebius_addon.core.solvers import adaptive
 from tests.mesh_checks import segments_closest
 
@@ -378,3 +378,24 @@ def test_a_stall_with_the_strands_apart_starts_the_method_afresh(monkeypatch, tr
     again = core.relax(trefoil_table, **opts)
     assert again.status == core.Status.STALLED and again.fun == plain.fun
     assert again.stats["fresh_starts"] == [] and "no two strands are closer" in again.message
+
+
+def test_a_stall_on_the_tree_tightens_theta_for_the_fresh_start(monkeypatch, trefoil_table):
+    # the same stall on the tree engine: each fresh start halves the tree's θ, not below
+    # FRESH_THETA_FLOOR times the first (the tree's error, not the flow, is what stalls there)
+    # (a tolerance it cannot reach: the large ftol stalls it again after every fresh start)
+    opts = {"tol": 1e-9, "ftol": 1e-3, "max_iter": 300, "engine": "tree"}
+    theta0 = barnes_hut.THETA
+    monkeypatch.setattr(adaptive, "FRESH_THETA_FLOOR", 0.3)
+    run = core.make_run("projected_gradient", trefoil_table, **opts)
+    assert run.run.engine.name == "tree" and run.run.engine.theta == theta0
+    seen = []
+    while run.step():
+        seen.append(run.run.engine.theta)
+    fresh = run.result().stats["fresh_starts"]
+    assert [f["theta"] for f in fresh] == [0.5 * theta0, 0.3 * theta0, 0.3 * theta0]
+    assert set(seen) <= {theta0, 0.5 * theta0, 0.3 * theta0} and 0.3 * theta0 in seen
+    assert f"θ tightened to {0.3 * theta0:.3g}" in run.result().message
+    # the exact engine has no θ to tighten: its fresh starts record none
+    r = core.relax(trefoil_table, **{**opts, "tol": 1e-4, "engine": "exact"})
+    assert r.stats["fresh_starts"] and all(f["theta"] is None for f in r.stats["fresh_starts"])

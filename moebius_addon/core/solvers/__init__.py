@@ -102,8 +102,8 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
                          f"keeps the constraints, which {method!r} holds by a penalty")
 
     def make(Q, iterations, seconds, **changes):
-        return cls(Q, metric, iterations, tol, engine=engine, theta=theta,
-                   **{**options, "max_seconds": seconds, **changes})
+        return cls(Q, metric, iterations, tol, engine=engine,
+                   **{"theta": theta, **options, "max_seconds": seconds, **changes})
 
     return AdaptiveRun(make, P, max_iter, refine=bool(refine), max_edges=max_edges,
                        restarts=restarts, seed=seed, restart_scale=restart_scale,

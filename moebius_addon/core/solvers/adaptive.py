@@ -62,6 +62,16 @@ CHECKPOINT_RATIO = 0.75
 #: strands closer than 0.88 edge lengths; the implicit method started again from that polygon
 #: went on to the table's 250.9956 (docs/benchmarks.md, "Untangling benchmark").
 FRESH_STARTS = 3
+#: A fresh start of a run on the tree engine takes this many times its admissibility θ (and
+#: keeps it for the rest of the path): a stall with the strands apart there is mostly the
+#: tree's error outgrowing the energy's fall per step (the tangent-point energy (2, 4.5) of
+#: 7_4 at 2 000 edges stalled at θ 0.3 after 49 iterations and at 0.5 after 25, at 220.0 and
+#: 222.6, while θ 0.1 and the exact engine went on to 218.2 and 218.1 in 300;
+#: docs/benchmarks.md, "A stall on the tree tightens θ").
+FRESH_THETA = 0.5
+#: ... but not below this many times the path's first θ (7_4 above at θ 0.0375 from its third
+#: fresh start: 216 s for 252 iterations against 50 s for 300 at 0.1).
+FRESH_THETA_FLOOR = 0.25
 #: Length growth (``length_target=``) splits every edge in two once growth has made an edge
 #: more than this many times the start's mean edge length (the energy resolves a curve at the
 #: scale of its edges: the split keeps them near the length they started with).
@@ -149,7 +159,9 @@ class AdaptiveRun:
                  closed=True, pinned=None, pin_tangents: bool = False, check: bool = True,
                  obstacles=None, container=None):
         self.t0 = time.perf_counter()
-        self._make = make
+        self._make_run = make
+        self._theta = None  # the tree's θ once a fresh start tightened it (None: the caller's)
+        self._theta_floor = None  # FRESH_THETA_FLOOR times the first tree run's θ
         self.refine = bool(refine)
         self.restarts = check_number("restarts", restarts, 0, integer=True)
         self.seed = check_number("seed", seed, 0, integer=True)
@@ -171,7 +183,8 @@ class AdaptiveRun:
             start, changes, path = self._refine_start(P, X, layout, pinned, pin_tangents,
                                                       separable)
         # a separation's steps count as iterations of the path
-        self.run = make(start, max(0, self.max_iter - len(path)), self.max_seconds, **changes)
+        self.run = self._make(start, max(0, self.max_iter - len(path)), self.max_seconds,
+                              **changes)
         self._retired: list[dict] = []  # the counters of every run left behind
         self.history = {k: list(v) for k, v in self.run.history.items()}
         self.history["edges"] = [self.run.layout.n] * len(self.history["energy"])
@@ -342,6 +355,13 @@ class AdaptiveRun:
         self._note_checkpoint(new)
         return True
 
+    def _make(self, Q, iterations, seconds, **changes):
+        """A new run of the method on ``Q`` (the caller's options, ``changes`` over them, and
+        the θ a fresh start tightened)."""
+        if self._theta is not None:
+            changes = {"theta": self._theta, **changes}
+        return self._make_run(Q, iterations, seconds, **changes)
+
     def _start_afresh(self, run) -> bool:
         """Go on from the polygon of ``run``, which stalled with its strands apart, with a new
         run of the method at the same edge count; False when :data:`FRESH_STARTS` are used
@@ -357,13 +377,20 @@ class AdaptiveRun:
         changes = {}
         if getattr(run, "pinned", None) is not None:
             changes = {"pinned": _pins_after(run.pinned, run.layout, 1), "pin_tangents": False}
+        engine = getattr(run, "engine", None)
+        if getattr(engine, "name", None) == "tree":
+            if self._theta_floor is None:
+                self._theta_floor = FRESH_THETA_FLOOR * engine.theta
+            changes["theta"] = max(FRESH_THETA * engine.theta, self._theta_floor)
         try:
             new = self._make(run.x, self._iterations_left(), self._seconds_left(), check=False,
                              **changes)
         except ValueError:
             return False
+        if "theta" in changes:
+            self._theta = changes["theta"]
         self.fresh_starts.append({"iteration": self.nit, "energy": float(run.E),
-                                  "message": run.message})
+                                  "message": run.message, "theta": changes.get("theta")})
         self._retire(run)
         self._go_on_with(new)
         return True
@@ -540,8 +567,9 @@ class AdaptiveRun:
             notes.append(self._why_not)
         if self.fresh_starts:
             k = len(self.fresh_starts)
+            tightened = f", the tree's θ tightened to {self._theta:.3g}" if self._theta else ""
             notes.append(f"the method started afresh {k} time{'s' * (k > 1)} after a stall with "
-                         f"the strands apart")
+                         f"the strands apart{tightened}")
         if self._restart_log:
             kept = sum(r["kept"] for r in self._restart_log)
             notes.append(f"{len(self._restart_log)} restarts, {kept} kept")
