@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._screens import equal_rows_possible, extent, short_edge_possible
+
 
 @dataclass(frozen=True)
 class Layout:
@@ -161,7 +163,11 @@ def unit_exponent(X: np.ndarray) -> int:
     as at the original size: results scaled back are the same bits."""
     if X.size == 0 or not np.all(np.isfinite(X)):
         return 0
-    span = float((X.max(axis=0) / 2 - X.min(axis=0) / 2).max())  # half-range, no overflow
+    return _span_exponent(float((X.max(axis=0) / 2 - X.min(axis=0) / 2).max()))
+
+
+def _span_exponent(span: float) -> int:
+    """:func:`unit_exponent` of a curve of half-range ``span`` (half-range: no overflow)."""
     if span == 0.0:
         return 0
     e = int(np.frexp(span)[1])
@@ -174,13 +180,17 @@ def as_unit_layout(P, closed=True) -> tuple[np.ndarray, Layout, int]:
     """:func:`as_layout` with the vertices scaled by ``2^-k`` (:func:`unit_exponent`):
     ``(X · 2^-k, layout, k)``."""
     X, layout = as_layout(P, closed)
-    k = unit_exponent(X)
+    # unit_exponent in one pass (its max and min along columns: 0.07 s at 10^6 vertices)
+    finite, span = extent(X)
+    k = _span_exponent(span) if finite else 0
     return (np.ldexp(X, -k) if k else X), layout, k
 
 
 # ---------------------------------------------------------------------------------------------
 # What every public function checks of its vertices before any kernel sees them: O(N) numpy
-# checks (and two sorts), so that no kernel divides by zero or returns NaN for bad input.
+# checks (and two sorts), so that no kernel divides by zero or returns NaN for bad input. A
+# curve that passes is let through by one-pass screens (._screens); the numpy code runs
+# where a screen cannot tell, and so decides and words every refusal as it did alone.
 
 
 def vertex_name(layout: Layout, v: int) -> str:
@@ -204,6 +214,8 @@ def check_counts(layout: Layout, name: str = "the curve") -> None:
 
 def check_finite(X: np.ndarray, layout: Layout, name: str = "the curve") -> None:
     """ValueError naming the first vertex with a NaN or infinite coordinate."""
+    if np.isfinite(X).all():  # without the reduction per row below (0.02 s at 10^6 vertices)
+        return
     bad = ~np.isfinite(X).all(axis=1)
     if bad.any():
         v = int(np.flatnonzero(bad)[0])
@@ -216,6 +228,12 @@ def check_finite(X: np.ndarray, layout: Layout, name: str = "the curve") -> None
 def check_distinct(X: np.ndarray, layout: Layout, name: str = "the curve") -> None:
     """ValueError for a vertex equal to the next one (an edge of length 0, relative to the
     curve's size; the dummy edges of open components are no such edges)."""
+    if short_edge_possible(X, layout.nxt, layout.has_open):  # else every edge is long enough
+        _distinct_by_numpy(X, layout, name)
+
+
+def _distinct_by_numpy(X: np.ndarray, layout: Layout, name: str) -> None:
+    """:func:`check_distinct` without its screen (what decides and words a refusal)."""
     edge = np.linalg.norm(X[layout.nxt] - X, axis=1)
     scale = float(np.abs(X - X.mean(axis=0)).max()) or 1.0
     rep = edge <= 1e-12 * scale
@@ -245,6 +263,15 @@ def check_not_touching(X: np.ndarray, layout: Layout, name: str = "the curve") -
     """ValueError for two vertices in the same place, or two edges that are not neighbours
     with the same midpoint: the kernels divide by those distances (an exact coincidence; a
     near one is the start check's business, :func:`..polygon.check_polygon`)."""
+    # the sorts only where a screen saw (or could not rule out) equal vertices or midpoints:
+    # they took 0.4 s at 10^6 vertices, the screens 0.04 s
+    if (equal_rows_possible(X, layout.nxt, False, False)
+            or equal_rows_possible(X, layout.nxt, True, layout.has_open)):
+        _not_touching_by_sorting(X, layout, name)
+
+
+def _not_touching_by_sorting(X: np.ndarray, layout: Layout, name: str) -> None:
+    """:func:`check_not_touching` without its screens (what decides and words a refusal)."""
     pair = _equal_rows(X)
     if pair is not None:
         a, b = pair
