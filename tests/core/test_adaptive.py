@@ -394,6 +394,10 @@ def test_a_stall_on_the_tree_tightens_theta_for_the_fresh_start(monkeypatch, tre
         seen.append(run.run.engine.theta)
     fresh = run.result().stats["fresh_starts"]
     assert [f["theta"] for f in fresh] == [0.5 * theta0, 0.3 * theta0, 0.3 * theta0]
+    # each fresh start's own energy at its start is the path's entry there (the next stall is
+    # judged against it, an evaluation at the same θ)
+    E = run.result().history["energy"]
+    assert [f["start_energy"] for f in fresh] == [E[f["iteration"]] for f in fresh]
     assert set(seen) <= {theta0, 0.5 * theta0, 0.3 * theta0} and 0.3 * theta0 in seen
     assert f"θ tightened to {0.3 * theta0:.3g}" in run.result().message
     # the exact engine has no θ to tighten: its fresh starts record none

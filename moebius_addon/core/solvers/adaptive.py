@@ -372,7 +372,10 @@ class AdaptiveRun:
                 self._iterations_left() == 0 or self._seconds_left() == 0.0):
             return False
         if self.fresh_starts:
-            last = self.fresh_starts[-1]["energy"]
+            # its own energy at its start: with a tightened θ the stalled run's value before
+            # it is another approximation (8_1's tangent-point run at 2 000 edges: its second
+            # fresh start lowered the energy but ended above the value at θ 0.15, and stopped)
+            last = self.fresh_starts[-1]["start_energy"]
             if not run.E < last - _KEEP * abs(last):  # the last one went nowhere
                 return False
         changes = {}
@@ -391,7 +394,8 @@ class AdaptiveRun:
         if "theta" in changes:
             self._theta = changes["theta"]
         self.fresh_starts.append({"iteration": self.nit, "energy": float(run.E),
-                                  "message": run.message, "theta": changes.get("theta")})
+                                  "start_energy": float(new.E), "message": run.message,
+                                  "theta": changes.get("theta")})
         self._retire(run)
         self._go_on_with(new)
         return True
