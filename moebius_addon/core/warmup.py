@@ -60,7 +60,7 @@ def _tree() -> None:
     _relax(knots.named("3_1", 3000), "projected_gradient")
     # from hs_solve.MULTILEVEL_FROM (2·10⁴) vertices the hs solve's hierarchy: its transfers
     _, _, P = hs_solve._halve(layout_from_sizes([64], False))
-    P.T @ (P @ np.zeros((32, 3)))
+    P.T @ (P @ np.zeros((P.shape[1], 3)))
 
 
 def _tangent_point() -> None:
