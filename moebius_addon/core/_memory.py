@@ -19,6 +19,19 @@ def physical_memory() -> float | None:
         return None
 
 
+def available_memory() -> float | None:
+    """Bytes of memory the system can give without swapping (Linux's ``MemAvailable``), else
+    the physical memory, else None."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except OSError:
+        pass
+    return physical_memory()
+
+
 def check_memory(need: float, what: str, fix: str) -> None:
     """ValueError when ``need`` bytes are more than :data:`MEMORY_SHARE` of this machine's
     memory: "``what`` needs about 12.3 GB, more than …: ``fix``". Nothing where the system
@@ -32,3 +45,24 @@ def check_memory(need: float, what: str, fix: str) -> None:
 
 def _gb(need: float) -> str:
     return f"{need / 1e9:.3g} GB" if need < 1e15 else f"{need:.2g} bytes"
+
+
+def _libc_trim():
+    """glibc's ``malloc_trim``, or None (another C library, or another system)."""
+    try:
+        import ctypes
+
+        return ctypes.CDLL("libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return None
+
+
+_TRIM = _libc_trim() if os.name == "posix" else None
+
+
+def give_back() -> None:
+    """Return the heap's free pages to the system (glibc's ``malloc_trim(0)``; nothing
+    elsewhere). Arrays below glibc's mmap threshold (up to 32 MB: the (N, 3) fields of
+    10⁶ vertices are 24 MB) come from the heap, whose freed pages stay resident."""
+    if _TRIM is not None:
+        _TRIM(0)

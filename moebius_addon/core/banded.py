@@ -171,11 +171,12 @@ def band_solve(ab, mult, piv, kl, ku, b):
 def _solve_fields(ab, mult, piv, kl, ku, D, pos, G, lam, cuts):
     """Band solves for right-hand sides given as fields ``G`` (m, N, 3) and edge values
     ``lam`` (m, N) (or (0, N): none), scaled by ``D`` on both sides; the solutions' fields
-    and edge multipliers. In parallel over the right-hand sides and the blocks of the band
-    (``cuts``, :func:`block_cuts`: whole components, whose vertices are the rows'
-    ``cuts / 4``): each block's unknowns are solved alone, the same bits for any thread
-    count."""
-    m, n = G.shape[0], G.shape[1]
+    and edge multipliers (``G`` of shape (m, 0, 3): zero fields, without their memory). In
+    parallel over the right-hand sides and the blocks of the band (``cuts``,
+    :func:`block_cuts`: whole components, whose vertices are the rows' ``cuts / 4``): each
+    block's unknowns are solved alone, the same bits for any thread count."""
+    m, n = G.shape[0], pos.shape[0]
+    zero = G.shape[1] == 0
     X = np.empty((m, n, 3))
     L = np.empty((m, n))
     nblocks = cuts.shape[0] - 1
@@ -187,7 +188,7 @@ def _solve_fields(ab, mult, piv, kl, ku, D, pos, G, lam, cuts):
         for v in range(lo // 4, hi // 4):  # a component's vertices are its rows' places
             i = 4 * pos[v]
             for d in range(3):
-                x[i + d - lo] = G[q, v, d] * D[i + d]
+                x[i + d - lo] = (0.0 if zero else G[q, v, d]) * D[i + d]
             x[i + 3 - lo] = lam[q, v] * D[i + 3] if lam.shape[0] > 0 else 0.0
         _solve_range(ab, mult, piv, kl, ku, x, lo, hi)
         for v in range(lo // 4, hi // 4):
@@ -349,10 +350,14 @@ class BandedSaddle:
     its barycenter weights ``beta`` (N,) (``B = β βᵀ`` per component), from
     :func:`metrics.banded_parts`; ``jac``: the constraint Jacobian (edge and barycenter rows);
     ``recycle``: the previous iterate's solver, whose memory this one takes over (it must
-    not be used afterwards).
+    not be used afterwards); ``product=False``: only the factors are kept (:meth:`_solve`,
+    :meth:`solve_many`, :meth:`pseudo_inverse`), not the metric's triplets that
+    :meth:`metric_product` and the refinement of :meth:`solve` need: a preconditioner's use
+    (the hs solver's, whose triplets were 0.29 GB at 10⁶ vertices).
     """
 
-    def __init__(self, parts, jac: Jacobian, recycle: BandedSaddle | None = None):
+    def __init__(self, parts, jac: Jacobian, recycle: BandedSaddle | None = None,
+                 product: bool = True):
         rows, cols, vals, beta = parts
         con = jac.con
         if not (con.edge_lengths and con.barycenter) or con.pinned is not None:
@@ -383,6 +388,8 @@ class BandedSaddle:
         for c in range(k):
             W = self.U[c].reshape(9, -1) @ self.Z[9 * c:9 * c + 9].reshape(9, -1).T
             self.cap[c] = _capacitance(W, self.mu[c])
+        if not product:
+            self.rows = self.cols = self.vals = None
 
     def _factor(self, rows, cols, vals, anchors, T, ln, has_row, fixed, recycle):
         """The band of the iterate (:func:`_fill`: ``has_row``, ``fixed`` as there) with a
@@ -440,19 +447,22 @@ class BandedSaddle:
                                r - self.jac.matvec(u))
         return u + du, lam + dlam
 
-    def _solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _solve(self, g: np.ndarray | None, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`solve` without its refinement; ``g`` None: zero."""
         lay = self.layout
         n, k = lay.n, lay.k
-        (y,), (ylam,) = self._band_inverse(g[None], r[None, :n])
+        G = np.empty((1, 0, 3)) if g is None else g[None]
+        (y,), (ylam,) = self._band_inverse(G, r[None, :n])
         yb = np.asarray(r[n:], float).reshape(k, 3)
-        u = y.copy()
-        lam_e = ylam.copy()
+        # every component's coefficients from y first; then y and ylam become u and λ
+        t = np.empty((k, 12))
+        for c in range(k):
+            t[c, :9] = self.U[c].reshape(9, -1) @ y.ravel()
+            t[c, 9:] = yb[c]
+        u, lam_e = y, ylam  # (fresh arrays of the band solve)
         lam_b = yb.copy()
         for c in range(k):
-            t = np.empty(12)
-            t[:9] = self.U[c].reshape(9, -1) @ y.ravel()
-            t[9:] = yb[c]
-            w = self.cap[c] @ t
+            w = self.cap[c] @ t[c]
             u -= (w[:9] @ self.Z[9 * c:9 * c + 9].reshape(9, -1)).reshape(u.shape)
             lam_e -= w[:9] @ self.Zlam[9 * c:9 * c + 9]
             lam_b[c] -= w[9:]
@@ -482,10 +492,12 @@ class BandedSaddle:
         """``G⁻¹Cᵀ(CG⁻¹Cᵀ)⁻¹ φ``: the ``u`` of :meth:`solve` with ``g = 0``, without its
         refinement step (the back-projection's Newton iteration corrects what is left, and
         a band solve is most of an iteration's solve time at 100 000 edges)."""
-        return self._solve(np.zeros((self.layout.n, 3)), phi)[0]
+        return self._solve(None, phi)[0]
 
     def metric_product(self, V: np.ndarray) -> np.ndarray:
         """``A V`` for an (N, 3) field (band and barycenter term)."""
+        if self.rows is None:
+            raise RuntimeError("this band solver keeps its factors only (product=False)")
         out = _band_product(self.rows, self.cols, self.vals, np.ascontiguousarray(V, float))
         lay = self.layout
         for c in range(lay.k):
@@ -607,10 +619,11 @@ class OpenBandedSaddle(BandedSaddle):
         con = self.jac.con
         n = self.layout.n
         ne = con.n_edge_rows
-        g = np.where(self.fixed[:, None], 0.0, g)
+        # g None: zero fields (:func:`_solve_fields`)
+        G = np.empty((1, 0, 3)) if g is None else np.where(self.fixed[:, None], 0.0, g)[None]
         lam0 = np.zeros(n)
         lam0[con.edge_index] = r[:ne]
-        (y,), (ylam,) = self._band_inverse(g[None], lam0[None])
+        (y,), (ylam,) = self._band_inverse(G, lam0[None])
         yb = np.asarray(r[ne:], float).reshape(-1, 3)
         u = y.copy()
         lam_e = ylam.copy()

@@ -34,7 +34,7 @@ import numpy as np
 
 from . import barnes_hut, energy_choice, hs_solve, hs_tree
 from ._layout import Layout, as_checked_layout
-from ._memory import check_memory
+from ._memory import available_memory, check_memory, give_back
 from .banded import BANDED_METRICS, BandedSaddle, OpenBandedSaddle
 from .collision import contact_time_x
 from .constraints import Jacobian
@@ -227,6 +227,12 @@ class DenseEngine:
         """Factor the current iterate's system afresh (a stale one may be what failed)."""
         self.solver.refactor()
 
+    def shed(self) -> None:
+        """The direction at the current iterate is solved: until the next :meth:`update`
+        the run asks only :meth:`pseudo_inverse` (and the energies and contact tests), so an
+        engine may let go of what the solves needed. A later :meth:`solve` or
+        :meth:`metric_product` still works (it may cost a rebuild). Nothing here."""
+
     @property
     def fresh(self) -> bool:
         """Whether the factorization belongs to the current iterate."""
@@ -284,6 +290,36 @@ GRADIENT_REUSE = 4.0
 #: / 0.160, 0.185; FHW 10 000 0.295, 0.328 / 0.231, 0.269; 100 cables of 200 (off) 1.7×
 #: faster than before (docs/benchmarks.md).
 EARLY_TEST_BELOW = 5000
+#: From this many vertices on, a run on the tree that is short of memory is *lean*
+#: (:func:`lean_run`): it keeps only what each phase of an iteration needs
+#: (:meth:`TreeEngine.shed`, :meth:`TreeEngine.update`): the hs operator and the coarse levels
+#: go once the direction is solved, the last frame while the next iterate's solver is built
+#: and used (built again, the same, if a trial asks for its split). The iterates are the same.
+#: FHW at 10⁶ vertices, 2 threads: peak 4.54–4.59 → 3.84–3.87 GB, but 1.17× the seconds
+#: per iteration here (32.2 against 27.6 s, three alternated pairs: memory let go early
+#: comes back without the transparent huge pages the full run reuses; with numpy's huge
+#: pages off both took 28.3–31.5 s). Docs: docs/benchmarks.md, "Memory at 10⁶ edges".
+LEAN_FROM = 200_000
+#: Peak resident memory per vertex of a run on the tree that is not lean (FHW at 10⁶
+#: vertices, 2 threads: 4.54–4.59 GB for the whole process).
+FULL_BYTES_PER_VERTEX = 4_600
+#: A run is lean when its full peak would take more than this share of the memory the system
+#: has available when the engine is made.
+LEAN_SHARE = 0.5
+#: From this many vertices on the hs operator stores its near weights in single precision
+#: (``HsOperator(single=True)``): 0.42 GB less at 10⁶ vertices and faster products; the
+#: iterates change at rounding level (docs/benchmarks.md, "Memory at 10⁶ edges").
+SINGLE_WEIGHTS_FROM = 200_000
+
+
+def lean_run(n: int) -> bool:
+    """Whether a tree run of ``n`` vertices is lean (:data:`LEAN_FROM`): from that size on,
+    when its full peak (:data:`FULL_BYTES_PER_VERTEX`) would exceed :data:`LEAN_SHARE` of the
+    memory available now, or where the system does not say."""
+    if n < LEAN_FROM:
+        return False
+    available = available_memory()
+    return available is None or FULL_BYTES_PER_VERTEX * float(n) > LEAN_SHARE * available
 
 
 def _moved2(X0: np.ndarray, X: np.ndarray) -> float:
@@ -329,7 +365,7 @@ class TreeEngine(DenseEngine):
     _saddle = None  # the solver of the current iterate (BandedSaddle or HsSaddle)
     #: Peak memory of a run per vertex: measured 5.3–7.4 kB over its first steps (7_2 at
     #: 20 000, 50 000 and 100 000 vertices, hs and h2, explicit and implicit; docs/api.md),
-    #: 5.5 kB for the whole process at 10⁶ (docs/benchmarks.md).
+    #: 4.6 kB (3.9 lean) for the whole process at 10⁶ (docs/benchmarks.md).
     BYTES_PER_VERTEX = 8_000
 
     @classmethod
@@ -342,6 +378,7 @@ class TreeEngine(DenseEngine):
         self.check_size(layout.n)  # before anything is built
         super().__init__(layout, metric, **options)
         self._tree_krylov: list[int] = []  # per solve: Krylov iterations (0: direct)
+        self.lean = lean_run(layout.n)
 
     @classmethod
     def holds_dense(cls, metric: str) -> bool:
@@ -376,9 +413,17 @@ class TreeEngine(DenseEngine):
             # the tree's solvers need both kinds of rows, and few pins: else solve densely
             super().update(X, jac)
             return
+        self._at = (X, jac)
+        lean = self.lean
+        if lean and self._frame is not None:
+            # the frame waits as its polygon while the solver is built and used (_frame_at)
+            self._frame = (self._frame[0], None, self._frame[2])
+            self._trial = None  # the accepted trial's gradient has been taken
         old, self._saddle = self._saddle, None  # its memory is reused: no longer usable
         if old is not None:
             old.release()  # all but the band, before the new one is built
+        if lean:
+            give_back()
         if self.metric in BANDED_METRICS:
             old = getattr(old, "base", old)
             band = BandedSaddle(banded_parts(self.metric, X, self.layout),
@@ -388,15 +433,27 @@ class TreeEngine(DenseEngine):
         else:
             self._saddle = hs_solve.HsSaddle(
                 hs_tree.HsOperator(X, self.layout, self.metric,
-                                   order=self.energy_choice.metric_order),
+                                   order=self.energy_choice.metric_order,
+                                   single=self.layout.n >= SINGLE_WEIGHTS_FROM),
                 jac, rtol=self.krylov_rtol,
                 exact_backprojection=self.exact_backprojection, log=self._tree_krylov,
                 recycle=old if isinstance(old, hs_solve.HsSaddle) else None, X=X)
         self._banded_factorizations += 1
 
+    def shed(self) -> None:
+        if self.lean and isinstance(self._saddle, hs_solve.HsSaddle):
+            if self._saddle.shed():
+                give_back()
+
+    def _whole(self) -> None:
+        """The solver able to solve again after :meth:`shed` (built afresh at the iterate)."""
+        if isinstance(self._saddle, hs_solve.HsSaddle) and not self._saddle.whole:
+            self.update(*self._at)
+
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self._saddle is None:
             return super().solve(g, r)
+        self._whole()
         if isinstance(self._saddle, (BandedSaddle, BorderedPins)):
             self._tree_krylov.append(0)
         return self._saddle.solve(g, r)
@@ -409,6 +466,7 @@ class TreeEngine(DenseEngine):
     def metric_product(self, V: np.ndarray) -> np.ndarray:
         if self._saddle is None:
             return super().metric_product(V)
+        self._whole()
         return self._saddle.metric_product(V)
 
     def refactor(self) -> None:
@@ -433,10 +491,14 @@ class TreeEngine(DenseEngine):
         if self._frame is not None:
             X0, frame, h = self._frame
             if np.array_equal(X0, X) or (reach > 0.0 and _moved2(X0, X) <= (reach * h) ** 2):
+                if frame is None:  # let go by update(): the same frame again
+                    frame = self.energy_choice.frame(X0, self.layout, self.theta)
+                    self._frame = (X0, frame, h)
                 return frame
         lay = self.layout
         ln2 = np.sum((X[lay.nxt] - X) ** 2, axis=1)
         h = float(np.mean(np.sqrt(ln2[lay.real] if lay.has_open else ln2)))
+        self._frame = None  # the old one goes before the new one is built
         self._frame = (X.copy(), self.energy_choice.frame(X, lay, self.theta), h)
         self._trial = None  # evaluated with the frame it replaces
         return self._frame[1]

@@ -204,6 +204,15 @@ class _Sparse:
         _csr_product(self._ptr, self._cols, self._vals, Y, out)
         return out.reshape((self.shape[0],) + y.shape[1:])
 
+    def compressed(self) -> _Sparse:
+        """This matrix with its compressed rows only (``@`` works, ``T`` and
+        :meth:`toarray` do not): the multilevel's transfers, whose entry lists were 0.1 GB
+        at 10⁶ vertices."""
+        S = object.__new__(_Sparse)
+        S.shape, S._cols, S._vals, S._ptr = self.shape, self._cols, self._vals, self._ptr
+        S.rows = S.cols = S.vals = None
+        return S
+
     def toarray(self) -> np.ndarray:
         A = np.zeros(self.shape)
         np.add.at(A, (self.rows, self.cols), self.vals)
@@ -287,7 +296,8 @@ class Multilevel:
     def __init__(self, X: np.ndarray, layout: Layout, metric: str, jac: Jacobian,
                  order: float = PAPER_ORDER, fine: BandedSaddle | None = None):
         self.jac = jac
-        self.fine = BandedSaddle(_parts(X, layout, metric, order), jac) if fine is None else fine
+        self.fine = (BandedSaddle(_parts(X, layout, metric, order), jac, product=False)
+                     if fine is None else fine)
         halvings = []
         Xl, lay = X, layout
         while lay.n > COARSEST:
@@ -310,7 +320,8 @@ class Multilevel:
                 break
             used.append((d, ln))
         depth = used[-1][0] + 1 if used else 0
-        self.transfers: list[tuple[_Sparse, _Sparse]] = [(P, P.T) for *_, P in halvings[:depth]]
+        self.transfers: list[tuple[_Sparse, _Sparse]] = [
+            (P.compressed(), P.T.compressed()) for *_, P in halvings[:depth]]
         #: per halving, its level's solve and constraint count, or None (no level there)
         self.solves: list = [None] * depth
         for i, (d, ln) in enumerate(used):
@@ -321,9 +332,10 @@ class Multilevel:
                 fac = Factorization(gram_x(metric, Xl, lay, order=order), jc, np.float64)
                 self.solves[d] = (fac.solve, jc.con.size)
             else:
-                op = HsOperator(Xl, lay, metric, order=order)
-                self.solves[d] = (BandedSaddle(op.preconditioner_parts(), jc)._solve,
-                                  jc.con.size)
+                # only the banded parts are taken, the same for single weights
+                op = HsOperator(Xl, lay, metric, order=order, single=True)
+                self.solves[d] = (BandedSaddle(op.preconditioner_parts(), jc,
+                                               product=False)._solve, jc.con.size)
 
     @property
     def levels(self) -> int:
@@ -348,12 +360,14 @@ class Multilevel:
                 z = solve(rs[d], np.zeros(m))[0]
                 y = z if y is None else y + z
         v = self.transfers[0][0] @ y
+        del rs, r, y  # (memory: the fine solve below is the preconditioner's peak)
         # back onto C v = 0 by the H-smallest change (one more band solve)
-        return v - self.fine._solve(np.zeros_like(v), self.jac.matvec(v))[0]
+        v -= self.fine._solve(None, self.jac.matvec(v))[0]
+        return v
 
 
 def _parts(X, layout, metric, order):
-    return HsOperator(X, layout, metric, order=order).preconditioner_parts()
+    return HsOperator(X, layout, metric, order=order, single=True).preconditioner_parts()
 
 
 class HsSaddle:
@@ -404,7 +418,7 @@ class HsSaddle:
             self.coarse = None
             return
         if jac.con.pinned is None:
-            self.K = BandedSaddle(op.preconditioner_parts(), jac, old)
+            self.K = BandedSaddle(op.preconditioner_parts(), jac, old, product=False)
         else:  # the constraint preconditioner with pins: bordered (the iterates stay 0 there)
             self.K = BorderedPins(BandedSaddle(op.preconditioner_parts(),
                                                unpinned_jacobian(jac), old), jac)
@@ -430,6 +444,22 @@ class HsSaddle:
         self.K.release()
         self.__dict__ = {"K": self.K}
 
+    def shed(self) -> bool:
+        """Let go of the operator and the coarse levels, keeping the constraint
+        preconditioner for :meth:`pseudo_inverse` (the back-projection's steps, all a line
+        search asks of the solver once the direction is solved); :meth:`solve` and
+        :meth:`metric_product` are unusable afterwards. Nothing is let go (False) with
+        ``exact_backprojection``, whose back-projection solves with the operator."""
+        if self.exact_backprojection:
+            return False
+        self.op = self.coarse = None
+        return True
+
+    @property
+    def whole(self) -> bool:
+        """Whether :meth:`shed` left the operator (:meth:`solve` can be called)."""
+        return self.op is not None
+
     def _precondition(self, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(z, μ)``: the constraint preconditioner's ``H z + Cᵀμ = R``, ``C z = 0``, plus the
         coarse level's correction."""
@@ -446,7 +476,7 @@ class HsSaddle:
         the first rows to the relative tolerance (λ from the last preconditioner solve)."""
         rtol = self.rtol if rtol is None else rtol
         n = g.shape[0]
-        x = self.K._solve(np.zeros((n, 3)), r)[0] if np.any(r) else np.zeros((n, 3))
+        x = self.K._solve(None, r)[0] if np.any(r) else np.zeros((n, 3))
         res = self.op.product(x) - g
         z, mu = self._precondition(res)
         # the residual keeps only what the constraints cannot absorb, its Cᵀμ part moved into
@@ -467,14 +497,16 @@ class HsSaddle:
         stop = rtol * rtol * rz
         p = -z
         its = 0
+        work = np.empty_like(p)
         while rz > stop and its < self.max_iter:
             Ap = self.op.product(p)
             pAp = float(np.einsum("ij,ij->", p, Ap))
             if not pAp > 0.0:
                 break
             a = rz / pAp
-            x += a * p
-            res += a * Ap
+            x += np.multiply(a, p, out=work)
+            res += np.multiply(a, Ap, out=work)
+            Ap = z = None  # (memory: the preconditioner's solves are the solve's peak)
             z, mu = self._precondition(res)
             lam -= mu
             res -= self.jac.rmatvec(mu)
@@ -497,4 +529,4 @@ class HsSaddle:
         step of the back-projection onto ``C d = φ`` either way."""
         if self.exact_backprojection:
             return self.solve(np.zeros((self.op.layout.n, 3)), phi)[0]
-        return self.K._solve(np.zeros((self.op.layout.n, 3)), phi)[0]
+        return self.K._solve(None, phi)[0]

@@ -495,11 +495,16 @@ class HsOperator:
     theta : float
         Admissibility of the far field (see the module's text).
     leaf_size : int
+    single : bool
+        The near pairs' weights stored in single precision (the products still sum in
+        double; the row sums, the diagonal and :meth:`preconditioner_parts` are the same):
+        half of the operator's memory, 0.42 GB at 10⁶ vertices, for a change of the metric
+        of the order of 1e-7 relative, far below the far field's.
     """
 
     def __init__(self, X: np.ndarray, layout: Layout, metric: str = "hs",
                  order: float = PAPER_ORDER, theta: float = THETA,
-                 leaf_size: int = LEAF_SIZE):
+                 leaf_size: int = LEAF_SIZE, single: bool = False):
         if metric not in ("hs", "hs_pure"):
             raise ValueError(f"{metric!r} is not computed by the tree's metric (hs, hs_pure)")
         self.layout = layout
@@ -531,8 +536,8 @@ class HsOperator:
         cells = np.where(tree.left < 0, size * width, 0)
         self.rowoff = np.concatenate(([0], np.cumsum(cells)[:-1])).astype(np.int64)
         total = int(cells.sum())
-        self.w = np.empty(total)
-        self.v = np.empty(total)
+        self.w = np.empty(total, np.float32 if single else np.float64)
+        self.v = np.empty(total, self.w.dtype)
         rows = np.empty((3, lay.n))
         cross2 = FOLDED**2
         _near_weights(ln, mid, arc, clen, closed, lay.nxt, lay.starts, lay.comp, tree.lo,

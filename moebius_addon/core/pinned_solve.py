@@ -100,10 +100,10 @@ class BorderedPins:
         """``(u, λ)`` of the system with pins, ``u`` exactly zero at the pins."""
         r0 = np.zeros(self.m0)
         r0[self.kept] = r
-        u, lam = self.base._solve(g, r0)
+        u, lam = self.base._solve(g, r0)  # g None: zero
         y = self.cap_inv @ -self._select(u[None], lam[None])[0]
         G, R = self._border(y[None])
-        u, lam = self.base._solve(g + G[0], r0 + R[0])
+        u, lam = self.base._solve((G[0] + 0.0) if g is None else g + G[0], r0 + R[0])
         u[self.pinned] = 0.0
         return u, lam[self.kept]
 

@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from . import hs_solve, knots
+from . import hs_solve, hs_tree, knots
 from ._layout import layout_from_sizes
 from .engine import energy, moebius_energy
 from .identify import identify
@@ -61,6 +61,10 @@ def _tree() -> None:
     # from hs_solve.MULTILEVEL_FROM (2·10⁴) vertices the hs solve's hierarchy: its transfers
     _, _, P = hs_solve._halve(layout_from_sizes([64], False))
     P.T @ (P @ np.zeros((P.shape[1], 3)))
+    # and its levels' operators, in single precision as the fine one from
+    # engine.SINGLE_WEIGHTS_FROM (2·10⁵) vertices on
+    X = knots.named("3_1", 400)
+    hs_tree.HsOperator(X, layout_from_sizes([400], False), single=True).product(X)
 
 
 def _tangent_point() -> None:

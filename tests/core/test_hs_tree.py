@@ -406,3 +406,118 @@ def test_memory_does_not_grow_across_iterations(monkeypatch):
     traced, resident = np.array(seen).T
     assert traced[8:].max() - traced[:8].max() < 0.15
     assert resident[8:].max() - resident[:8].max() < 8.0
+
+
+def _lean(monkeypatch, single: bool):
+    """Lean iterations (engine.LEAN_FROM) from 0 vertices, single-precision weights or not, and
+    a spy counting the solvers that let go of their operator."""
+    from moebius_addon.core import engine as engines
+
+    monkeypatch.setattr(engines, "LEAN_FROM", 0)
+    monkeypatch.setattr(engines, "LEAN_SHARE", 0.0)  # short of memory at any size
+    monkeypatch.setattr(engines, "SINGLE_WEIGHTS_FROM", 0 if single else 10**12)
+    monkeypatch.setattr(hs_solve, "MULTILEVEL_FROM", 600)
+    shed = []
+    real = hs_solve.HsSaddle.shed
+
+    def spy(self):
+        shed.append(real(self))
+        return shed[-1]
+
+    monkeypatch.setattr(hs_solve.HsSaddle, "shed", spy)
+    return shed
+
+
+def test_lean_iterations_are_the_same_iterates(monkeypatch):
+    # letting go of the operator and the coarse levels after the direction's solve and of the
+    # frame while the next solver is built must not change a bit: the frame a trial asks for
+    # is built again at the same polygon, and nothing else is asked of the solver
+    P = core.resample(core.knots.named("5_2"), 1200)
+    monkeypatch.setattr(hs_solve, "MULTILEVEL_FROM", 600)
+    whole = core.relax(P, max_iter=8, engine="tree")
+    shed = _lean(monkeypatch, single=False)
+    lean = core.relax(P, max_iter=8, engine="tree")
+    assert shed and all(shed)  # every iterate's solver let go of its operator
+    assert lean.nit == whole.nit == 8
+    assert lean.x.tobytes() == whole.x.tobytes()
+    assert lean.history["energy"] == whole.history["energy"]
+    assert lean.stats["krylov_iterations"] == whole.stats["krylov_iterations"]
+
+
+def test_a_shed_solver_is_built_again_for_a_later_solve(monkeypatch):
+    # a solve after shed (a restart's nudge, another method's product) rebuilds the solver at
+    # the same iterate: the same answer as before it was shed
+    from moebius_addon.core import engine as engines
+
+    _lean(monkeypatch, single=False)
+    P = core.resample(core.knots.named("5_2"), 800)
+    X, lay = as_layout(P)
+    jac = jacobian(X, make_constraints(X, lay, np.linalg.norm(X[lay.nxt] - X, axis=1)))
+    eng = engines.make_engine("tree", lay, "hs")
+    E, g = eng.energy_gradient(X)
+    eng.update(X, jac)
+    u0, lam0 = eng.solve(g, np.zeros(jac.con.size))
+    Ag = eng.metric_product(g)
+    eng.shed()
+    assert eng._saddle.op is None and eng._saddle.coarse is None
+    d = eng.pseudo_inverse(residual(X + 1e-3 * g, jac.con))  # the band alone still answers
+    assert np.all(np.isfinite(d))
+    u1, lam1 = eng.solve(g, np.zeros(jac.con.size))
+    assert np.array_equal(u0, u1) and np.array_equal(lam0, lam1)
+    eng.shed()
+    assert np.array_equal(eng.metric_product(g), Ag)
+    # exact back-projection solves with the operator: nothing is let go there
+    eng = engines.make_engine("tree", lay, "hs", exact_backprojection=True)
+    eng.update(X, jac)
+    eng.shed()
+    assert eng._saddle.op is not None
+
+
+def test_single_precision_weights(rng):
+    # half the operator's memory; products within rounding of the double ones, the same row
+    # sums and banded preconditioner parts, and still symmetric
+    P = core.knots.freedman_unknot(1500)
+    X, lay = as_layout(P)
+    a = hs_tree.HsOperator(X, lay)
+    b = hs_tree.HsOperator(X, lay, single=True)
+    assert b.w.dtype == np.float32 and a.w.dtype == np.float64
+    assert b.w.nbytes + b.v.nbytes == (a.w.nbytes + a.v.nbytes) // 2
+    U, V = rng.standard_normal((2, lay.n, 3))
+    ya, yb = a.product(U), b.product(U)
+    assert 0 < np.abs(yb - ya).max() <= 1e-6 * np.abs(ya).max()  # measured 8e-9 (FHW 5 000)
+    for pa, pb in zip(a.preconditioner_parts(), b.preconditioner_parts(), strict=True):
+        assert np.array_equal(pa, pb)
+    uv, vu = np.sum(U * b.product(V)), np.sum(V * b.product(U))
+    assert abs(uv - vu) <= 1e-12 * np.sqrt(np.sum(U * yb) * np.sum(V * b.product(V)))
+
+
+def test_lean_run_with_single_weights_follows_the_double_run(monkeypatch):
+    P = core.resample(core.knots.named("5_2"), 1200)
+    monkeypatch.setattr(hs_solve, "MULTILEVEL_FROM", 600)
+    whole = core.relax(P, max_iter=6, engine="tree")
+    _lean(monkeypatch, single=True)
+    lean = core.relax(P, max_iter=6, engine="tree")
+    assert lean.nit == 6 and lean.x.tobytes() != whole.x.tobytes()
+    # a Krylov solve stopped at its tolerance passes the metric's rounding-level change on,
+    # amplified: measured 8.6e-7 relative in the energy, 1.7e-6 in the vertices
+    e, f = np.array(lean.history["energy"]), np.array(whole.history["energy"])
+    assert np.allclose(e, f, rtol=1e-5, atol=0)
+    assert np.abs(lean.x - whole.x).max() <= 1e-5 * np.abs(whole.x).max()
+    assert max(lean.history["constraint_residual"]) <= 1e-10
+
+
+def test_a_run_is_lean_where_memory_is_short(monkeypatch):
+    from moebius_addon.core import engine as engines
+
+    gb = 1e9
+    monkeypatch.setattr(engines, "available_memory", lambda: 20 * gb)
+    assert not engines.lean_run(engines.LEAN_FROM - 1)
+    assert not engines.lean_run(10**6)  # 4.6 GB of 20 available
+    assert engines.lean_run(3 * 10**6)  # 13.8 GB
+    monkeypatch.setattr(engines, "available_memory", lambda: 8 * gb)
+    assert engines.lean_run(10**6) and not engines.lean_run(5 * 10**5)
+    monkeypatch.setattr(engines, "available_memory", lambda: None)  # the system does not say
+    assert engines.lean_run(engines.LEAN_FROM) and not engines.lean_run(1000)
+    from moebius_addon.core._memory import available_memory
+
+    assert available_memory() > 0

@@ -236,6 +236,7 @@ class Relaxation(Run):
         jac = jacobian(X, self.con)
         self.engine.update(X, jac)
         u, _ = self.engine.solve(g, np.zeros(self.con.size))
+        self.engine.shed()  # the line search needs no more solves here
         phi = residual(X, self.con)
         self.X, self.E, self.g, self.jac, self.u, self.phi = X, E, g, jac, u, phi
         self.gu = float(np.einsum("ij,ij->", g, u))
