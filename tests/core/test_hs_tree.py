@@ -438,6 +438,7 @@ def test_lean_iterations_are_the_same_iterates(monkeypatch):
     shed = _lean(monkeypatch, single=False)
     lean = core.relax(P, max_iter=8, engine="tree")
     assert shed and all(shed)  # every iterate's solver let go of its operator
+    assert lean.stats["lean"] is True and "lean" not in whole.stats
     assert lean.nit == whole.nit == 8
     assert lean.x.tobytes() == whole.x.tobytes()
     assert lean.history["energy"] == whole.history["energy"]

@@ -382,8 +382,12 @@ class Run:
         )
 
     def _stats(self) -> dict:
-        """``result().stats``; subclasses add their counters."""
-        return {"engine": self.engine.name}
+        """``result().stats``; subclasses add their counters. ``lean``: True where the tree
+        engine held less at once because memory is short (``engine.lean_run``)."""
+        stats = {"engine": self.engine.name}
+        if getattr(self.engine, "lean", False):
+            stats["lean"] = True
+        return stats
 
     def result(self) -> RelaxResult:
         if not self.done:
