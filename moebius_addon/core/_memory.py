@@ -4,6 +4,7 @@ out-of-memory handler, says nothing useful; numba's ``MemoryError`` says less)."
 
 from __future__ import annotations
 
+import functools
 import os
 
 #: Share of the machine's physical memory one call may need before it is refused (as
@@ -47,8 +48,12 @@ def _gb(need: float) -> str:
     return f"{need / 1e9:.3g} GB" if need < 1e15 else f"{need:.2g} bytes"
 
 
+@functools.cache
 def _libc_trim():
-    """glibc's ``malloc_trim``, or None (another C library, or another system)."""
+    """glibc's ``malloc_trim``, or None (another C library, or another system); looked up at
+    the first call, not at import."""
+    if os.name != "posix":
+        return None
     try:
         import ctypes
 
@@ -57,12 +62,10 @@ def _libc_trim():
         return None
 
 
-_TRIM = _libc_trim() if os.name == "posix" else None
-
-
 def give_back() -> None:
     """Return the heap's free pages to the system (glibc's ``malloc_trim(0)``; nothing
     elsewhere). Arrays below glibc's mmap threshold (up to 32 MB: the (N, 3) fields of
     10⁶ vertices are 24 MB) come from the heap, whose freed pages stay resident."""
-    if _TRIM is not None:
-        _TRIM(0)
+    trim = _libc_trim()
+    if trim is not None:
+        trim(0)

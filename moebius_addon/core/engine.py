@@ -227,6 +227,10 @@ class DenseEngine:
         """Factor the current iterate's system afresh (a stale one may be what failed)."""
         self.solver.refactor()
 
+    #: Whether the engine holds less at once because memory is short (the tree's
+    #: :func:`lean_run`); never for the dense engine.
+    lean = False
+
     def shed(self) -> None:
         """The direction at the current iterate is solved: until the next :meth:`update`
         the run asks only :meth:`pseudo_inverse` (and the energies and contact tests), so an
@@ -414,15 +418,14 @@ class TreeEngine(DenseEngine):
             super().update(X, jac)
             return
         self._at = (X, jac)
-        lean = self.lean
-        if lean and self._frame is not None:
+        if self.lean and self._frame is not None:
             # the frame waits as its polygon while the solver is built and used (_frame_at)
             self._frame = (self._frame[0], None, self._frame[2])
             self._trial = None  # the accepted trial's gradient has been taken
         old, self._saddle = self._saddle, None  # its memory is reused: no longer usable
         if old is not None:
             old.release()  # all but the band, before the new one is built
-        if lean:
+        if self.lean:
             give_back()
         if self.metric in BANDED_METRICS:
             old = getattr(old, "base", old)
@@ -441,9 +444,8 @@ class TreeEngine(DenseEngine):
         self._banded_factorizations += 1
 
     def shed(self) -> None:
-        if self.lean and isinstance(self._saddle, hs_solve.HsSaddle):
-            if self._saddle.shed():
-                give_back()
+        if self.lean and isinstance(self._saddle, hs_solve.HsSaddle) and self._saddle.shed():
+            give_back()
 
     def _whole(self) -> None:
         """The solver able to solve again after :meth:`shed` (built afresh at the iterate)."""

@@ -332,9 +332,7 @@ class Multilevel:
                 fac = Factorization(gram_x(metric, Xl, lay, order=order), jc, np.float64)
                 self.solves[d] = (fac.solve, jc.con.size)
             else:
-                # only the banded parts are taken, the same for single weights
-                op = HsOperator(Xl, lay, metric, order=order, single=True)
-                self.solves[d] = (BandedSaddle(op.preconditioner_parts(), jc,
+                self.solves[d] = (BandedSaddle(_parts(Xl, lay, metric, order), jc,
                                                product=False)._solve, jc.con.size)
 
     @property
@@ -367,6 +365,8 @@ class Multilevel:
 
 
 def _parts(X, layout, metric, order):
+    """The banded parts of the hs operator at ``X`` (:meth:`HsOperator.preconditioner_parts`),
+    the same for single-precision weights, which take half the memory while built."""
     return HsOperator(X, layout, metric, order=order, single=True).preconditioner_parts()
 
 

@@ -385,7 +385,7 @@ class Run:
         """``result().stats``; subclasses add their counters. ``lean``: True where the tree
         engine held less at once because memory is short (``engine.lean_run``)."""
         stats = {"engine": self.engine.name}
-        if getattr(self.engine, "lean", False):
+        if self.engine.lean:
             stats["lean"] = True
         return stats
 
