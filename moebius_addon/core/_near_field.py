@@ -52,8 +52,11 @@ def _near_lanes(W, rx, ry, rz, bx0, by0, bz0, lj, r, cr, grad):
         dy = py - ry
         dz = pz - rz
         r2 = dx * dx + dy * dy + dz * dz
-        skip = r == W[_NW_ID + j] or r == W[_NW_ID + _LANES + j] or r == W[_NW_ID + 2 * _LANES + j]
-        r2 = np.inf if skip else r2  # 1/|d|² = 0: every term 0
+        # 1/|d|² = 0: every term 0. One select per test: a compound condition branches, and
+        # the lane loop does not vectorize
+        r2 = np.inf if r == W[_NW_ID + j] else r2
+        r2 = np.inf if r == W[_NW_ID + _LANES + j] else r2
+        r2 = np.inf if r == W[_NW_ID + 2 * _LANES + j] else r2
         same = cr == W[_NW_ID + 3 * _LANES + j]
         bx = bx0 if same else 0.0
         by = by0 if same else 0.0
@@ -69,6 +72,51 @@ def _near_lanes(W, rx, ry, rz, bx0, by0, bz0, lj, r, cr, grad):
             W[_NW_SUMS + 5 * _LANES + j] += fdx
             W[_NW_SUMS + 6 * _LANES + j] += fdy
             W[_NW_SUMS + 7 * _LANES + j] += fdz
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _near_leaves(E, M, ln, cp, lo, hi, leaves, t0, t1, noff, npart, nbr, grad, rows):
+    """The leaves ``leaves[t0:t1]`` of :func:`_near`, their edges' sums to ``rows``. A function
+    of its own, called from the parallel loop: compiled inside that loop's body, the lanes took
+    longer (measured in docs/benchmarks.md, session 11)."""
+    W = np.zeros(_NW_SIZE)
+    for t in range(t0, t1):
+        a = leaves[t]
+        for q0 in range(lo[a], hi[a], _LANES):
+            count = min(_LANES, hi[a] - q0)
+            for j in range(_LANES):
+                q = q0 + min(j, count - 1)  # lanes past the leaf's end repeat its last edge
+                W[j] = M[q, 0]
+                W[_LANES + j] = M[q, 1]
+                W[2 * _LANES + j] = M[q, 2]
+                W[3 * _LANES + j] = E[q, 0]
+                W[4 * _LANES + j] = E[q, 1]
+                W[5 * _LANES + j] = E[q, 2]
+                W[6 * _LANES + j] = ln[q]
+                W[_NW_ID + j] = q
+                W[_NW_ID + _LANES + j] = nbr[q, 0]
+                W[_NW_ID + 2 * _LANES + j] = nbr[q, 1]
+                W[_NW_ID + 3 * _LANES + j] = cp[q]
+            W[_NW_SUMS:] = 0.0
+            for p in range(noff[a], noff[a + 1]):
+                b = npart[p]
+                for r in range(lo[b], hi[b]):
+                    if grad:
+                        _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
+                                    ln[r], float(r), float(cp[r]), True)
+                    else:
+                        _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
+                                    ln[r], float(r), float(cp[r]), False)
+            for j in range(count):
+                q = q0 + j
+                rows[0, q] = W[_NW_SUMS + j]
+                if grad:
+                    # the length term of ∂f/∂e_I: (l_J/l_I) e_I/|d|²
+                    w = W[_NW_SUMS + _LANES + j] / ln[q]
+                    for k in range(3):
+                        ga = W[_NW_SUMS + (2 + k) * _LANES + j]
+                        rows[1 + k, q] = 2.0 * (ga + w * E[q, k])
+                        rows[4 + k, q] = 2.0 * W[_NW_SUMS + (5 + k) * _LANES + j]
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
@@ -87,44 +135,8 @@ def _near(E, M, ln, cp, lo, hi, leaves, noff, npart, nbr, grad):
     nchunks = min(nl, _NEAR_CHUNKS)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
-        W = np.zeros(_NW_SIZE)
-        for t in range(ch * nl // nchunks, (ch + 1) * nl // nchunks):
-            a = leaves[t]
-            for q0 in range(lo[a], hi[a], _LANES):
-                count = min(_LANES, hi[a] - q0)
-                for j in range(_LANES):
-                    q = q0 + min(j, count - 1)  # lanes past the leaf's end repeat its last edge
-                    W[j] = M[q, 0]
-                    W[_LANES + j] = M[q, 1]
-                    W[2 * _LANES + j] = M[q, 2]
-                    W[3 * _LANES + j] = E[q, 0]
-                    W[4 * _LANES + j] = E[q, 1]
-                    W[5 * _LANES + j] = E[q, 2]
-                    W[6 * _LANES + j] = ln[q]
-                    W[_NW_ID + j] = q
-                    W[_NW_ID + _LANES + j] = nbr[q, 0]
-                    W[_NW_ID + 2 * _LANES + j] = nbr[q, 1]
-                    W[_NW_ID + 3 * _LANES + j] = cp[q]
-                W[_NW_SUMS:] = 0.0
-                for p in range(noff[a], noff[a + 1]):
-                    b = npart[p]
-                    for r in range(lo[b], hi[b]):
-                        if grad:
-                            _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
-                                        ln[r], float(r), float(cp[r]), True)
-                        else:
-                            _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
-                                        ln[r], float(r), float(cp[r]), False)
-                for j in range(count):
-                    q = q0 + j
-                    rows[0, q] = W[_NW_SUMS + j]
-                    if grad:
-                        # the length term of ∂f/∂e_I: (l_J/l_I) e_I/|d|²
-                        w = W[_NW_SUMS + _LANES + j] / ln[q]
-                        for k in range(3):
-                            ga = W[_NW_SUMS + (2 + k) * _LANES + j]
-                            rows[1 + k, q] = 2.0 * (ga + w * E[q, k])
-                            rows[4 + k, q] = 2.0 * W[_NW_SUMS + (5 + k) * _LANES + j]
+        _near_leaves(E, M, ln, cp, lo, hi, leaves, ch * nl // nchunks,
+                     (ch + 1) * nl // nchunks, noff, npart, nbr, grad, rows)
     return rows
 
 
