@@ -106,9 +106,18 @@ def test_scaling_law_and_rigid_motions():
 def test_moebius_is_unchanged_through_the_new_door():
     P = trefoil(200)
     assert core.energy(P) == core.moebius_energy(P) == 75.99452256688987
-    e, g = core.energy_gradient(P, energy="moebius", engine="tree")
-    assert e == core.moebius_energy(P, engine="tree")
-    assert np.array_equal(g, core.moebius_gradient(P, engine="tree"))
+    # one frame for both (a change of session 11): the same values as the two doors apart, on
+    # both engines, for a link and for a curve scaled far beyond 2^64
+    link = [P, P + np.array([3.0, 0.0, 0.0])]
+    for Q in (P, link, P * 2.0**80):
+        for eng in ("tree", "exact"):
+            e, g = core.energy_gradient(Q, energy="moebius", engine=eng)
+            assert e == core.moebius_energy(Q, engine=eng)
+            g0 = core.moebius_gradient(Q, engine=eng)
+            if isinstance(Q, list):
+                assert all(np.array_equal(a, b) for a, b in zip(g, g0))
+            else:
+                assert np.array_equal(g, g0)
 
 
 @pytest.mark.parametrize("alpha, beta", [(2.0, 4.0), (2.5, 5.0)])
