@@ -151,7 +151,7 @@ def _solve_range(ab, mult, piv, kl, ku, x, lo, n):
             for t in range(min(kl, n - 1 - k)):
                 x[k + 1 + t - lo] -= mult[k, t] * xk
     # back substitution: row k's products with the columns k + 2 … in eight running sums
-    # (column k + 2 + 8 i + c in sum c), added pairwise, and the column k + 1, solved just
+    # (column k + 2 + 8 i + c always in sum c), added pairwise, and the column k + 1, solved just
     # before, subtracted last. One running sum is a chain of dependent additions whose latency
     # bounded the solve; with eight the row waits only for its neighbour's result. Other
     # rounding than one sum in column order (5.96e-16 of the solution's largest entry on a
@@ -171,9 +171,22 @@ def _solve_range(ab, mult, piv, kl, ku, x, lo, n):
             s6 += ab[k, j + 6] * x[o + j + 6]
             s7 += ab[k, j + 7] * x[o + j + 7]
             j += 8
-        while j <= w:
+        # the rest in the same sums by column (a block's rows end where one band's go on with
+        # zeros: the same bits, test_open_tree_runs)
+        if j <= w:
             s0 += ab[k, j] * x[o + j]
-            j += 1
+        if j + 1 <= w:
+            s1 += ab[k, j + 1] * x[o + j + 1]
+        if j + 2 <= w:
+            s2 += ab[k, j + 2] * x[o + j + 2]
+        if j + 3 <= w:
+            s3 += ab[k, j + 3] * x[o + j + 3]
+        if j + 4 <= w:
+            s4 += ab[k, j + 4] * x[o + j + 4]
+        if j + 5 <= w:
+            s5 += ab[k, j + 5] * x[o + j + 5]
+        if j + 6 <= w:
+            s6 += ab[k, j + 6] * x[o + j + 6]
         t = x[o] - (((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7)))
         if w >= 1:
             t -= ab[k, 1] * x[o + 1]

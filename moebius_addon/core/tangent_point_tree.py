@@ -152,7 +152,9 @@ def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, noff, npart, nbr, alpha, beta
                  rows, b4):
     """The leaves ``leaves[t0:t1]`` of :func:`_near`: their edges' own sums to ``rows``, what
     their pairs give partner edges to ``b4``. A function of its own, called from the parallel
-    loop (compiled inside that loop's body, the lanes took up to 1.3× the time)."""
+    loop: a copy compiled without ``parallel`` took 0.25 s for the gradient pass against 0.33
+    s compiled inside the loop's body (10⁵ edges); in place the difference was in the
+    noise."""
     W = np.zeros(_NW_SIZE)
     for t in range(t0, t1):
         a = leaves[t]

@@ -115,7 +115,7 @@ def test_moebius_is_unchanged_through_the_new_door():
             assert e == core.moebius_energy(Q, engine=eng)
             g0 = core.moebius_gradient(Q, engine=eng)
             if isinstance(Q, list):
-                assert all(np.array_equal(a, b) for a, b in zip(g, g0))
+                assert all(np.array_equal(a, b) for a, b in zip(g, g0, strict=True))
             else:
                 assert np.array_equal(g, g0)
 
