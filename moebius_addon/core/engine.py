@@ -681,8 +681,8 @@ def _evaluate(P, energy_name, alpha, beta, engine, theta, closed, grad):
     if choice.name == "moebius":
         if not grad:
             return moebius_energy(P, engine=engine, theta=theta, closed=closed), None
-        # moebius_energy's and moebius_gradient's values, on one check and one frame (a
-        # second frame was a quarter of the time at 10⁵ edges)
+        # moebius_energy's and moebius_gradient's values, on one check and one frame (the two
+        # frames were a quarter of the time at 10⁵ edges: 0.29 of 1.13 s, one thread)
         X, layout, k = as_checked_layout(P, closed)
         frame = _frame(X, layout, engine, theta)
         if frame is None:
