@@ -74,6 +74,26 @@ def _near_lanes(W, rx, ry, rz, bx0, by0, bz0, lj, r, cr, grad):
             W[_NW_SUMS + 7 * _LANES + j] += fdz
 
 
+@nb.njit(cache=True, inline="always")
+def _load_lanes(W, E, M, ln, nbr, q0, count, off_past):
+    """Edges ``q0 … q0 + count − 1`` of a leaf into the lanes' rows of ``W`` (midpoint, edge
+    vector, length, tree position, the neighbours' positions); lanes past the leaf's end
+    repeat its last edge, with position −1 when ``off_past`` (the tangent-point near field
+    masks them so), else its own."""
+    for j in range(_LANES):
+        q = q0 + min(j, count - 1)
+        W[j] = M[q, 0]
+        W[_LANES + j] = M[q, 1]
+        W[2 * _LANES + j] = M[q, 2]
+        W[3 * _LANES + j] = E[q, 0]
+        W[4 * _LANES + j] = E[q, 1]
+        W[5 * _LANES + j] = E[q, 2]
+        W[6 * _LANES + j] = ln[q]
+        W[_NW_ID + j] = -1.0 if off_past and j >= count else q
+        W[_NW_ID + _LANES + j] = nbr[q, 0]
+        W[_NW_ID + 2 * _LANES + j] = nbr[q, 1]
+
+
 @nb.njit(cache=True, error_model="numpy")
 def _near_leaves(E, M, ln, cp, lo, hi, leaves, t0, t1, noff, npart, nbr, grad, rows):
     """The leaves ``leaves[t0:t1]`` of :func:`_near`, their edges' sums to ``rows``. A function
@@ -84,19 +104,9 @@ def _near_leaves(E, M, ln, cp, lo, hi, leaves, t0, t1, noff, npart, nbr, grad, r
         a = leaves[t]
         for q0 in range(lo[a], hi[a], _LANES):
             count = min(_LANES, hi[a] - q0)
+            _load_lanes(W, E, M, ln, nbr, q0, count, False)
             for j in range(_LANES):
-                q = q0 + min(j, count - 1)  # lanes past the leaf's end repeat its last edge
-                W[j] = M[q, 0]
-                W[_LANES + j] = M[q, 1]
-                W[2 * _LANES + j] = M[q, 2]
-                W[3 * _LANES + j] = E[q, 0]
-                W[4 * _LANES + j] = E[q, 1]
-                W[5 * _LANES + j] = E[q, 2]
-                W[6 * _LANES + j] = ln[q]
-                W[_NW_ID + j] = q
-                W[_NW_ID + _LANES + j] = nbr[q, 0]
-                W[_NW_ID + 2 * _LANES + j] = nbr[q, 1]
-                W[_NW_ID + 3 * _LANES + j] = cp[q]
+                W[_NW_ID + 3 * _LANES + j] = cp[q0 + min(j, count - 1)]
             W[_NW_SUMS:] = 0.0
             for p in range(noff[a], noff[a + 1]):
                 b = npart[p]

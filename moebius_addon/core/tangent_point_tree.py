@@ -41,7 +41,7 @@ import numpy as np
 from . import bvh
 from ._far_field import _cluster_data, _levels
 from ._layout import Layout
-from ._near_field import _to_vertices
+from ._near_field import _LANES, _NW_ID, _load_lanes, _to_vertices
 from .barnes_hut import Frame, _edge_arrays, check_theta
 from .energies.tangent_point import (
     DEFAULT_ALPHA,
@@ -86,8 +86,7 @@ def _kernel(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
 # ∂f/∂e_I, ∂f/∂d) and what its pair gives J at W[_NW_OUT + _LANES k + j] (−∂f/∂d, ∂f/∂l_J),
 # added over the lanes in lane order. Constant offsets plus j: the lane loop vectorizes. No
 # fast-math (see ``_near_field``).
-_LANES = 8
-_NW_ID = 7 * _LANES
+# (_LANES and the first ten rows, _load_lanes, as in ``_near_field``)
 _NW_SUMS = 10 * _LANES
 _NW_OUT = 17 * _LANES
 _NW_SIZE = 21 * _LANES
@@ -152,26 +151,15 @@ def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, noff, npart, nbr, alpha, beta
                  rows, b4):
     """The leaves ``leaves[t0:t1]`` of :func:`_near`: their edges' own sums to ``rows``, what
     their pairs give partner edges to ``b4``. A function of its own, called from the parallel
-    loop: a copy compiled without ``parallel`` took 0.25 s for the gradient pass against 0.33
-    s compiled inside the loop's body (10⁵ edges); in place the difference was in the
-    noise."""
+    loop: in a copy of a variant, compiled without ``parallel``, the gradient pass took 0.28 s
+    against 0.33 s inside the loop's body (10⁵ edges); in place the difference was in the
+    noise (docs/benchmarks.md, session 11)."""
     W = np.zeros(_NW_SIZE)
     for t in range(t0, t1):
         a = leaves[t]
         for q0 in range(lo[a], hi[a], _LANES):
             count = min(_LANES, hi[a] - q0)
-            for j in range(_LANES):
-                q = q0 + min(j, count - 1)  # lanes past the leaf's end: its last edge, off
-                W[j] = M[q, 0]
-                W[_LANES + j] = M[q, 1]
-                W[2 * _LANES + j] = M[q, 2]
-                W[3 * _LANES + j] = E[q, 0]
-                W[4 * _LANES + j] = E[q, 1]
-                W[5 * _LANES + j] = E[q, 2]
-                W[6 * _LANES + j] = ln[q]
-                W[_NW_ID + j] = q if j < count else -1.0
-                W[_NW_ID + _LANES + j] = nbr[q, 0]
-                W[_NW_ID + 2 * _LANES + j] = nbr[q, 1]
+            _load_lanes(W, E, M, ln, nbr, q0, count, True)  # past the leaf's end: off
             W[_NW_SUMS:] = 0.0
             for p in range(noff[a], noff[a + 1]):
                 b = npart[p]
