@@ -211,6 +211,12 @@ def segment_boxes(tree: Tree, X: np.ndarray, layout: Layout):
     return _segment_boxes(X, layout.nxt, *tree)
 
 
+def vertex_boxes(tree: Tree, X: np.ndarray):
+    """Axis-aligned boxes ``(bmin, bmax)`` of every node's first vertices (the edges' own
+    ``X[I]``, without their ends ``X[nxt[I]]``): boxes for questions about vertices."""
+    return _segment_boxes(X, np.arange(X.shape[0]), *tree)
+
+
 @nb.njit(cache=True, inline="always")
 def box_gap2(bmin, bmax, a, b):
     """Squared distance between the boxes of nodes ``a`` and ``b`` (0 where they overlap)."""

@@ -152,6 +152,15 @@ def _closest_pairs(X, nxt, starts, comp, closed, min_gap, nchunks):
     return vbest, vidx, ebest, eidx, epar
 
 
+def closest_vertices(X: np.ndarray, layout: Layout, min_gap: int = 4,
+                     search: str = "auto") -> tuple[float, tuple[int, int]]:
+    """The first half of :func:`closest_pairs`, ``(vertex distance, (i, j))``; through the
+    hierarchy it leaves out the edges' distances (the same vertices)."""
+    if _use_tree(search, layout.n, CLOSEST_TREE_FROM):
+        return tree_contact.closest_vertices_tree(X, layout, min_gap)
+    return closest_pairs(X, layout, min_gap, search)[0]
+
+
 def closest_pairs(X: np.ndarray, layout: Layout, min_gap: int = 4, search: str = "auto"):
     """``(vertex distance, (i, j)), (edge distance, (I, J), (s, t))``: the closest vertices at
     least ``min_gap`` apart along the curve and the closest disjoint edges (parameters s, t

@@ -29,7 +29,7 @@ import numpy as np
 
 from ._layout import Layout, layout_from_sizes
 from .banded import BandedSaddle, OpenBandedSaddle
-from .collision import closest_pairs
+from .collision import closest_vertices
 from .constraints import Jacobian, TangentProjector, jacobian, make_constraints
 from .hs_tree import HsOperator
 from .linalg import Factorization
@@ -316,7 +316,7 @@ class Multilevel:
             # a level whose strands cross is not the curve's shape (FHW at 100 000 vertices,
             # levels down to 390 vertices with this rule: 10 iterations per solve; with ratio
             # ≥ 2, down to 1 562 vertices and that level banded: 19)
-            if closest_pairs(Xl, lay, CONTACT_GAP)[0][0] < MIN_CONTACT * ln.mean():
+            if closest_vertices(Xl, lay, CONTACT_GAP)[0] < MIN_CONTACT * ln.mean():
                 break
             used.append((d, ln))
         depth = used[-1][0] + 1 if used else 0

@@ -25,7 +25,7 @@ from ._layout import (
 )
 from ._memory import check_memory
 from ._tridiagonal import cyclic_tridiagonal_solve
-from .collision import closest_pairs
+from .collision import closest_pairs, closest_vertices
 
 # Closest pair of vertices at least CONTACT_GAP edges apart, divided by the mean edge length,
 # must reach CONTACT_RATIO. docs/design.md measured 0.71 for the FHW unknot at 300 edges (a true
@@ -401,7 +401,7 @@ def contact_ratio(P, min_gap: int = CONTACT_GAP, closed=True) -> float:
     ``closed=False``: open polylines (distances along them do not wrap round the ends)."""
     min_gap = check_number("min_gap", min_gap, 1, integer=True)
     X, layout, _ = as_checked_layout(P, closed, touching=False)
-    (dv, _), _ = closest_pairs(X, layout, min_gap)
+    dv, _ = closest_vertices(X, layout, min_gap)
     return dv / _mean_edge(X, layout)
 
 

@@ -22,7 +22,7 @@ import numpy as np
 from ._layout import as_layout, as_unit_layout
 from ._pairs import segment_distance2
 from ._tridiagonal import cyclic_tridiagonal_solve
-from .collision import closest_pairs, contact_time_x
+from .collision import closest_vertices, contact_time_x
 from .polygon import CONTACT_GAP, CONTACT_RATIO, _mean_edge, equalize
 
 #: Edges closer than this many mean edge lengths repel (the barrier is 0 beyond).
@@ -140,7 +140,7 @@ def _equalized(Y, layout, flags):
 
 def _vertex_ratio(X, layout):
     """The start check's contact ratio (polygon.contact_ratio) of stacked rows."""
-    (dv, _), _ = closest_pairs(X, layout, CONTACT_GAP)
+    dv, _ = closest_vertices(X, layout, CONTACT_GAP)
     return dv / _mean_edge(X, layout)
 
 

@@ -195,7 +195,7 @@ def _better(d2, i, j, best, bi, bj):
 
 @nb.njit(cache=True, parallel=True)
 def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmin, bmax,
-                    min_gap, nchunks, want):
+                    min_gap, nchunks, want, edges):
     diam2 = bvh.node_diam2(bmin, bmax)
     tasks = _frontier(left, right, bmin, bmax, diam2, False, want, bmin, bmax, 0.0, 0.0)
     big = np.iinfo(np.int64).max
@@ -207,7 +207,8 @@ def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmi
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
         vb, vi0, vj0 = np.inf, big, big
-        eb, ei0, ej0, es, et = np.inf, big, big, 0.0, 0.0
+        # without the edges, their bound never keeps a box pair (−∞)
+        eb, ei0, ej0, es, et = np.inf if edges else -np.inf, big, big, 0.0, 0.0
         stack = np.empty((128, 2), np.int64)
         for t in range(ch, tasks.shape[0], nchunks):
             stack[0, 0] = tasks[t, 0]
@@ -240,7 +241,7 @@ def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmi
                                     vb, vi0, vj0 = d2, i, j
                             i1, j1 = nxt[i], nxt[j]
                             # an open component's dummy edge (a point) is no edge here
-                            if ((not same) or gap >= 2) and i1 != i and j1 != j:
+                            if edges and ((not same) or gap >= 2) and i1 != i and j1 != j:
                                 d2, s, u = segment_distance2(
                                     X[i, 0], X[i, 1], X[i, 2], X[i1, 0], X[i1, 1], X[i1, 2],
                                     X[j, 0], X[j, 1], X[j, 2], X[j1, 0], X[j1, 1], X[j1, 2],
@@ -262,7 +263,7 @@ def closest_pairs_tree(X: np.ndarray, layout: Layout, min_gap: int = 4):
     bmin, bmax = bvh.segment_boxes(tree, X, layout)
     closed = np.ones(layout.k, np.bool_) if layout.closed is None else layout.closed
     vb, vi, eb, ei, ep = _closest_search(X, layout.nxt, layout.starts, layout.comp, closed,
-                                         *tree, bmin, bmax, int(min_gap), _CHUNKS, _TASKS)
+                                         *tree, bmin, bmax, int(min_gap), _CHUNKS, _TASKS, True)
     a = min(range(len(vb)), key=lambda c: (vb[c], vi[c, 0], vi[c, 1]))
     b = min(range(len(eb)), key=lambda c: (eb[c], ei[c, 0], ei[c, 1]))
     return (
@@ -270,3 +271,18 @@ def closest_pairs_tree(X: np.ndarray, layout: Layout, min_gap: int = 4):
         (float(np.sqrt(eb[b])), (int(ei[b, 0]), int(ei[b, 1])), (float(ep[b, 0]),
                                                                  float(ep[b, 1]))),
     )
+
+
+def closest_vertices_tree(X: np.ndarray, layout: Layout, min_gap: int = 4):
+    """The first half of :func:`closest_pairs_tree`, ``(distance, (i, j))``, without the
+    edges' distances: the same vertices (of pairs at one distance, the smallest indices),
+    searched in boxes of the vertices alone. FHW, one thread, best of 7 with the hierarchy's
+    build: 9.7 against 20.4 ms for both halves at 25 000 edges, 41 against 103 ms at 100 000
+    (the hs preconditioner asks it at every level of every iterate)."""
+    tree = bvh.build(X, layout)
+    bmin, bmax = bvh.vertex_boxes(tree, X)
+    closed = np.ones(layout.k, np.bool_) if layout.closed is None else layout.closed
+    vb, vi, *_ = _closest_search(X, layout.nxt, layout.starts, layout.comp, closed, *tree,
+                                 bmin, bmax, int(min_gap), _CHUNKS, _TASKS, False)
+    a = min(range(len(vb)), key=lambda c: (vb[c], vi[c, 0], vi[c, 1]))
+    return float(np.sqrt(vb[a])), (int(vi[a, 0]), int(vi[a, 1]))

@@ -264,8 +264,9 @@ def test_contact_queries_through_the_hierarchy_on_open_curves(rng):
     X, layout = as_layout(parts, closed)
     assert layout.n >= collision.CONTACT_TREE_FROM
     for gap in (2, 4):
-        assert collision.closest_pairs(X, layout, gap, search="tree") == \
-            collision.closest_pairs(X, layout, gap, search="pairs")
+        both = collision.closest_pairs(X, layout, gap, search="pairs")
+        assert collision.closest_pairs(X, layout, gap, search="tree") == both
+        assert collision.closest_vertices(X, layout, gap, search="tree") == both[0]
     for _ in range(3):
         U = rng.standard_normal(X.shape)
         assert collision.contact_time_x(X, U, layout, 1.0, 1e-4, search="tree") == \

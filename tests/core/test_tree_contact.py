@@ -30,6 +30,8 @@ def _both_closest(P, min_gap=4):
     X, layout = as_layout(P)
     a = collision.closest_pairs(X, layout, min_gap, search="pairs")
     b = collision.closest_pairs(X, layout, min_gap, search="tree")
+    # the vertices alone, searched without the edges: the same pair
+    assert collision.closest_vertices(X, layout, min_gap, search="tree") == b[0]
     return a, b
 
 
