@@ -56,13 +56,14 @@ def _contact_rows(X, U, nxt, starts, comp, tau_max, eps, nchunks):
 
 
 def contact_time_x(X, U, layout: Layout, tau_max: float, eps: float,
-                   search: str = "auto") -> float:
+                   search: str = "auto", staged: bool = True) -> float:
     """First contact of ``X − τU`` up to ``tau_max``; ``search`` "pairs" (all pairs), "tree"
-    (the hierarchy: the same value) or "auto" (the tree from ``CONTACT_TREE_FROM`` edges).
+    (the hierarchy: the same value) or "auto" (the tree from ``CONTACT_TREE_FROM`` edges);
+    ``staged`` as in :func:`.tree_contact.contact_time_tree`.
     Open components' dummy edges (._layout) are points at their last vertex, tested as such
     (by both searches: the hierarchy's rule for the pairs it skips is the all-pairs one)."""
     if _use_tree(search, layout.n, CONTACT_TREE_FROM):
-        return tree_contact.contact_time_tree(X, U, layout, tau_max, eps)
+        return tree_contact.contact_time_tree(X, U, layout, tau_max, eps, staged)
     return float(
         _contact_rows(X, np.ascontiguousarray(U), layout.nxt, layout.starts, layout.comp,
                       float(tau_max), float(eps), 16)

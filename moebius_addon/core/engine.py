@@ -193,13 +193,23 @@ class DenseEngine:
         Eo, go = self.obstacles.energy_gradient(X, self.layout.nxt, self.layout.prv)
         return E + Eo, g + go
 
-    def contact_time(self, X: np.ndarray, U: np.ndarray, tau_max: float, eps: float) -> float:
+    def contact_time(self, X: np.ndarray, U: np.ndarray, tau_max: float, eps: float,
+                     staged: bool = True) -> float:
         """Smallest ``τ ≤ tau_max`` at which ``X − τU`` comes within ``eps`` of touching
-        itself (edges not adjacent) or an obstacle, or ``tau_max`` when it does not."""
-        t = contact_time_x(X, U, self.layout, tau_max, eps)
+        itself (edges not adjacent) or an obstacle, or ``tau_max`` when it does not.
+        ``staged`` as in :func:`.tree_contact.contact_time_tree` (the same value)."""
+        t = contact_time_x(X, U, self.layout, tau_max, eps, staged=staged)
         if self.obstacles is not None and t > 0.0:
             t = self.obstacles.contact_time(X, U, self.layout.nxt, t, eps)
         return t
+
+    def path_is_free(self, X: np.ndarray, Q: np.ndarray, eps: float) -> bool:
+        """Whether the straight path from ``X`` to a trial ``Q`` keeps ``eps`` from contact
+        (:meth:`contact_time` up to the whole step). The step was bounded by a contact time
+        along its direction before, so a contact is rare here: the hierarchy searches the
+        whole path at once rather than in stages (FHW at 100 000 edges: one search of
+        18-31 ms where the stages took three)."""
+        return self.contact_time(X, X - Q, 1.0, eps, staged=False) >= 1.0
 
     # -- metric and saddle-point solves at the current iterate ---------------------------------
 

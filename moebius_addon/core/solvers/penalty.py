@@ -362,8 +362,7 @@ class Nesterov(_PenaltyRun):
             found = self._wolfe(Y, ev[0], ev[2], -solver.solve(ev[2]), self.tau)
             if found is not None and found[2][0] > f:
                 found = None  # the energy went up: reset the momentum
-            elif found is not None and self.engine.contact_time(X, X - found[1], 1.0,
-                                                                self.eps) < 1.0:
+            elif found is not None and not self.engine.path_is_free(X, found[1], self.eps):
                 # X → Y → X₊ is collision-free by construction; the straight X → X₊ (what
                 # a keyframe interpolates) must be too
                 found = None

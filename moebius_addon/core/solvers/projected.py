@@ -353,7 +353,7 @@ class Relaxation(Run):
             # the gradient (the two kernels sum in different orders)
             if EQ is None:
                 EQ = self.engine.trial_energy(Q) if ok else np.inf
-            if EQ <= target and self.engine.contact_time(X, X - Q, 1.0, self.eps) >= 1.0:
+            if EQ <= target and self.engine.path_is_free(X, Q, self.eps):
                 if self._growing:  # the length grows from the accepted trial
                     return self._accept_grown(self._grow(X, Q), tau, E)
                 EQ, gQ = self.engine.energy_gradient(Q)
@@ -407,7 +407,7 @@ class Relaxation(Run):
                 self.con = sched.constraints(old, free)
                 with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
                     G, ok = self._backproject(Q)
-                if ok and self.engine.contact_time(X, X - G, 1.0, self.eps) >= 1.0:
+                if ok and self.engine.path_is_free(X, G, self.eps):
                     return G, self.con, free
                 rate *= 0.5
         finally:
@@ -481,7 +481,7 @@ class Relaxation(Run):
         tau = min(tau, 2.0 / 3.0 * self.engine.contact_time(X, u, tau, self.eps))
         for _ in range(30):
             Q, ok = self._backproject(X - tau * u)
-            if ok and self.engine.contact_time(X, X - Q, 1.0, self.eps) >= 1.0:
+            if ok and self.engine.path_is_free(X, Q, self.eps):
                 Y = Q * self._scale + self._shift
                 if self.pinned is not None:
                     Y[self.pinned] = self._pinned_at

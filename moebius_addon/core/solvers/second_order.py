@@ -200,7 +200,7 @@ class ImplicitProjectedGradient(_Feasible):
             if delta is not None:
                 gd = float(np.einsum("ij,ij->", g, delta))
                 Q, ok = self._backproject(X - delta)
-                if ok and gd > 0 and self.engine.contact_time(X, X - Q, 1.0, self.eps) >= 1.0:
+                if ok and gd > 0 and self.engine.path_is_free(X, Q, self.eps):
                     EQ, gQ = self.engine.energy_gradient(Q)
                     if EQ <= E - self.armijo * gd:
                         self.tau = tau
@@ -333,7 +333,7 @@ class TrustRegion(_Feasible):
                 truncated = True
                 continue
             Q, ok = self._backproject(X + S)
-            if ok and self.engine.contact_time(X, X - Q, 1.0, self.eps) >= 1.0:
+            if ok and self.engine.path_is_free(X, Q, self.eps):
                 EQ, gQ = self.engine.energy_gradient(Q)
                 rho = (E - EQ) / pred
             else:
