@@ -131,15 +131,60 @@ def _lu_range(ab, kl, ku, piv, mult, lo, n):
     return -1
 
 
-@nb.njit(cache=True)
-def _solve_vector(ab, mult, piv, kl, ku, x):
-    _solve_range(ab, mult, piv, kl, ku, x, 0, x.shape[0])
+def pack_factors(ab, mult, kl, ku, cuts):
+    """The factors of :func:`band_lu_blocks` packed for the solves, in the memory of ``ab``
+    and ``mult`` (overwritten; ``ab`` stays fit to be filled again by :func:`_fill`): every
+    row keeps its entries up to its last nonzero, and ends at its block's end. Returns
+    ``(U, L, uw, lw, uoff, loff)``: the packed rows of U (from the diagonal on) and of the
+    multipliers, the rows' kept widths, and where each block's rows begin (then the end).
+    FHW at 100 000 edges (hs, kl = ku = 11): U's rows keep 9.1 of 23 entries on average, the
+    multipliers 8.6 of 11, so the solves, which stream the factors from memory, read 55 % of
+    the bytes (docs/benchmarks.md, session 12)."""
+    nb_ = cuts.shape[0] - 1
+    wide = kl + ku + 1 >= 65536
+    uw = np.empty(ab.shape[0], np.int64 if wide else np.uint16)
+    lw = np.empty(ab.shape[0], np.int64 if wide else np.uint16)
+    uoff = np.empty(nb_ + 1, np.int64)
+    loff = np.empty(nb_ + 1, np.int64)
+    U, L = ab.reshape(-1), mult.reshape(-1)
+    _pack(U, L, ab.shape[1], mult.shape[1], kl, ku, cuts, uw, lw, uoff, loff)
+    return U[:uoff[-1]], L[:loff[-1]], uw, lw, uoff, loff
 
 
 @nb.njit(cache=True)
-def _solve_range(ab, mult, piv, kl, ku, x, lo, n):
-    """:func:`_solve_vector` for the unknowns ``lo … n − 1`` of a block (factored alone),
-    ``x`` holding just those (``x[k − lo]``)."""
+def _pack(U, L, wu_, wl_, kl, ku, cuts, uw, lw, uoff, loff):
+    """:func:`pack_factors`' copy, row after row (a row's packed place is never after its
+    place in the band, so it reads nothing already overwritten)."""
+    pu = pl = 0
+    for b in range(cuts.shape[0] - 1):
+        lo, hi = cuts[b], cuts[b + 1]
+        uoff[b] = pu
+        loff[b] = pl
+        for k in range(lo, hi):
+            w = min(kl + ku + 1, hi - k)
+            while w > 1 and U[k * wu_ + w - 1] == 0.0:
+                w -= 1
+            for t in range(w):
+                U[pu + t] = U[k * wu_ + t]
+            uw[k] = w
+            pu += w
+            w = min(kl, hi - 1 - k)
+            while w > 0 and L[k * wl_ + w - 1] == 0.0:
+                w -= 1
+            for t in range(w):
+                L[pl + t] = L[k * wl_ + t]
+            lw[k] = w
+            pl += w
+    uoff[cuts.shape[0] - 1] = pu
+    loff[cuts.shape[0] - 1] = pl
+
+
+@nb.njit(cache=True)
+def _solve_range(U, L, uw, lw, uo, lo_, piv, x, lo, n):
+    """Solve with the packed factors (:func:`pack_factors`) of the block of unknowns
+    ``lo … n − 1`` (its rows of U from ``uo``, its multipliers from ``lo_`` on), ``x``
+    holding just those (``x[k − lo]``), in place. The operations of the solve on the band but
+    for the products with the zeros past a row's last nonzero: the same values."""
     for k in range(lo, n):
         p = piv[k]
         if p != k:
@@ -147,9 +192,13 @@ def _solve_range(ab, mult, piv, kl, ku, x, lo, n):
             x[k - lo] = x[p - lo]
             x[p - lo] = a
         xk = x[k - lo]
+        w = lw[k]
         if xk != 0.0:
-            for t in range(min(kl, n - 1 - k)):
-                x[k + 1 + t - lo] -= mult[k, t] * xk
+            for t in range(w):
+                x[k + 1 + t - lo] -= L[lo_ + t] * xk
+        lo_ += w
+    for k in range(lo, n):
+        uo += uw[k]  # the block's end: the back substitution walks its rows backwards
     # back substitution: row k's products with the columns k + 2 … in eight running sums
     # (column k + 2 + 8 i + c always in sum c), added pairwise, and the column k + 1, solved just
     # before, subtracted last. One running sum is a chain of dependent additions whose latency
@@ -157,64 +206,75 @@ def _solve_range(ab, mult, piv, kl, ku, x, lo, n):
     # rounding than one sum in column order (5.96e-16 of the solution's largest entry on a
     # random band); measured in docs/benchmarks.md, session 11
     for k in range(n - 1, lo - 1, -1):
-        w = min(n - 1, k + kl + ku) - k  # the columns k + 1 … k + w
+        uo -= uw[k]
+        w = uw[k] - 1  # the columns k + 1 … k + w
         o = k - lo
         s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = 0.0
         j = 2
         while j + 7 <= w:
-            s0 += ab[k, j] * x[o + j]
-            s1 += ab[k, j + 1] * x[o + j + 1]
-            s2 += ab[k, j + 2] * x[o + j + 2]
-            s3 += ab[k, j + 3] * x[o + j + 3]
-            s4 += ab[k, j + 4] * x[o + j + 4]
-            s5 += ab[k, j + 5] * x[o + j + 5]
-            s6 += ab[k, j + 6] * x[o + j + 6]
-            s7 += ab[k, j + 7] * x[o + j + 7]
+            s0 += U[uo + j] * x[o + j]
+            s1 += U[uo + j + 1] * x[o + j + 1]
+            s2 += U[uo + j + 2] * x[o + j + 2]
+            s3 += U[uo + j + 3] * x[o + j + 3]
+            s4 += U[uo + j + 4] * x[o + j + 4]
+            s5 += U[uo + j + 5] * x[o + j + 5]
+            s6 += U[uo + j + 6] * x[o + j + 6]
+            s7 += U[uo + j + 7] * x[o + j + 7]
             j += 8
         # the rest in the same sums by column (a block's rows end where one band's go on with
         # zeros: the same bits, test_open_tree_runs)
         if j <= w:
-            s0 += ab[k, j] * x[o + j]
+            s0 += U[uo + j] * x[o + j]
         if j + 1 <= w:
-            s1 += ab[k, j + 1] * x[o + j + 1]
+            s1 += U[uo + j + 1] * x[o + j + 1]
         if j + 2 <= w:
-            s2 += ab[k, j + 2] * x[o + j + 2]
+            s2 += U[uo + j + 2] * x[o + j + 2]
         if j + 3 <= w:
-            s3 += ab[k, j + 3] * x[o + j + 3]
+            s3 += U[uo + j + 3] * x[o + j + 3]
         if j + 4 <= w:
-            s4 += ab[k, j + 4] * x[o + j + 4]
+            s4 += U[uo + j + 4] * x[o + j + 4]
         if j + 5 <= w:
-            s5 += ab[k, j + 5] * x[o + j + 5]
+            s5 += U[uo + j + 5] * x[o + j + 5]
         if j + 6 <= w:
-            s6 += ab[k, j + 6] * x[o + j + 6]
+            s6 += U[uo + j + 6] * x[o + j + 6]
         t = x[o] - (((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7)))
         if w >= 1:
-            t -= ab[k, 1] * x[o + 1]
-        x[o] = t / ab[k, 0]
+            t -= U[uo + 1] * x[o + 1]
+        x[o] = t / U[uo]
+
+
+def band_solve(ab, mult, piv, kl, ku, b):
+    """Solve with the factors of :func:`band_lu` for the columns of ``b`` (n, m), in place
+    (the factors stay as they are: the solve packs copies)."""
+    cuts = np.array([0, ab.shape[0]], np.int64)
+    _band_solve(pack_factors(ab.copy(), mult.copy(), kl, ku, cuts) + (piv,), b)
 
 
 @nb.njit(cache=True, parallel=True)
-def band_solve(ab, mult, piv, kl, ku, b):
-    """Solve with the factors of :func:`band_lu` for the columns of ``b`` (n, m), in place
-    (columns in parallel, each alone: the same bits for any thread count)."""
+def _band_solve(F, b):
+    """:func:`band_solve`'s columns in parallel, each alone: the same bits for any thread
+    count."""
+    U, L, uw, lw, uoff, loff, piv = F
     for c in nb.prange(b.shape[1]):
         x = np.ascontiguousarray(b[:, c])
-        _solve_vector(ab, mult, piv, kl, ku, x)
+        _solve_range(U, L, uw, lw, uoff[0], loff[0], piv, x, 0, x.shape[0])
         b[:, c] = x
 
 
 @nb.njit(cache=True, parallel=True)
-def _solve_fields(ab, mult, piv, kl, ku, D, pos, G, lam, cuts):
+def _solve_fields(F, D, pos, G, lam, cuts):
     """Band solves for right-hand sides given as fields ``G`` (m, N, 3) and edge values
-    ``lam`` (m, N) (or (0, N): none), scaled by ``D`` on both sides; the solutions' fields
-    and edge multipliers (``G`` of shape (m, 0, 3): zero fields, without their memory). In
-    parallel over the right-hand sides and the blocks of the band (``cuts``,
-    :func:`block_cuts`: whole components, whose vertices are the rows' ``cuts / 4``): each
-    block's unknowns are solved alone, the same bits for any thread count."""
+    ``lam`` (m, N) (or (0, N): none), scaled by ``D`` on both sides, with the packed factors
+    ``F`` (:func:`pack_factors`, then the pivots); the solutions' fields and edge multipliers
+    (``G`` of shape (m, 0, 3): zero fields, without their memory). In parallel over the
+    right-hand sides and the blocks of the band (``cuts``, :func:`block_cuts`: whole
+    components, whose vertices are the rows' ``cuts / 4``): each block's unknowns are solved
+    alone, the same bits for any thread count."""
+    U, L, uw, lw, uoff, loff, piv = F
     m, n = G.shape[0], pos.shape[0]
     zero = G.shape[1] == 0
     X = np.empty((m, n, 3))
-    L = np.empty((m, n))
+    Lm = np.empty((m, n))
     nblocks = cuts.shape[0] - 1
     for t in nb.prange(m * nblocks):
         q = t // nblocks
@@ -226,13 +286,13 @@ def _solve_fields(ab, mult, piv, kl, ku, D, pos, G, lam, cuts):
             for d in range(3):
                 x[i + d - lo] = (0.0 if zero else G[q, v, d]) * D[i + d]
             x[i + 3 - lo] = lam[q, v] * D[i + 3] if lam.shape[0] > 0 else 0.0
-        _solve_range(ab, mult, piv, kl, ku, x, lo, hi)
+        _solve_range(U, L, uw, lw, uoff[b], loff[b], piv, x, lo, hi)
         for v in range(lo // 4, hi // 4):
             i = 4 * pos[v]
             for d in range(3):
                 X[q, v, d] = x[i + d - lo] * D[i + d]
-            L[q, v] = x[i + 3 - lo] * D[i + 3]
-    return X, L
+            Lm[q, v] = x[i + 3 - lo] * D[i + 3]
+    return X, Lm
 
 
 @nb.njit(cache=True)
@@ -451,9 +511,10 @@ class BandedSaddle:
         # blocks of whole components, some 64 at most (none for one component)
         self.cuts = block_cuts(ab, self.kl, self.ku, np.asarray(lay.starts[:-1], np.int64),
                                max(4 * lay.n // _BLOCKS, 1))
-        self.piv, self.mult, bad = band_lu_blocks(ab, self.kl, self.ku, self.cuts)
+        piv, mult, bad = band_lu_blocks(ab, self.kl, self.ku, self.cuts)
         if bad >= 0:
             raise np.linalg.LinAlgError(f"singular band at unknown {bad}")
+        self.factors = (*pack_factors(ab, mult, self.kl, self.ku, self.cuts), piv)
         return diag
 
     def release(self) -> None:
@@ -468,8 +529,7 @@ class BandedSaddle:
         ``lam`` (m, N): the core solution's fields and edge multipliers."""
         G = np.ascontiguousarray(G, dtype=np.float64)
         lam = np.zeros((0, G.shape[1])) if lam is None else np.ascontiguousarray(lam, float)
-        return _solve_fields(self.ab, self.mult, self.piv, self.kl, self.ku, self.D, self.pos,
-                             G, lam, self.cuts)
+        return _solve_fields(self.factors, self.D, self.pos, G, lam, self.cuts)
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(u, λ)`` of ``[[G, Cᵀ], [C, 0]] [u; λ] = [g; r]`` (λ: edge rows, then three

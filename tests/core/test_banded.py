@@ -136,3 +136,40 @@ def test_banded_tree_flow_follows_the_exact_flow():
     tree = core.relax(P, metric="h2", max_iter=15, engine="tree")
     assert tree.nit == exact.nit == 15
     assert tree.fun == pytest.approx(exact.fun, rel=1e-3)
+
+
+def test_packed_factors_keep_every_nonzero_and_solve_the_blocks():
+    """pack_factors drops only the zeros past each row's last nonzero (rows end at their
+    block's end), and each block's packed solve solves its system."""
+    rng = np.random.default_rng(1)
+    n, kl, ku = 80, 4, 4
+    M = np.zeros((n, n))
+    for i in range(n):
+        for j in range(max(0, i - kl), min(n, i + ku + 1)):
+            M[i, j] = rng.standard_normal() if (i + j) % 3 else 0.0  # zeros inside the band
+        M[i, i] += 8.0
+    M[40:, :40] = M[:40, 40:] = 0.0  # two blocks
+    ab = np.zeros((n, kl + ku + 1))
+    for i in range(n):
+        for j in range(max(0, i - kl), min(n, i + ku + 1)):
+            ab[i, j - i + kl] = M[i, j]
+    cuts = np.array([0, 40, n], np.int64)
+    piv, mult, bad = banded.band_lu_blocks(ab, kl, ku, cuts)
+    assert bad == -1
+    band, mult0 = ab.copy(), mult.copy()
+    U, L, uw, lw, uoff, loff = banded.pack_factors(ab, mult, kl, ku, cuts)
+    assert uw.sum() == U.size < band.size and lw.sum() == L.size < mult0.size
+    for b in range(2):
+        lo, hi = cuts[b], cuts[b + 1]
+        pu, pl = uoff[b], loff[b]
+        for k in range(lo, hi):
+            row = band[k, :min(kl + ku + 1, hi - k)]
+            assert np.array_equal(U[pu:pu + uw[k]], row[:uw[k]]) and not np.any(row[uw[k]:])
+            mrow = mult0[k, :min(kl, hi - 1 - k)]
+            assert np.array_equal(L[pl:pl + lw[k]], mrow[:lw[k]]) and not np.any(mrow[lw[k]:])
+            pu, pl = pu + uw[k], pl + lw[k]
+    b = rng.standard_normal(n)
+    x = b.copy()
+    banded._solve_range(U, L, uw, lw, uoff[0], loff[0], piv, x[:40], 0, 40)
+    banded._solve_range(U, L, uw, lw, uoff[1], loff[1], piv, x[40:], 40, n)
+    assert np.allclose(x, np.linalg.solve(M, b), rtol=1e-12, atol=1e-12)

@@ -58,7 +58,8 @@ def test_the_band_in_blocks_gives_the_bits_of_one_band(metric, rng, monkeypatch)
     for blocks in (1, banded._BLOCKS):
         monkeypatch.setattr(banded, "_BLOCKS", blocks)
         solver = OpenBandedSaddle(banded_parts(metric, X, layout), jac)
-        out[blocks] = (len(solver.cuts) - 1, solver.piv, solver.mult, *solver.solve(g, r))
+        U, L, uw, lw, _, _, piv = solver.factors  # (the blocks' offsets: one per block)
+        out[blocks] = (len(solver.cuts) - 1, U, L, uw, lw, piv, *solver.solve(g, r))
     assert out[1][0] == 1 and out[banded._BLOCKS][0] == 7  # a block per component
     for a, b in zip(out[1][1:], out[banded._BLOCKS][1:], strict=True):
         assert np.array_equal(a, b)
