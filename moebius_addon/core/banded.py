@@ -161,22 +161,23 @@ def _pack(U, L, wu_, wl_, kl, ku, cuts, uw, lw, uoff, loff):
         uoff[b] = pu
         loff[b] = pl
         for k in range(lo, hi):
-            w = min(kl + ku + 1, hi - k)
-            while w > 1 and U[k * wu_ + w - 1] == 0.0:
-                w -= 1
-            for t in range(w):
-                U[pu + t] = U[k * wu_ + t]
-            uw[k] = w
-            pu += w
-            w = min(kl, hi - 1 - k)
-            while w > 0 and L[k * wl_ + w - 1] == 0.0:
-                w -= 1
-            for t in range(w):
-                L[pl + t] = L[k * wl_ + t]
-            lw[k] = w
-            pl += w
+            uw[k] = _pack_row(U, k * wu_, min(kl + ku + 1, hi - k), 1, pu)
+            pu += uw[k]
+            lw[k] = _pack_row(L, k * wl_, min(kl, hi - 1 - k), 0, pl)
+            pl += lw[k]
     uoff[cuts.shape[0] - 1] = pu
     loff[cuts.shape[0] - 1] = pl
+
+
+@nb.njit(cache=True, inline="always")
+def _pack_row(A, start, w, least, to):
+    """The row of ``w`` entries at ``A[start]`` without its trailing zeros (at least
+    ``least`` entries kept), copied to ``A[to]``; its kept width."""
+    while w > least and A[start + w - 1] == 0.0:
+        w -= 1
+    for t in range(w):
+        A[to + t] = A[start + t]
+    return w
 
 
 @nb.njit(cache=True)
