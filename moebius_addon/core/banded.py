@@ -137,7 +137,7 @@ def pack_factors(ab, mult, kl, ku, cuts):
     row keeps its entries up to its last nonzero, and ends at its block's end. Returns
     ``(U, L, uw, lw, uoff, loff)``: the packed rows of U (from the diagonal on) and of the
     multipliers, the rows' kept widths, and where each block's rows begin (then the end).
-    FHW at 100 000 edges (hs, kl = ku = 11): U's rows keep 9.1 of 23 entries on average, the
+    FHW at 100 000 edges (hs, kl = ku = 11): U's rows keep 10.1 of 23 entries on average, the
     multipliers 8.6 of 11, so the solves, which stream the factors from memory, read 55 % of
     the bytes (docs/benchmarks.md, session 12)."""
     nb_ = cuts.shape[0] - 1
@@ -183,7 +183,7 @@ def _pack_row(A, start, w, least, to):
 @nb.njit(cache=True)
 def _solve_range(U, L, uw, lw, uo, lo_, piv, x, lo, n):
     """Solve with the packed factors (:func:`pack_factors`) of the block of unknowns
-    ``lo … n − 1`` (its rows of U from ``uo``, its multipliers from ``lo_`` on), ``x``
+    ``lo … n − 1`` (its rows of U ending at ``uo``, its multipliers from ``lo_`` on), ``x``
     holding just those (``x[k − lo]``), in place. The operations of the solve on the band but
     for the products with the zeros past a row's last nonzero: the same values."""
     for k in range(lo, n):
@@ -198,8 +198,6 @@ def _solve_range(U, L, uw, lw, uo, lo_, piv, x, lo, n):
             for t in range(w):
                 x[k + 1 + t - lo] -= L[lo_ + t] * xk
         lo_ += w
-    for k in range(lo, n):
-        uo += uw[k]  # the block's end: the back substitution walks its rows backwards
     # back substitution: row k's products with the columns k + 2 … in eight running sums
     # (column k + 2 + 8 i + c always in sum c), added pairwise, and the column k + 1, solved just
     # before, subtracted last. One running sum is a chain of dependent additions whose latency
@@ -258,7 +256,7 @@ def _band_solve(F, b):
     U, L, uw, lw, uoff, loff, piv = F
     for c in nb.prange(b.shape[1]):
         x = np.ascontiguousarray(b[:, c])
-        _solve_range(U, L, uw, lw, uoff[0], loff[0], piv, x, 0, x.shape[0])
+        _solve_range(U, L, uw, lw, uoff[1], loff[0], piv, x, 0, x.shape[0])
         b[:, c] = x
 
 
@@ -287,7 +285,7 @@ def _solve_fields(F, D, pos, G, lam, cuts):
             for d in range(3):
                 x[i + d - lo] = (0.0 if zero else G[q, v, d]) * D[i + d]
             x[i + 3 - lo] = lam[q, v] * D[i + 3] if lam.shape[0] > 0 else 0.0
-        _solve_range(U, L, uw, lw, uoff[b], loff[b], piv, x, lo, hi)
+        _solve_range(U, L, uw, lw, uoff[b + 1], loff[b], piv, x, lo, hi)
         for v in range(lo // 4, hi // 4):
             i = 4 * pos[v]
             for d in range(3):

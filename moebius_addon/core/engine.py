@@ -208,7 +208,7 @@ class DenseEngine:
         (:meth:`contact_time` up to the whole step). The step was bounded by a contact time
         along its direction before, so a contact is rare here: the hierarchy searches the
         whole path at once rather than in stages (FHW at 100 000 edges: one search of
-        18-31 ms where the stages took three)."""
+        17-32 ms where the stages took three)."""
         return self.contact_time(X, X - Q, 1.0, eps, staged=False) >= 1.0
 
     # -- metric and saddle-point solves at the current iterate ---------------------------------

@@ -174,7 +174,7 @@ def contact_time_tree(X: np.ndarray, U: np.ndarray, layout: Layout, tau_max: flo
     a horizon does not depend on the horizon, so the first horizon with a contact below it
     gives the answer (the same bits). ``staged=False`` searches up to ``tau_max`` at once,
     for a caller that expects no contact: without one, each stage costs about what the
-    whole search does (FHW at 100 000 edges: 17-31 ms each)."""
+    whole search does (FHW at 100 000 edges: 17-32 ms each)."""
     tree = bvh.build(X, layout)
     U = np.ascontiguousarray(U)
     tau_max = float(tau_max)
@@ -261,13 +261,8 @@ def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmi
 def closest_pairs_tree(X: np.ndarray, layout: Layout, min_gap: int = 4):
     """:func:`collision.closest_pairs` through the hierarchy (the same distances; of several
     pairs at the same distance, the one with the smallest indices)."""
-    tree = bvh.build(X, layout)
-    bmin, bmax = bvh.segment_boxes(tree, X, layout)
-    closed = np.ones(layout.k, np.bool_) if layout.closed is None else layout.closed
-    vb, vi, eb, ei, ep = _closest_search(X, layout.nxt, layout.starts, layout.comp, closed,
-                                         *tree, bmin, bmax, int(min_gap), _CHUNKS, _TASKS, True)
-    a = min(range(len(vb)), key=lambda c: (vb[c], vi[c, 0], vi[c, 1]))
-    b = min(range(len(eb)), key=lambda c: (eb[c], ei[c, 0], ei[c, 1]))
+    vb, vi, eb, ei, ep = _closest(X, layout, min_gap, True)
+    a, b = _least(vb, vi), _least(eb, ei)
     return (
         (float(np.sqrt(vb[a])), (int(vi[a, 0]), int(vi[a, 1]))),
         (float(np.sqrt(eb[b])), (int(ei[b, 0]), int(ei[b, 1])), (float(ep[b, 0]),
@@ -281,10 +276,21 @@ def closest_vertices_tree(X: np.ndarray, layout: Layout, min_gap: int = 4):
     searched in boxes of the vertices alone. FHW, one thread, best of 7 with the hierarchy's
     build: 9.7 against 20.4 ms for both halves at 25 000 edges, 41 against 103 ms at 100 000
     (the hs preconditioner asks it at every level of every iterate)."""
-    tree = bvh.build(X, layout)
-    bmin, bmax = bvh.vertex_boxes(tree, X)
-    closed = np.ones(layout.k, np.bool_) if layout.closed is None else layout.closed
-    vb, vi, *_ = _closest_search(X, layout.nxt, layout.starts, layout.comp, closed, *tree,
-                                 bmin, bmax, int(min_gap), _CHUNKS, _TASKS, False)
-    a = min(range(len(vb)), key=lambda c: (vb[c], vi[c, 0], vi[c, 1]))
+    vb, vi, *_ = _closest(X, layout, min_gap, False)
+    a = _least(vb, vi)
     return float(np.sqrt(vb[a])), (int(vi[a, 0]), int(vi[a, 1]))
+
+
+def _closest(X, layout, min_gap, edges: bool):
+    """:func:`_closest_search` on a fresh hierarchy: its boxes the segments' with ``edges``,
+    the vertices' alone without."""
+    tree = bvh.build(X, layout)
+    bmin, bmax = bvh.segment_boxes(tree, X, layout) if edges else bvh.vertex_boxes(tree, X)
+    closed = np.ones(layout.k, np.bool_) if layout.closed is None else layout.closed
+    return _closest_search(X, layout.nxt, layout.starts, layout.comp, closed, *tree, bmin,
+                           bmax, int(min_gap), _CHUNKS, _TASKS, edges)
+
+
+def _least(best, idx) -> int:
+    """The chunk with the least distance, of equal ones the smallest indices."""
+    return min(range(len(best)), key=lambda c: (best[c], idx[c, 0], idx[c, 1]))

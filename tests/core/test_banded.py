@@ -170,6 +170,6 @@ def test_packed_factors_keep_every_nonzero_and_solve_the_blocks():
             pu, pl = pu + uw[k], pl + lw[k]
     b = rng.standard_normal(n)
     x = b.copy()
-    banded._solve_range(U, L, uw, lw, uoff[0], loff[0], piv, x[:40], 0, 40)
-    banded._solve_range(U, L, uw, lw, uoff[1], loff[1], piv, x[40:], 40, n)
+    banded._solve_range(U, L, uw, lw, uoff[1], loff[0], piv, x[:40], 0, 40)
+    banded._solve_range(U, L, uw, lw, uoff[2], loff[1], piv, x[40:], 40, n)
     assert np.allclose(x, np.linalg.solve(M, b), rtol=1e-12, atol=1e-12)
