@@ -75,23 +75,23 @@ def _near_lanes(W, rx, ry, rz, bx0, by0, bz0, lj, r, cr, grad):
 
 
 @nb.njit(cache=True, inline="always")
-def _load_lanes(W, E, M, ln, nbr, q0, count, off_past):
-    """Edges ``q0 … q0 + count − 1`` of a leaf into the lanes' rows of ``W`` (midpoint, edge
-    vector, length, tree position, the neighbours' positions); lanes past the leaf's end
-    repeat its last edge, with position −1 when ``off_past`` (the tangent-point near field
-    masks them so), else its own."""
-    for j in range(_LANES):
+def _load_lanes(W, E, M, ln, nbr, q0, count, off_past, lanes):
+    """Edges ``q0 … q0 + count − 1`` of a leaf into the rows of ``W`` of a near field with
+    ``lanes`` lanes (midpoint, edge vector, length, tree position, the neighbours' positions;
+    row k at ``lanes · k``); lanes past the leaf's end repeat its last edge, with position −1
+    when ``off_past`` (the tangent-point near field masks them so), else its own."""
+    for j in range(lanes):
         q = q0 + min(j, count - 1)
         W[j] = M[q, 0]
-        W[_LANES + j] = M[q, 1]
-        W[2 * _LANES + j] = M[q, 2]
-        W[3 * _LANES + j] = E[q, 0]
-        W[4 * _LANES + j] = E[q, 1]
-        W[5 * _LANES + j] = E[q, 2]
-        W[6 * _LANES + j] = ln[q]
-        W[_NW_ID + j] = -1.0 if off_past and j >= count else q
-        W[_NW_ID + _LANES + j] = nbr[q, 0]
-        W[_NW_ID + 2 * _LANES + j] = nbr[q, 1]
+        W[lanes + j] = M[q, 1]
+        W[2 * lanes + j] = M[q, 2]
+        W[3 * lanes + j] = E[q, 0]
+        W[4 * lanes + j] = E[q, 1]
+        W[5 * lanes + j] = E[q, 2]
+        W[6 * lanes + j] = ln[q]
+        W[7 * lanes + j] = -1.0 if off_past and j >= count else q
+        W[8 * lanes + j] = nbr[q, 0]
+        W[9 * lanes + j] = nbr[q, 1]
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -104,7 +104,7 @@ def _near_leaves(E, M, ln, cp, lo, hi, leaves, t0, t1, noff, npart, nbr, grad, r
         a = leaves[t]
         for q0 in range(lo[a], hi[a], _LANES):
             count = min(_LANES, hi[a] - q0)
-            _load_lanes(W, E, M, ln, nbr, q0, count, False)
+            _load_lanes(W, E, M, ln, nbr, q0, count, False, _LANES)
             for j in range(_LANES):
                 W[_NW_ID + 3 * _LANES + j] = cp[q0 + min(j, count - 1)]
             W[_NW_SUMS:] = 0.0

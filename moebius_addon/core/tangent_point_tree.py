@@ -38,10 +38,9 @@ import math
 import numba as nb
 import numpy as np
 
-from . import bvh
 from ._far_field import _cluster_data, _levels
 from ._layout import Layout
-from ._near_field import _LANES, _NW_ID, _load_lanes, _to_vertices
+from ._near_field import _load_lanes, _to_vertices
 from .barnes_hut import Frame, _edge_arrays, check_theta
 from .energies.tangent_point import (
     DEFAULT_ALPHA,
@@ -55,11 +54,14 @@ from .energies.tangent_point import (
     pair,
 )
 
-#: Default admissibility of the tangent-point tree: relative errors (energy / gradient) at most
-#: 1.7e-3 / 2.0e-2 on FHW at 2 400–10 000 edges, about 5× / 30× below Repulsor's at its
-#: default (docs/benchmarks.md, "Tangent-point energy: cluster against cluster"); 0.25 cost
-#: 1.1–1.5× the time for errors about 1.5× smaller.
-THETA = 0.3
+#: Default admissibility of the tangent-point tree (with leaves of :data:`LEAF_SIZE` edges):
+#: relative errors (energy / gradient) at most 1.4e-3 / 2.5e-2 on FHW at 2 400–10 000 edges,
+#: about 6× / 9–24× below Repulsor's at its default; with leaves of four edges 0.3 gave errors
+#: 1.1–1.6× larger than 0.3 with leaves of eight, 0.25 about the same (docs/benchmarks.md,
+#: "Tangent-point energy: cluster against cluster" and session 13).
+THETA = 0.25
+#: Edges per leaf of the tangent-point tree (the near field's lanes, below).
+LEAF_SIZE = 4
 # Fixed pieces of the parallel loops over leaves: the per-edge sums are their own (any split,
 # the same bits); what the pairs give their second edge (near) or source cluster (far) goes to
 # one buffer per piece, so their number is fixed.
@@ -85,20 +87,27 @@ def _kernel(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
 # floats, position −1 past the leaf's end), its sums at W[_NW_SUMS + _LANES k + j] (f,
 # ∂f/∂e_I, ∂f/∂d) and what its pair gives J at W[_NW_OUT + _LANES k + j] (−∂f/∂d, ∂f/∂l_J),
 # added over the lanes in lane order. Constant offsets plus j: the lane loop vectorizes. No
-# fast-math (see ``_near_field``).
-# (_LANES and the first ten rows, _load_lanes, as in ``_near_field``)
+# fast-math (see ``_near_field``). The first ten rows as in ``_near_field``, by its _load_lanes.
+# Four lanes, leaves of four edges (:data:`LEAF_SIZE`): a finer split leaves fewer near pairs
+# (FHW, 10⁵ edges, θ = 0.3: 225 against 528 per edge with leaves of eight) and the far field,
+# cluster against cluster, is cheap; the gradient's near field 0.24–0.25 against 0.44–0.50 s
+# (docs/benchmarks.md, session 13). The energy-only pass loops over ``lanes``, a run-time
+# argument equal to _LANES: with a constant trip count of four LLVM unrolled that small loop
+# fully and left it scalar (0.25 s; 0.08 s so).
+_LANES = 4
+_NW_ID = 7 * _LANES
 _NW_SUMS = 10 * _LANES
 _NW_OUT = 17 * _LANES
 _NW_SIZE = 21 * _LANES
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _near_lanes(W, rx, ry, rz, lj, r, alpha, beta, kind, grad):
+def _near_lanes(W, rx, ry, rz, lj, r, alpha, beta, kind, grad, lanes):
     """Partner edge ``r`` (midpoint, length, tree position as a float) against every lane's
     edge, added to the lane's sums; what each pair gives ``r`` in the lane's ``_NW_OUT``
     slots. The edge itself, its neighbours and the lanes past the leaf's end count zero: by a
     select (``|d|² = ∞``), no branch."""
-    for j in range(_LANES):
+    for j in range(_LANES if grad else lanes):
         dx = W[j] - rx
         dy = W[_LANES + j] - ry
         dz = W[2 * _LANES + j] - rz
@@ -128,11 +137,12 @@ def _near_lanes(W, rx, ry, rz, lj, r, alpha, beta, kind, grad):
 
 
 @nb.njit(cache=True, inline="always")
-def _near_partner(W, b4, M, ln, lo_b, hi_b, alpha, beta, kind, grad):
+def _near_partner(W, b4, M, ln, lo_b, hi_b, alpha, beta, kind, grad, lanes):
     """The lanes against every edge of one partner leaf, what the pairs give each of its edges
     added to ``b4`` (the lanes in order)."""
     for r in range(lo_b, hi_b):
-        _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], ln[r], float(r), alpha, beta, kind, grad)
+        _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], ln[r], float(r), alpha, beta, kind, grad,
+                    lanes)
         if grad:
             sx = sy = sz = sl = 0.0
             for j in range(_LANES):
@@ -148,7 +158,7 @@ def _near_partner(W, b4, M, ln, lo_b, hi_b, alpha, beta, kind, grad):
 
 @nb.njit(cache=True, error_model="numpy")
 def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, noff, npart, nbr, alpha, beta, kind, grad,
-                 rows, b4):
+                 rows, b4, lanes):
     """The leaves ``leaves[t0:t1]`` of :func:`_near`: their edges' own sums to ``rows``, what
     their pairs give partner edges to ``b4``. A function of its own, called from the parallel
     loop: in a copy of a variant, compiled without ``parallel``, the gradient pass took 0.28 s
@@ -159,34 +169,35 @@ def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, noff, npart, nbr, alpha, beta
         a = leaves[t]
         for q0 in range(lo[a], hi[a], _LANES):
             count = min(_LANES, hi[a] - q0)
-            _load_lanes(W, E, M, ln, nbr, q0, count, True)  # past the leaf's end: off
+            _load_lanes(W, E, M, ln, nbr, q0, count, True, _LANES)  # past the leaf's end: off
             W[_NW_SUMS:] = 0.0
             for p in range(noff[a], noff[a + 1]):
                 b = npart[p]
                 # kind and grad constants at each call (the branches fold away)
                 if grad:
                     if kind == KIND_2_4:
-                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2_4, True)
+                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta,
+                                      KIND_2_4, True, lanes)
                     elif kind == KIND_2_45:
                         _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2_45,
-                                      True)
+                                      True, lanes)
                     elif kind == KIND_2:
-                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2, True)
+                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2, True, lanes)
                     else:
                         _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_GENERAL,
-                                      True)
+                                      True, lanes)
                 else:
                     if kind == KIND_2_4:
                         _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2_4,
-                                      False)
+                                      False, lanes)
                     elif kind == KIND_2_45:
                         _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2_45,
-                                      False)
+                                      False, lanes)
                     elif kind == KIND_2:
-                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2, False)
+                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2, False, lanes)
                     else:
                         _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_GENERAL,
-                                      False)
+                                      False, lanes)
             for j in range(count):
                 q = q0 + j
                 rows[0, q] = W[_NW_SUMS + j]
@@ -196,13 +207,14 @@ def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, noff, npart, nbr, alpha, beta
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def _near(E, M, ln, lo, hi, leaves, noff, npart, nbr, alpha, beta, kind, grad):
+def _near(E, M, ln, lo, hi, leaves, noff, npart, nbr, alpha, beta, kind, grad, lanes):
     """Per edge (tree order): row 0 ``Σ_J f(I, J)`` over its near partners and, with ``grad``,
     the partials of every near pair it is part of (as ``I`` or as ``J``) in its edge vector
     (rows 1–3, without the length term), midpoint (4–6) and length (7). Each ordered pair is
     evaluated once, by the leaf of its ``I``: the leaf's edges are the lanes
     (:func:`_near_lanes`), the partners' edges go by one at a time; what a pair gives ``J``
-    goes to one buffer per fixed piece of the leaves, added in piece order."""
+    goes to one buffer per fixed piece of the leaves, added in piece order. ``lanes``: always
+    :data:`_LANES`, passed at run time (see the lanes' comment above)."""
     n = ln.shape[0]
     nl = leaves.shape[0]
     rows = np.zeros((8 if grad else 1, n))
@@ -211,7 +223,7 @@ def _near(E, M, ln, lo, hi, leaves, noff, npart, nbr, alpha, beta, kind, grad):
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
         _near_leaves(E, M, ln, lo, hi, leaves, ch * nl // nchunks, (ch + 1) * nl // nchunks,
-                     noff, npart, nbr, alpha, beta, kind, grad, rows, sb[ch])
+                     noff, npart, nbr, alpha, beta, kind, grad, rows, sb[ch], lanes)
     if grad:
         for ch in range(nchunks):  # in piece order: the same bits for any thread count
             for k in range(4):
@@ -621,7 +633,7 @@ class TangentPointFrame(Frame):
 
     def __init__(self, X: np.ndarray, layout: Layout, alpha: float = DEFAULT_ALPHA,
                  beta: float = DEFAULT_BETA,
-                 theta: float = THETA, leaf_size: int = bvh.LEAF_SIZE):
+                 theta: float = THETA, leaf_size: int = LEAF_SIZE):
         self.alpha, self.beta = check_exponents(alpha, beta)
         self.kind = kind_of(self.alpha, self.beta)
         super().__init__(X, layout, check_theta(theta), leaf_size)
@@ -645,7 +657,7 @@ class TangentPointFrame(Frame):
         L, C = clusters[0], clusters[1]
         noff, npart, nbr = self._near_lists
         args = (self.alpha, self.beta, self.kind, grad)
-        rows = _near(E, M, ln, tree.lo, tree.hi, self.leaves, noff, npart, nbr, *args)
+        rows = _near(E, M, ln, tree.lo, tree.hi, self.leaves, noff, npart, nbr, *args, _LANES)
         if self.kind == KIND_GENERAL:
             # |T × d|^α is no polynomial in T for α ≠ 2: every edge against the cluster
             gnode = _far(E, M, ln, L, C, tree.lo, tree.hi, self.leaves, self.parent, self.foff,

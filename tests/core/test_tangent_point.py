@@ -123,7 +123,7 @@ def test_moebius_is_unchanged_through_the_new_door():
 @pytest.mark.parametrize("alpha, beta", [(2.0, 4.0), (2.5, 5.0)])
 def test_tree_against_exact(alpha, beta):
     # the tolerances documented in docs/benchmarks.md ("Tangent-point energy: cluster against
-    # cluster"): at the default theta (0.3) relative errors below 1e-3 (energy) and 2e-3
+    # cluster"): at the default theta (0.25) relative errors below 1e-3 (energy) and 2e-3
     # (gradient, 2-norm) on this trefoil; at 0.1 below 3e-4 and 1e-3, at 0.5 5e-3 and 1e-2;
     # smaller theta, smaller error. alpha = 2 is the cluster-cluster far field, 2.5 the
     # edge-vs-cluster one
