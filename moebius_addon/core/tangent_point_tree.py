@@ -56,9 +56,9 @@ from .energies.tangent_point import (
 
 #: Default admissibility of the tangent-point tree (with leaves of :data:`LEAF_SIZE` edges):
 #: relative errors (energy / gradient) at most 1.4e-3 / 2.5e-2 on FHW at 2 400–10 000 edges,
-#: about 6× / 9–24× below Repulsor's at its default; with leaves of four edges 0.3 gave errors
-#: 1.1–1.6× larger than 0.3 with leaves of eight, 0.25 about the same (docs/benchmarks.md,
-#: "Tangent-point energy: cluster against cluster" and session 13).
+#: about 6–7× / 24–40× below Repulsor's at its default. With leaves of four edges, 0.3 gave
+#: errors 0.9–2.5× those of 0.3 with leaves of eight; 0.25 gives about the same
+#: (docs/benchmarks.md, "Tangent-point energy: cluster against cluster" and session 13).
 THETA = 0.25
 #: Edges per leaf of the tangent-point tree (the near field's lanes, below).
 LEAF_SIZE = 4
@@ -90,7 +90,7 @@ def _kernel(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
 # fast-math (see ``_near_field``). The first ten rows as in ``_near_field``, by its _load_lanes.
 # Four lanes, leaves of four edges (:data:`LEAF_SIZE`): a finer split leaves fewer near pairs
 # (FHW, 10⁵ edges, θ = 0.3: 225 against 528 per edge with leaves of eight) and the far field,
-# cluster against cluster, is cheap; the gradient's near field 0.24–0.25 against 0.44–0.50 s
+# cluster against cluster, is cheap; the gradient's near field 0.24–0.25 against 0.44–0.51 s
 # (docs/benchmarks.md, session 13). The energy-only pass loops over ``lanes``, a run-time
 # argument equal to _LANES: with a constant trip count of four LLVM unrolled that small loop
 # fully and left it scalar (0.25 s; 0.08 s so).
