@@ -88,12 +88,10 @@ def _kernel(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
 # ∂f/∂e_I, ∂f/∂d) and what its pair gives J at W[_NW_OUT + _LANES k + j] (−∂f/∂d, ∂f/∂l_J),
 # added over the lanes in lane order. Constant offsets plus j: the lane loop vectorizes. No
 # fast-math (see ``_near_field``). The first ten rows as in ``_near_field``, by its _load_lanes.
-# Four lanes, leaves of four edges (:data:`LEAF_SIZE`): a finer split leaves fewer near pairs
-# (FHW, 10⁵ edges, θ = 0.3: 225 against 528 per edge with leaves of eight) and the far field,
-# cluster against cluster, is cheap; the gradient's near field 0.24–0.25 against 0.44–0.51 s
-# (docs/benchmarks.md, session 13). The energy-only pass loops over ``lanes``, a run-time
-# argument equal to _LANES: with a constant trip count of four LLVM unrolled that small loop
-# fully and left it scalar (0.25 s; 0.08 s so).
+# Four lanes on leaves of four edges (:data:`LEAF_SIZE`): the finer split leaves about half the
+# near pairs, and the far field, cluster against cluster, is cheap per pair. The energy-only
+# pass loops over ``lanes``, a run-time argument equal to _LANES: a constant trip count of four
+# was unrolled fully and left scalar (times in docs/benchmarks.md, session 13).
 _LANES = 4
 _NW_ID = 7 * _LANES
 _NW_SUMS = 10 * _LANES
