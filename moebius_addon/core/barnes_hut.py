@@ -369,15 +369,12 @@ def _by_target(pairs, m):
 
 
 @nb.njit(cache=True)
-def _near_lists(pairs, m, perm, nxt, prv):
-    """What the near field reads besides the edges: every leaf's near partners (CSR
-    ``(offsets, partners)`` of :func:`_by_target`: both directions of each pair, a self pair
-    once), per tree position the tree positions of the previous and the next edge along the
-    curve (always in a near partner: boxes of edges that share a vertex touch), and per edge
-    its tree position (−1 for the dummy edges of open components, which are not in the tree:
-    the ends of an open polyline have no neighbour there)."""
+def _neighbours(perm, nxt, prv):
+    """Per tree position the tree positions of the previous and the next edge along the curve
+    (always in a near partner: boxes of edges that share a vertex touch), and per edge its tree
+    position (−1 for the dummy edges of open components, which are not in the tree: the ends
+    of an open polyline have no neighbour there)."""
     n = perm.shape[0]
-    noff, npart = _by_target(pairs, m)
     at = np.full(nxt.shape[0], -1, np.int64)  # −1: a dummy edge of an open component
     for q in range(n):
         at[perm[q]] = q
@@ -386,6 +383,16 @@ def _near_lists(pairs, m, perm, nxt, prv):
         i = perm[q]
         nbr[q, 0] = at[prv[i]]
         nbr[q, 1] = at[nxt[i]]
+    return nbr, at
+
+
+@nb.njit(cache=True)
+def _near_lists(pairs, m, perm, nxt, prv):
+    """What the near field reads besides the edges: every leaf's near partners (CSR
+    ``(offsets, partners)`` of :func:`_by_target`: both directions of each pair, a self pair
+    once) and :func:`_neighbours`."""
+    noff, npart = _by_target(pairs, m)
+    nbr, at = _neighbours(perm, nxt, prv)
     return noff, npart, nbr, at
 
 
@@ -428,7 +435,7 @@ class Frame:
         if layout.has_open:
             cp = layout.comp[tree.perm]
             self._near_cp = np.where(layout.closed[cp], cp, -2 - np.arange(cp.shape[0]))
-        clusters = _cluster_data(*edges[:4], tree.lo, tree.hi, tree.left, tree.right)
+        clusters = self._clusters(edges)
         # what an evaluation at the frame's own polygon reuses (the engine's next call)
         self._own = (X.copy(), edges, clusters)
         nc = clusters[-1]
@@ -444,10 +451,20 @@ class Frame:
         self.foff, self.fpart = _by_target(far, m)
         self.near = near
         self.leaves = np.flatnonzero(tree.left < 0).astype(np.int64)
-        *self._near_lists, self._at = _near_lists(near, m, tree.perm, layout.nxt, layout.prv)
+        self._near_setup(near, m)
         #: The arc-length part of the open components' energy (None: all closed).
         self.arc = (ArcField(layout, X, tree, self.foff, self.fpart)
                     if layout.has_open and self.arc_part else None)
+
+    def _clusters(self, edges):
+        """Per node what the far field reads, the nodes' kinds (``nc``) last."""
+        tree = self.tree
+        return _cluster_data(*edges[:4], tree.lo, tree.hi, tree.left, tree.right)
+
+    def _near_setup(self, near: np.ndarray, m: int):
+        """What the near field reads besides the edges (:func:`_near_lists`)."""
+        tree, layout = self.tree, self.layout
+        *self._near_lists, self._at = _near_lists(near, m, tree.perm, layout.nxt, layout.prv)
 
     def _edges(self, X: np.ndarray):
         """:func:`_edge_arrays` in tree order, an open component's edges of kind
@@ -464,7 +481,7 @@ class Frame:
         X0, edges, clusters = self._own
         if not np.array_equal(X, X0):
             edges = self._edges(X)
-            clusters = _cluster_data(*edges[:4], tree.lo, tree.hi, tree.left, tree.right)
+            clusters = self._clusters(edges)
         E, M, ln = edges[:3]
         L, C, S, D, Q, T, nc = clusters
         eF, gL, gS, gC, gD, gQ, gT = _far(L, C, S, D, Q, T, nc, self.foff, self.fpart, grad)

@@ -38,6 +38,7 @@ def _segment(i, lo, hi, ex, ey, ez, mx, my, mz, ln, b, alpha, beta, kind, grad, 
     edge vector and midpoint added to ``acc`` (7), those of each ``j`` (midpoint, length) to
     the buffer ``b``."""
     ax, ay, az, li = ex[i], ey[i], ez[i], ln[i]
+    il = 1.0 / li
     px, py, pz = mx[i], my[i], mz[i]
     s = acc[0]
     gax, gay, gaz, gmx, gmy, gmz = acc[1], acc[2], acc[3], acc[4], acc[5], acc[6]
@@ -46,7 +47,7 @@ def _segment(i, lo, hi, ex, ey, ez, mx, my, mz, ln, b, alpha, beta, kind, grad, 
         dy = py - my[j]
         dz = pz - mz[j]
         f, fax, fay, faz, fdx, fdy, fdz, fl = pair(
-            dx, dy, dz, ax, ay, az, li, ln[j], dx * dx + dy * dy + dz * dz, alpha, beta, kind)
+            dx, dy, dz, ax, ay, az, li, il, ln[j], dx * dx + dy * dy + dz * dz, alpha, beta, kind)
         s += f
         if grad:
             gax += fax

@@ -38,10 +38,10 @@ import math
 import numba as nb
 import numpy as np
 
-from ._far_field import _cluster_data, _levels
+from ._far_field import _kind, _levels
 from ._layout import Layout
 from ._near_field import _load_lanes, _to_vertices
-from .barnes_hut import Frame, _edge_arrays, check_theta
+from .barnes_hut import Frame, _edge_arrays, _neighbours, check_theta
 from .energies.tangent_point import (
     DEFAULT_ALPHA,
     DEFAULT_BETA,
@@ -69,42 +69,46 @@ _FAR_CHUNKS = 16
 
 
 @nb.njit(cache=True, inline="always")
-def _kernel(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
+def _kernel(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, kind):
     """:func:`pair` with ``kind`` made a constant at each call site (the branches inside fold
     away)."""
     if kind == KIND_2_4:
-        return pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, KIND_2_4)
+        return pair(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, KIND_2_4)
     if kind == KIND_2_45:
-        return pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, KIND_2_45)
+        return pair(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, KIND_2_45)
     if kind == KIND_2:
-        return pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, KIND_2)
-    return pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, KIND_GENERAL)
+        return pair(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, KIND_2)
+    return pair(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, KIND_GENERAL)
 
 
-# The near field's lanes (the idea of ``_near_field``): up to this many edges ``I`` of a leaf
-# against one partner edge ``J`` at a time. One work array per parallel piece: lane j's edge at
-# W[_LANES k + j] (k: midpoint, edge vector, length, then its tree position and neighbours' as
-# floats, position −1 past the leaf's end), its sums at W[_NW_SUMS + _LANES k + j] (f,
-# ∂f/∂e_I, ∂f/∂d) and what its pair gives J at W[_NW_OUT + _LANES k + j] (−∂f/∂d, ∂f/∂l_J),
-# added over the lanes in lane order. Constant offsets plus j: the lane loop vectorizes. No
-# fast-math (see ``_near_field``). The first ten rows as in ``_near_field``, by its _load_lanes.
+# The near field's lanes (the idea of ``_near_field``): up to this many edges of a leaf against
+# one partner edge at a time, both orders of each pair at once (the distance, |d|^−β and the
+# masks are shared). One work array per parallel piece: lane j's edge at W[_LANES k + j] (k:
+# midpoint, edge vector, length, then its tree position and neighbours' as floats, position −1
+# past the leaf's end, then 1 / length), its sums at W[_NW_SUMS + _LANES k + j] (f, ∂/∂e,
+# ∂/∂m, ∂/∂l) and what its pairs give the partner at W[_NW_OUT + _LANES k + j] (∂/∂e, ∂/∂m,
+# ∂/∂l), added over the lanes in lane order. Constant offsets plus j: the lane loop
+# vectorizes. No fast-math (see ``_near_field``). The first ten rows as in ``_near_field``, by
+# its _load_lanes.
 # Four lanes on leaves of four edges (:data:`LEAF_SIZE`): the finer split leaves about half the
 # near pairs, and the far field, cluster against cluster, is cheap per pair. The energy-only
 # pass loops over ``lanes``, a run-time argument equal to _LANES: a constant trip count of four
 # was unrolled fully and left scalar (times in docs/benchmarks.md, session 13).
 _LANES = 4
 _NW_ID = 7 * _LANES
-_NW_SUMS = 10 * _LANES
-_NW_OUT = 17 * _LANES
-_NW_SIZE = 21 * _LANES
+_NW_IL = 10 * _LANES
+_NW_SUMS = 11 * _LANES
+_NW_OUT = 19 * _LANES
+_NW_SIZE = 26 * _LANES
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _near_lanes(W, rx, ry, rz, lj, r, alpha, beta, kind, grad, lanes):
-    """Partner edge ``r`` (midpoint, length, tree position as a float) against every lane's
-    edge, added to the lane's sums; what each pair gives ``r`` in the lane's ``_NW_OUT``
-    slots. The edge itself, its neighbours and the lanes past the leaf's end count zero: by a
-    select (``|d|² = ∞``), no branch."""
+def _near_lanes(W, rx, ry, rz, sx, sy, sz, lr, ir, r, lim, alpha, beta, kind, grad, lanes):
+    """Partner edge ``r`` (midpoint, edge vector, length and its inverse, tree position as a
+    float) against every lane's edge, both ordered pairs: added to the lane's sums, what they
+    give ``r`` in the lane's ``_NW_OUT`` slots. The edge itself, its neighbours, the lanes past
+    the leaf's end and lanes at positions ≥ ``lim`` (a leaf against itself: each pair once)
+    count zero: by a select (``|d|² = ∞``), no branch."""
     for j in range(_LANES if grad else lanes):
         dx = W[j] - rx
         dy = W[_LANES + j] - ry
@@ -117,116 +121,232 @@ def _near_lanes(W, rx, ry, rz, lj, r, alpha, beta, kind, grad, lanes):
         r2 = np.inf if r == W[_NW_ID + _LANES + j] else r2
         r2 = np.inf if r == W[_NW_ID + 2 * _LANES + j] else r2
         r2 = np.inf if q < 0.0 else r2
+        r2 = np.inf if q >= lim else r2
+        lq = W[6 * _LANES + j]
+        # (I, J) = (lane, r) and (r, lane)
         f, fax, fay, faz, fdx, fdy, fdz, fl = _kernel(
             dx, dy, dz, W[3 * _LANES + j], W[4 * _LANES + j], W[5 * _LANES + j],
-            W[6 * _LANES + j], lj, r2, alpha, beta, kind)
-        W[_NW_SUMS + j] += f
+            lq, W[_NW_IL + j], lr, r2, alpha, beta, kind)
+        g, gax, gay, gaz, gdx, gdy, gdz, gl = _kernel(
+            -dx, -dy, -dz, sx, sy, sz, lr, ir, lq, r2, alpha, beta, kind)
+        W[_NW_SUMS + j] += f + g
         if grad:
+            mx = fdx - gdx
+            my = fdy - gdy
+            mz = fdz - gdz
             W[_NW_SUMS + _LANES + j] += fax
             W[_NW_SUMS + 2 * _LANES + j] += fay
             W[_NW_SUMS + 3 * _LANES + j] += faz
-            W[_NW_SUMS + 4 * _LANES + j] += fdx
-            W[_NW_SUMS + 5 * _LANES + j] += fdy
-            W[_NW_SUMS + 6 * _LANES + j] += fdz
-            W[_NW_OUT + j] = fdx
-            W[_NW_OUT + _LANES + j] = fdy
-            W[_NW_OUT + 2 * _LANES + j] = fdz
-            W[_NW_OUT + 3 * _LANES + j] = fl
+            W[_NW_SUMS + 4 * _LANES + j] += mx
+            W[_NW_SUMS + 5 * _LANES + j] += my
+            W[_NW_SUMS + 6 * _LANES + j] += mz
+            W[_NW_SUMS + 7 * _LANES + j] += gl
+            W[_NW_OUT + j] = gax
+            W[_NW_OUT + _LANES + j] = gay
+            W[_NW_OUT + 2 * _LANES + j] = gaz
+            W[_NW_OUT + 3 * _LANES + j] = -mx
+            W[_NW_OUT + 4 * _LANES + j] = -my
+            W[_NW_OUT + 5 * _LANES + j] = -mz
+            W[_NW_OUT + 6 * _LANES + j] = fl
 
 
 @nb.njit(cache=True, inline="always")
-def _near_partner(W, b4, M, ln, lo_b, hi_b, alpha, beta, kind, grad, lanes):
-    """The lanes against every edge of one partner leaf, what the pairs give each of its edges
-    added to ``b4`` (the lanes in order)."""
-    for r in range(lo_b, hi_b):
-        _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], ln[r], float(r), alpha, beta, kind, grad,
-                    lanes)
-        if grad:
-            sx = sy = sz = sl = 0.0
-            for j in range(_LANES):
-                sx += W[_NW_OUT + j]
-                sy += W[_NW_OUT + _LANES + j]
-                sz += W[_NW_OUT + 2 * _LANES + j]
-                sl += W[_NW_OUT + 3 * _LANES + j]
-            b4[0, r] -= sx
-            b4[1, r] -= sy
-            b4[2, r] -= sz
-            b4[3, r] += sl
+def _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width, alpha, beta, kind,
+                grad, lanes):
+    """The loaded lanes of leaf ``a`` against every edge ``r`` of the leaf itself (each pair
+    once) and of its partners after it: what the pairs give ``r`` (edge vector, midpoint,
+    length; the lanes in order) added to its columns 1–7 of ``acc`` for a leaf of the same piece,
+    else of ``ext`` in the partner's slot (rows ``width · slot …``). One call site per kind
+    and pass: with three (24 copies of the kernel pair inlined) compiling took minutes."""
+    for p in range(uoff[a] - 1, uoff[a + 1]):
+        b = a if p < uoff[a] else upart[p]
+        s = -1 if p < uoff[a] else uslot[p]
+        tgt = acc if s < 0 else ext
+        off = 0 if s < 0 else width * s - lo[b]
+        for r in range(lo[b], hi[b]):
+            fr = float(r)
+            _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2], ln[r],
+                        1.0 / ln[r], fr, fr if b == a else np.inf, alpha, beta, kind, grad, lanes)
+            if grad:
+                for k in range(7):
+                    t = 0.0
+                    for j in range(_LANES):
+                        t += W[_NW_OUT + k * _LANES + j]
+                    tgt[r + off, 1 + k] += t
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, noff, npart, nbr, alpha, beta, kind, grad,
-                 rows, b4, lanes):
-    """The leaves ``leaves[t0:t1]`` of :func:`_near`: their edges' own sums to ``rows``, what
-    their pairs give partner edges to ``b4``. A function of its own, called from the parallel
-    loop: in a copy of a variant, compiled without ``parallel``, the gradient pass took 0.28 s
-    against 0.33 s inside the loop's body (10⁵ edges); in place the difference was in the
-    noise (docs/benchmarks.md, session 11)."""
+def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, uoff, upart, uslot, nbr, width, alpha,
+                 beta, kind, grad, acc, ext, lanes):
+    """The leaves ``leaves[t0:t1]`` of :func:`_near` (one piece): the sums of their edges and
+    what their pairs give other edges to ``acc`` and ``ext`` (:func:`_near_group`). A function
+    of its own, called from the parallel loop: in a copy of a variant, compiled without
+    ``parallel``, the gradient pass took 0.28 s against 0.33 s inside the loop's body (10⁵
+    edges); in place the difference was in the noise (docs/benchmarks.md, session 11)."""
     W = np.zeros(_NW_SIZE)
     for t in range(t0, t1):
         a = leaves[t]
         for q0 in range(lo[a], hi[a], _LANES):
             count = min(_LANES, hi[a] - q0)
             _load_lanes(W, E, M, ln, nbr, q0, count, True, _LANES)  # past the leaf's end: off
+            for j in range(_LANES):
+                W[_NW_IL + j] = 1.0 / W[6 * _LANES + j]
             W[_NW_SUMS:] = 0.0
-            for p in range(noff[a], noff[a + 1]):
-                b = npart[p]
-                # kind and grad constants at each call (the branches fold away)
-                if grad:
-                    if kind == KIND_2_4:
-                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta,
-                                      KIND_2_4, True, lanes)
-                    elif kind == KIND_2_45:
-                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2_45,
-                                      True, lanes)
-                    elif kind == KIND_2:
-                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2, True, lanes)
-                    else:
-                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_GENERAL,
-                                      True, lanes)
+            # kind and grad constants at each call (the branches fold away)
+            if grad:
+                if kind == KIND_2_4:
+                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, KIND_2_4, True, lanes)
+                elif kind == KIND_2_45:
+                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, KIND_2_45, True, lanes)
+                elif kind == KIND_2:
+                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, KIND_2, True, lanes)
                 else:
-                    if kind == KIND_2_4:
-                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2_4,
-                                      False, lanes)
-                    elif kind == KIND_2_45:
-                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2_45,
-                                      False, lanes)
-                    elif kind == KIND_2:
-                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_2, False, lanes)
-                    else:
-                        _near_partner(W, b4, M, ln, lo[b], hi[b], alpha, beta, KIND_GENERAL,
-                                      False, lanes)
+                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, KIND_GENERAL, True, lanes)
+            else:
+                if kind == KIND_2_4:
+                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, KIND_2_4, False, lanes)
+                elif kind == KIND_2_45:
+                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, KIND_2_45, False, lanes)
+                elif kind == KIND_2:
+                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, KIND_2, False, lanes)
+                else:
+                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, KIND_GENERAL, False, lanes)
             for j in range(count):
                 q = q0 + j
-                rows[0, q] = W[_NW_SUMS + j]
+                acc[q, 0] += W[_NW_SUMS + j]
                 if grad:
-                    for k in range(1, 7):
-                        rows[k, q] = W[_NW_SUMS + k * _LANES + j]
+                    for k in range(1, 8):
+                        acc[q, k] += W[_NW_SUMS + k * _LANES + j]
+
+
+@nb.njit(cache=True)
+def _near_pieces(leaves, pairs, m, nchunks):
+    """Each unordered pair of near leaves (``pairs``, :func:`.barnes_hut._split`'s) once, by
+    the first in tree order: per leaf its partners after it (CSR ``uoff``, ``upart``, in the
+    order of ``pairs``) and the slot each takes in the buffer of what the pairs give partners
+    beyond the leaf's piece (``uslot``, −1 for a partner in the same piece; one slot per piece
+    and partner leaf, ``slot_leaf``), the pieces ``nchunks`` fixed ranges of ``leaves``."""
+    nl = leaves.shape[0]
+    pos = np.full(m, -1, np.int64)
+    for t in range(nl):
+        pos[leaves[t]] = t
+    uoff = np.zeros(m + 1, np.int64)
+    for p in range(pairs.shape[0]):
+        if pairs[p, 0] != pairs[p, 1]:
+            uoff[min(pairs[p, 0], pairs[p, 1]) + 1] += 1
+    for k in range(m):
+        uoff[k + 1] += uoff[k]
+    upart = np.empty(uoff[m], np.int64)
+    fill = uoff[:m].copy()
+    for p in range(pairs.shape[0]):
+        a, b = pairs[p, 0], pairs[p, 1]
+        if a != b:
+            lo_ = min(a, b)
+            upart[fill[lo_]] = max(a, b)
+            fill[lo_] += 1
+    uslot = np.empty(uoff[m], np.int64)
+    slot_leaf = np.empty(uoff[m], np.int64)
+    stamp = np.full(m, -1, np.int64)
+    slot = np.empty(m, np.int64)
+    ns = 0
+    for ch in range(nchunks):
+        t1 = (ch + 1) * nl // nchunks
+        for t in range(ch * nl // nchunks, t1):
+            a = leaves[t]
+            for k in range(uoff[a], uoff[a + 1]):
+                b = upart[k]
+                if pos[b] < t1:
+                    uslot[k] = -1
+                else:
+                    if stamp[b] != ch:
+                        stamp[b] = ch
+                        slot[b] = ns
+                        slot_leaf[ns] = b
+                        ns += 1
+                    uslot[k] = slot[b]
+    return uoff, upart, uslot, slot_leaf[:ns].copy()
+
+
+@nb.njit(cache=True, parallel=True)
+def _lc_data(M, ln, cp, lo, hi, left, right):
+    """Per node what the tangent-point far field and the split read: total length ``L``,
+    length-weighted centre ``c`` and kind (:func:`._far_field._cluster_data`'s, without the
+    Möbius energy's higher moments). One depth at a time from the deepest."""
+    m = lo.shape[0]
+    L = np.empty(m)
+    C = np.empty((m, 3))
+    nc = np.empty(m, np.int64)
+    order, offsets = _levels(left, right)
+    for d in range(offsets.shape[0] - 2, -1, -1):
+        for tt in nb.prange(offsets[d], offsets[d + 1]):
+            node = order[tt]
+            a0, b0 = left[node], right[node]
+            if a0 < 0:
+                tot = cx = cy = cz = 0.0
+                c0 = cp[lo[node]]
+                for q in range(lo[node], hi[node]):
+                    w = ln[q]
+                    tot += w
+                    cx += w * M[q, 0]
+                    cy += w * M[q, 1]
+                    cz += w * M[q, 2]
+                    c0 = _kind(c0, cp[q])
+                L[node] = tot
+                C[node, 0] = cx / tot
+                C[node, 1] = cy / tot
+                C[node, 2] = cz / tot
+                nc[node] = c0
+            else:
+                tot = L[a0] + L[b0]
+                L[node] = tot
+                for k in range(3):
+                    C[node, k] = (L[a0] * C[a0, k] + L[b0] * C[b0, k]) / tot
+                nc[node] = _kind(nc[a0], nc[b0])
+    return L, C, nc
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def _near(E, M, ln, lo, hi, leaves, noff, npart, nbr, alpha, beta, kind, grad, lanes):
+def _near(E, M, ln, lo, hi, leaves, uoff, upart, uslot, slot_leaf, nbr, alpha, beta, kind, grad,
+          lanes):
     """Per edge (tree order): row 0 ``Σ_J f(I, J)`` over its near partners and, with ``grad``,
     the partials of every near pair it is part of (as ``I`` or as ``J``) in its edge vector
-    (rows 1–3, without the length term), midpoint (4–6) and length (7). Each ordered pair is
-    evaluated once, by the leaf of its ``I``: the leaf's edges are the lanes
-    (:func:`_near_lanes`), the partners' edges go by one at a time; what a pair gives ``J``
-    goes to one buffer per fixed piece of the leaves, added in piece order. ``lanes``: always
-    :data:`_LANES`, passed at run time (see the lanes' comment above)."""
+    (rows 1–3, without the length term), midpoint (4–6) and length (7). Each unordered pair of
+    edges is evaluated once, both orders (:func:`_near_lanes`), by the first leaf in tree order
+    (:func:`_near_pieces`); the pieces of the leaves in parallel, each writing its own edges'
+    rows, what its pairs give edges beyond it to their slots, added in slot order: the same
+    bits for any thread count. ``lanes``: always :data:`_LANES`, passed at run time (see the
+    lanes' comment above)."""
     n = ln.shape[0]
     nl = leaves.shape[0]
-    rows = np.zeros((8 if grad else 1, n))
+    width = 0
+    for t in range(nl):
+        width = max(width, hi[leaves[t]] - lo[leaves[t]])
+    slots = slot_leaf.shape[0] if grad else 0
+    acc = np.zeros((n, 8 if grad else 1))  # an edge's sums in one cache line
+    ext = np.zeros((width * slots, 8 if grad else 1))
     nchunks = min(nl, _FAR_CHUNKS)
-    sb = np.zeros((nchunks, 4 if grad else 0, n))
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
         _near_leaves(E, M, ln, lo, hi, leaves, ch * nl // nchunks, (ch + 1) * nl // nchunks,
-                     noff, npart, nbr, alpha, beta, kind, grad, rows, sb[ch], lanes)
-    if grad:
-        for ch in range(nchunks):  # in piece order: the same bits for any thread count
-            for k in range(4):
-                for q in nb.prange(n):
-                    rows[4 + k, q] += sb[ch, k, q]
+                     uoff, upart, uslot, nbr, width, alpha, beta, kind, grad, acc, ext, lanes)
+    for s in range(slots):  # in slot order: the same bits for any thread count
+        b = slot_leaf[s]
+        for i in range(hi[b] - lo[b]):
+            for k in range(1, 8):
+                acc[lo[b] + i, k] += ext[width * s + i, k]
+    rows = np.empty((acc.shape[1], n))
+    for qq in nb.prange(n):
+        q = np.int64(qq)
+        for k in range(acc.shape[1]):
+            rows[k, q] = acc[q, k]
     return rows
 
 
@@ -250,6 +370,7 @@ def _far(E, M, ln, L, C, lo, hi, leaves, parent, foff, fpart, alpha, beta, kind,
             for q in range(lo[leaf], hi[leaf]):
                 px, py, pz = M[q, 0], M[q, 1], M[q, 2]
                 ax, ay, az, li = E[q, 0], E[q, 1], E[q, 2], ln[q]
+                il = 1.0 / li
                 s = gax = gay = gaz = gmx = gmy = gmz = 0.0
                 a = leaf
                 while a >= 0:
@@ -259,7 +380,7 @@ def _far(E, M, ln, L, C, lo, hi, leaves, parent, foff, fpart, alpha, beta, kind,
                         dy = py - C[b, 1]
                         dz = pz - C[b, 2]
                         f, fax, fay, faz, fdx, fdy, fdz, fl = _kernel(
-                            dx, dy, dz, ax, ay, az, li, L[b], dx * dx + dy * dy + dz * dz,
+                            dx, dy, dz, ax, ay, az, li, il, L[b], dx * dx + dy * dy + dz * dz,
                             alpha, beta, kind)
                         s += f
                         if grad:
@@ -406,15 +527,22 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad):
             if foff[a + 1] == foff[a]:
                 continue
             la = L[a]
-            g0, g1, g2, g3, g4, g5, g6, g7, g8 = G[a, 0], G[a, 1], G[a, 2], G[a, 3], G[a, 4], \
-                G[a, 5], G[a, 6], G[a, 7], G[a, 8]
-            v0 = Wm[a, 0] + Wm[a, 4] + Wm[a, 8]
-            v1 = Wm[a, 9] + Wm[a, 13] + Wm[a, 17]
-            v2 = Wm[a, 18] + Wm[a, 22] + Wm[a, 26]
+            # G and W are symmetric in their first two indices (Σ e eᵀ/l): six of G, 18 of W
+            g00, g01, g02, g11, g12, g22 = G[a, 0], G[a, 1], G[a, 2], G[a, 4], G[a, 5], G[a, 8]
+            a000, a001, a002 = Wm[a, 0], Wm[a, 1], Wm[a, 2]
+            a010, a011, a012 = Wm[a, 3], Wm[a, 4], Wm[a, 5]
+            a020, a021, a022 = Wm[a, 6], Wm[a, 7], Wm[a, 8]
+            a110, a111, a112 = Wm[a, 12], Wm[a, 13], Wm[a, 14]
+            a120, a121, a122 = Wm[a, 15], Wm[a, 16], Wm[a, 17]
+            a220, a221, a222 = Wm[a, 24], Wm[a, 25], Wm[a, 26]
+            v0 = a000 + a011 + a022
+            v1 = a010 + a111 + a122
+            v2 = a020 + a121 + a222
             e = sla = scx = scy = scz = 0.0
             p0 = p1 = p2 = 0.0  # Σ −2 L_B ρ d (∂/∂v)
             o00 = o01 = o02 = o11 = o12 = o22 = 0.0  # Σ −L_B ρ d dᵀ (∂/∂G)
-            t = np.zeros(27) if grad else np.zeros(0)  # Σ β L_B ρ₂ d ⊗ d ⊗ d (∂/∂W)
+            # Σ β L_B ρ₂ d ⊗ d ⊗ d (∂/∂W), symmetric: its ten entries
+            txxx = txxy = txxz = txyy = txyz = txzz = tyyy = tyyz = tyzz = tzzz = 0.0
             for p in range(foff[a], foff[a + 1]):
                 b = fpart[p]
                 lb = L[b]
@@ -424,32 +552,31 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad):
                 r2 = dx * dx + dy * dy + dz * dz
                 rho = _inv_beta(r2, beta, kind)
                 rho2 = rho / r2
-                gdx = g0 * dx + g1 * dy + g2 * dz
-                gdy = g3 * dx + g4 * dy + g5 * dz
-                gdz = g6 * dx + g7 * dy + g8 * dz
+                gdx = g00 * dx + g01 * dy + g02 * dz
+                gdy = g01 * dx + g11 * dy + g12 * dz
+                gdz = g02 * dx + g12 * dy + g22 * dz
                 dgd = dx * gdx + dy * gdy + dz * gdz
                 vd = v0 * dx + v1 * dy + v2 * dz
-                # Wd_ab = Σ_c W_abc d_c; s = dᵀ Wd d; u_k = Σ_ab W_abk d_a d_b
-                s = 0.0
-                w0 = w1 = w2 = 0.0  # Σ_b Wd_kb d_b
-                u0 = u1 = u2 = 0.0
-                for i in range(3):
-                    di = dx if i == 0 else (dy if i == 1 else dz)
-                    for j in range(3):
-                        dj = dx if j == 0 else (dy if j == 1 else dz)
-                        base = 9 * i + 3 * j
-                        wd = Wm[a, base] * dx + Wm[a, base + 1] * dy + Wm[a, base + 2] * dz
-                        if i == 0:
-                            w0 += wd * dj
-                        elif i == 1:
-                            w1 += wd * dj
-                        else:
-                            w2 += wd * dj
-                        dd = di * dj
-                        u0 += Wm[a, base] * dd
-                        u1 += Wm[a, base + 1] * dd
-                        u2 += Wm[a, base + 2] * dd
+                # Wd_ab = Σ_c W_abc d_c; w_a = Σ_b Wd_ab d_b; s = dᵀ Wd d; u_c = Σ_ab W_abc d_a d_b
+                d00 = a000 * dx + a001 * dy + a002 * dz
+                d01 = a010 * dx + a011 * dy + a012 * dz
+                d02 = a020 * dx + a021 * dy + a022 * dz
+                d11 = a110 * dx + a111 * dy + a112 * dz
+                d12 = a120 * dx + a121 * dy + a122 * dz
+                d22 = a220 * dx + a221 * dy + a222 * dz
+                w0 = d00 * dx + d01 * dy + d02 * dz
+                w1 = d01 * dx + d11 * dy + d12 * dz
+                w2 = d02 * dx + d12 * dy + d22 * dz
                 s = w0 * dx + w1 * dy + w2 * dz
+                xx = dx * dx
+                yy = dy * dy
+                zz = dz * dz
+                xy = 2.0 * dx * dy
+                xz = 2.0 * dx * dz
+                yz = 2.0 * dy * dz
+                u0 = a000 * xx + a110 * yy + a220 * zz + a010 * xy + a020 * xz + a120 * yz
+                u1 = a001 * xx + a111 * yy + a221 * zz + a011 * xy + a021 * xz + a121 * yz
+                u2 = a002 * xx + a112 * yy + a222 * zz + a012 * xy + a022 * xz + a122 * yz
                 inner = la * r2 * rho - rho * dgd - 2.0 * rho * vd + beta * rho2 * s
                 e += lb * inner
                 if grad:
@@ -467,24 +594,29 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad):
                     scy += hy
                     scz += hz
                     k = -lb * rho
-                    o00 += k * dx * dx
+                    o00 += k * xx
                     o01 += k * dx * dy
                     o02 += k * dx * dz
-                    o11 += k * dy * dy
+                    o11 += k * yy
                     o12 += k * dy * dz
-                    o22 += k * dz * dz
+                    o22 += k * zz
                     p0 += 2.0 * k * dx
                     p1 += 2.0 * k * dy
                     p2 += 2.0 * k * dz
                     k3 = beta * lb * rho2
-                    for i in range(3):
-                        di = dx if i == 0 else (dy if i == 1 else dz)
-                        for j in range(3):
-                            dj = dx if j == 0 else (dy if j == 1 else dz)
-                            kij = k3 * di * dj
-                            t[9 * i + 3 * j] += kij * dx
-                            t[9 * i + 3 * j + 1] += kij * dy
-                            t[9 * i + 3 * j + 2] += kij * dz
+                    kx = k3 * xx
+                    ky = k3 * yy
+                    kz = k3 * zz
+                    txxx += kx * dx
+                    txxy += kx * dy
+                    txxz += kx * dz
+                    txyy += ky * dx
+                    txyz += k3 * dx * dy * dz
+                    txzz += kz * dx
+                    tyyy += ky * dy
+                    tyyz += ky * dz
+                    tyzz += kz * dy
+                    tzzz += kz * dz
                     gsb = gs[ch, b]
                     gsb[0] += inner
                     gsb[1] -= hx
@@ -505,8 +637,22 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad):
                 gG[a, 6] = o02
                 gG[a, 7] = o12
                 gG[a, 8] = o22
-                for k in range(27):
-                    gW[a, k] = t[k]
+                for i in range(3):
+                    for j in range(3):
+                        for k in range(3):
+                            # the entry of the sorted index triple
+                            nx = (i == 0) + (j == 0) + (k == 0)
+                            ny = (i == 1) + (j == 1) + (k == 1)
+                            if nx == 3:
+                                tv = txxx
+                            elif nx == 2:
+                                tv = txxy if ny == 1 else txxz
+                            elif nx == 1:
+                                tv = txyy if ny == 2 else (txyz if ny == 1 else txzz)
+                            else:
+                                tv = tyyy if ny == 3 else (tyyz if ny == 2 else (
+                                    tyzz if ny == 1 else tzzz))
+                            gW[a, 9 * i + 3 * j + k] = tv
                 # ∂/∂W_abc of −2ρ<v, d> is −2ρ d_a δ_bc
                 for i in range(3):
                     pi = p0 if i == 0 else (p1 if i == 1 else p2)
@@ -544,59 +690,81 @@ def _cc_node_grad(L, G, gt, gs, gG, gW):
     return out
 
 
+@nb.njit(cache=True)
+def _cc_push(L, C, parent, gn, gG, gW):
+    """The nodes' derivatives summed down to the leaves, in place, each node's sum about its
+    own centre: the terms :func:`_cc_to_edges` adds per edge and ancestor are affine in the
+    edge's midpoint (``L`` and ``c`` through ``m − c``, ``G`` and ``W`` through ``δ = m −
+    c``), so a parent's sum moves to a child's centre by ``h = c_child − c``. After it, per
+    node: ``gn`` column 0 the ``∂/∂l`` constant, 1–3 ``Σ g_c / L``; ``gG`` ``Σ gG + gW · h``,
+    ``gW`` ``Σ gW``. Parents first (a parent's index is below its children's)."""
+    for b in range(L.shape[0]):
+        il = 1.0 / L[b]
+        for k in range(1, 4):
+            gn[b, k] *= il
+        p = parent[b]
+        if p < 0:
+            continue
+        h0 = C[b, 0] - C[p, 0]
+        h1 = C[b, 1] - C[p, 1]
+        h2 = C[b, 2] - C[p, 2]
+        gn[b, 0] += gn[p, 0] + gn[p, 1] * h0 + gn[p, 2] * h1 + gn[p, 3] * h2
+        for k in range(1, 4):
+            gn[b, k] += gn[p, k]
+        for ab in range(9):
+            gG[b, ab] += (gG[p, ab] + gW[p, 3 * ab] * h0 + gW[p, 3 * ab + 1] * h1
+                          + gW[p, 3 * ab + 2] * h2)
+        for k in range(27):
+            gW[b, k] += gW[p, k]
+
+
 @nb.njit(cache=True, parallel=True)
-def _cc_to_edges(E, M, ln, L, C, lo, hi, leaves, parent, hasfar, gn, gG, gW, rows):
-    """The nodes' derivatives passed to their edges (every node holding the edge that has far
-    pairs): ``L`` and ``c`` as in :func:`_far_sources`; ``G`` and ``W`` through
-    ``e eᵀ / l`` (edge vector rows 1–3 without the length term, length row 7) and ``δ = m − c``
-    (midpoint rows 4–6)."""
+def _cc_to_edges(E, M, ln, C, lo, hi, leaves, gn, gG, gW, rows):
+    """The nodes' derivatives, summed to the leaves (:func:`_cc_push`), passed to their edges:
+    ``L`` and ``c`` as in :func:`_far_sources`; ``G`` and ``W`` through ``e eᵀ / l`` (edge
+    vector rows 1–3 without the length term, length row 7) and ``δ = m − c`` (midpoint rows
+    4–6)."""
     nl = leaves.shape[0]
     for tt in nb.prange(nl):
-        leaf = leaves[np.int64(tt)]
-        for q in range(lo[leaf], hi[leaf]):
+        b = leaves[np.int64(tt)]
+        for q in range(lo[b], hi[b]):
             e0, e1, e2 = E[q, 0], E[q, 1], E[q, 2]
             il = 1.0 / ln[q]
-            gl = ga0 = ga1 = ga2 = gm0 = gm1 = gm2 = 0.0
-            b = leaf
-            while b >= 0:
-                if hasfar[b]:
-                    iL = 1.0 / L[b]
-                    x0 = M[q, 0] - C[b, 0]
-                    x1 = M[q, 1] - C[b, 1]
-                    x2 = M[q, 2] - C[b, 2]
-                    gl += gn[b, 0] + iL * (gn[b, 1] * x0 + gn[b, 2] * x1 + gn[b, 3] * x2)
-                    w = ln[q] * iL
-                    gm0 += gn[b, 1] * w
-                    gm1 += gn[b, 2] * w
-                    gm2 += gn[b, 3] * w
-                    # H = gG + gW·δ; ∂(eᵀHe/l)/∂e = (H + Hᵀ) e / l, ∂/∂l = −eᵀHe/l²
-                    ehe = 0.0
-                    for i in range(3):
-                        ei = e0 if i == 0 else (e1 if i == 1 else e2)
-                        hr = hc = 0.0  # (H e)_i, (Hᵀ e)_i
-                        for j in range(3):
-                            ej = e0 if j == 0 else (e1 if j == 1 else e2)
-                            hij = (gG[b, 3 * i + j] + gW[b, 9 * i + 3 * j] * x0
-                                   + gW[b, 9 * i + 3 * j + 1] * x1 + gW[b, 9 * i + 3 * j + 2] * x2)
-                            hji = (gG[b, 3 * j + i] + gW[b, 9 * j + 3 * i] * x0
-                                   + gW[b, 9 * j + 3 * i + 1] * x1 + gW[b, 9 * j + 3 * i + 2] * x2)
-                            hr += hij * ej
-                            hc += hji * ej
-                            # ∂/∂m_c of Σ gW_ijc e_i e_j / l
-                            eij = ei * ej * il
-                            gm0 += gW[b, 9 * i + 3 * j] * eij
-                            gm1 += gW[b, 9 * i + 3 * j + 1] * eij
-                            gm2 += gW[b, 9 * i + 3 * j + 2] * eij
-                        ehe += ei * hr
-                        g = (hr + hc) * il
-                        if i == 0:
-                            ga0 += g
-                        elif i == 1:
-                            ga1 += g
-                        else:
-                            ga2 += g
-                    gl -= ehe * il * il
-                b = parent[b]
+            x0 = M[q, 0] - C[b, 0]
+            x1 = M[q, 1] - C[b, 1]
+            x2 = M[q, 2] - C[b, 2]
+            gl = gn[b, 0] + gn[b, 1] * x0 + gn[b, 2] * x1 + gn[b, 3] * x2
+            gm0 = gn[b, 1] * ln[q]
+            gm1 = gn[b, 2] * ln[q]
+            gm2 = gn[b, 3] * ln[q]
+            ga0 = ga1 = ga2 = 0.0
+            # H = gG + gW·δ; ∂(eᵀHe/l)/∂e = (H + Hᵀ) e / l, ∂/∂l = −eᵀHe/l²
+            ehe = 0.0
+            for i in range(3):
+                ei = e0 if i == 0 else (e1 if i == 1 else e2)
+                hr = hc = 0.0  # (H e)_i, (Hᵀ e)_i
+                for j in range(3):
+                    ej = e0 if j == 0 else (e1 if j == 1 else e2)
+                    hij = (gG[b, 3 * i + j] + gW[b, 9 * i + 3 * j] * x0
+                           + gW[b, 9 * i + 3 * j + 1] * x1 + gW[b, 9 * i + 3 * j + 2] * x2)
+                    hji = (gG[b, 3 * j + i] + gW[b, 9 * j + 3 * i] * x0
+                           + gW[b, 9 * j + 3 * i + 1] * x1 + gW[b, 9 * j + 3 * i + 2] * x2)
+                    hr += hij * ej
+                    hc += hji * ej
+                    # ∂/∂m_c of Σ gW_ijc e_i e_j / l
+                    eij = ei * ej * il
+                    gm0 += gW[b, 9 * i + 3 * j] * eij
+                    gm1 += gW[b, 9 * i + 3 * j + 1] * eij
+                    gm2 += gW[b, 9 * i + 3 * j + 2] * eij
+                ehe += ei * hr
+                g = (hr + hc) * il
+                if i == 0:
+                    ga0 += g
+                elif i == 1:
+                    ga1 += g
+                else:
+                    ga2 += g
+            gl -= ehe * il * il
             rows[1, q] += ga0
             rows[2, q] += ga1
             rows[3, q] += ga2
@@ -641,8 +809,16 @@ class TangentPointFrame(Frame):
         parent[left[inner]] = inner
         parent[right[inner]] = inner
         self.parent = parent
-        self._hasfar = np.diff(self.foff) > 0
         self._cc_own = None
+
+    def _clusters(self, edges):
+        tree = self.tree
+        return _lc_data(edges[1], edges[2], edges[3], tree.lo, tree.hi, tree.left, tree.right)
+
+    def _near_setup(self, near: np.ndarray, m: int):
+        tree, layout = self.tree, self.layout
+        self._nbr, self._at = _neighbours(tree.perm, layout.nxt, layout.prv)
+        self._pieces = _near_pieces(self.leaves, near, m, min(self.leaves.shape[0], _FAR_CHUNKS))
 
     def _evaluate(self, X: np.ndarray, grad: bool):
         lay, tree = self.layout, self.tree
@@ -650,12 +826,12 @@ class TangentPointFrame(Frame):
         own = np.array_equal(X, X0)
         if not own:
             edges = _edge_arrays(X, lay.nxt, lay.comp, lay.starts, tree.perm)
-            clusters = _cluster_data(*edges[:4], tree.lo, tree.hi, tree.left, tree.right)
+            clusters = self._clusters(edges)
         E, M, ln = edges[0], edges[1], edges[2]
         L, C = clusters[0], clusters[1]
-        noff, npart, nbr = self._near_lists
         args = (self.alpha, self.beta, self.kind, grad)
-        rows = _near(E, M, ln, tree.lo, tree.hi, self.leaves, noff, npart, nbr, *args, _LANES)
+        rows = _near(E, M, ln, tree.lo, tree.hi, self.leaves, *self._pieces, self._nbr, *args,
+                     _LANES)
         if self.kind == KIND_GENERAL:
             # |T × d|^α is no polynomial in T for α ≠ 2: every edge against the cluster
             gnode = _far(E, M, ln, L, C, tree.lo, tree.hi, self.leaves, self.parent, self.foff,
@@ -678,8 +854,8 @@ class TangentPointFrame(Frame):
             if not grad:
                 return energy, None
             gn = _cc_node_grad(L, G, gt, gs, gG, gW)
-            _cc_to_edges(E, M, ln, L, C, tree.lo, tree.hi, self.leaves, self.parent,
-                         self._hasfar, gn, gG, gW, rows)
+            _cc_push(L, C, self.parent, gn, gG, gW)
+            _cc_to_edges(E, M, ln, C, tree.lo, tree.hi, self.leaves, gn, gG, gW, rows)
         rows[1:4] += rows[7] / ln * E.T  # ∂l/∂e = e/l
         return energy, _to_vertices(rows, lay.prv, self._at)
 

@@ -160,6 +160,23 @@ def test_tree_against_exact(alpha, beta):
     assert np.linalg.norm(gt - g) <= 2e-2 * np.linalg.norm(g)
 
 
+@pytest.mark.parametrize("leaf_size", [3, 9])
+def test_near_field_with_other_leaf_sizes(leaf_size):
+    # the near field takes four edges of a leaf at a time and each unordered pair of edges
+    # once, both orders: leaves of three (a partial group) and nine (three groups, the last
+    # partial) sum every ordered pair once, here of two components, everything near
+    s = np.linspace(0, 2 * np.pi, 150, endpoint=False)
+    ring = np.stack([np.cos(s), np.sin(s), 0 * s], axis=1)
+    P = trefoil(400) + 0.002 * np.random.default_rng(8).standard_normal((400, 3))
+    X, lay = as_layout([P, 0.5 * ring + np.array([0.3, 0.2, 0.1])])
+    e, g = tp_energy_gradient_x(X, lay, 2.0, 4.5)
+    frame = TangentPointFrame(X, lay, 2.0, 4.5, theta=0.002, leaf_size=leaf_size)
+    assert frame.far_pairs == 0
+    et, gt = frame.energy_gradient(X)
+    assert et == pytest.approx(e, rel=1e-12)
+    assert np.abs(gt - g).max() <= 1e-10 * np.abs(g).max()
+
+
 @pytest.mark.parametrize("alpha, beta", [(2.0, 4.0), (3.0, 6.0)])
 def test_tree_gradient_is_the_derivative_of_the_tree_sum(alpha, beta):
     P = trefoil(600) + 0.003 * np.random.default_rng(5).standard_normal((600, 3))

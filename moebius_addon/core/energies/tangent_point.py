@@ -86,9 +86,9 @@ def kind_of(alpha: float, beta: float) -> int:
 
 
 @nb.njit(cache=True, inline="always")
-def pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
-    """The ordered pair ``(I, J)``: ``e_I = a``, lengths ``li``, ``lj``, ``d = m_I − m_J`` with
-    ``r2 = |d|²``.
+def pair(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, kind):
+    """The ordered pair ``(I, J)``: ``e_I = a``, lengths ``li``, ``lj``, ``il = 1 / li`` (a sum
+    divides once per edge, not per pair), ``d = m_I − m_J`` with ``r2 = |d|²``.
 
     Returns ``(f, ∂f/∂e_I (3), ∂f/∂d (3), ∂f/∂l_J)``: ``∂f/∂e_I`` with its length term (``l_I``
     is ``|e_I|``); ``∂f/∂m_I = ∂f/∂d``, ``∂f/∂m_J = −∂f/∂d``; ``∂f/∂l_J = f/l_J`` (computed
@@ -102,15 +102,15 @@ def pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
     if kind == KIND_2_4:
         w = 1.0
         rb = inv * inv  # |d|^−4
-        pl = 1.0 / li  # l_I^(1−α)
+        pl = il  # l_I^(1−α)
     elif kind == KIND_2_45:
         w = 1.0
         rb = inv * inv * math.sqrt(math.sqrt(inv))  # r2^−2 r2^−¼, no pow
-        pl = 1.0 / li
+        pl = il
     elif kind == KIND_2:
         w = 1.0
         rb = r2 ** (-0.5 * beta)
-        pl = 1.0 / li
+        pl = il
     else:
         w = c2 ** (0.5 * alpha - 1.0) if c2 > 0.0 else 0.0
         rb = r2 ** (-0.5 * beta)
@@ -123,7 +123,7 @@ def pair(dx, dy, dz, ax, ay, az, li, lj, r2, alpha, beta, kind):
     gx = k * cx
     gy = k * cy
     gz = k * cz
-    tl = (1.0 - alpha) * f / (li * li)
+    tl = (1.0 - alpha) * f * il * il
     fax = dy * gz - dz * gy + tl * ax
     fay = dz * gx - dx * gz + tl * ay
     faz = dx * gy - dy * gx + tl * az
