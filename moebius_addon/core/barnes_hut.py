@@ -335,13 +335,25 @@ def _split(left, right, bmin, bmax, nc, theta2, masks, nchunks, want, cap):
     for ch in range(nchunks):
         of[ch + 1] = of[ch] + nf[ch]
         on[ch + 1] = on[ch] + nn[ch]
-    far = np.empty((of[nchunks], 2), np.int64)
-    near = np.empty((on[nchunks], 2), np.int64)
-    for cc in nb.prange(nchunks):
-        ch = np.int64(cc)
-        far[of[ch]:of[ch + 1]] = fbuf[ch, :nf[ch]]
-        near[on[ch]:on[ch + 1]] = nbuf[ch, :nn[ch]]
+    # the chunks moved down to their place in the buffers themselves (never up: a chunk's place
+    # is at or below its start), not copied: the pages of a second list are not touched
+    far = _compact(fbuf.reshape(nchunks * room, 2), nf, of, room)
+    near = _compact(nbuf.reshape(nchunks * room, 2), nn, on, room)
     return far, near
+
+
+@nb.njit(cache=True, inline="always")
+def _compact(flat, counts, offsets, room):
+    """The pairs of every chunk (``counts[ch]`` at ``ch · room``) moved to ``offsets[ch]`` in
+    chunk order, forward (an overlap lies above the place written); the first
+    ``offsets[-1]`` rows."""
+    for ch in range(1, counts.shape[0]):
+        src = ch * room
+        dst = offsets[ch]
+        for k in range(counts[ch]):
+            flat[dst + k, 0] = flat[src + k, 0]
+            flat[dst + k, 1] = flat[src + k, 1]
+    return flat[:offsets[counts.shape[0]]]
 
 
 @nb.njit(cache=True)

@@ -507,6 +507,174 @@ def _inv_beta(r2, beta, kind):
     return r2 ** (-0.5 * beta)
 
 
+# The cluster–cluster far field's lanes (the idea of ``_near_field``): up to this many partners
+# of one target at a time. One work array per parallel piece: lane j's partner at W[_CL k + j]
+# (k: L, c), its sums at W[_CW_SUMS + _CL k + j] (energy; ∂/∂L_A, ∂/∂c_A; −2 L ρ d; −L ρ d dᵀ,
+# six; β L ρ₂ d ⊗ d ⊗ d, ten) and what the pair gives the partner at W[_CW_OUT + _CL k + j]
+# (∂/∂L_B, ∂/∂c_B), added over the lanes in lane order. Lanes past the last partner repeat it
+# with L = 0: every term is a multiple of L_B.
+_CL = 4
+_CW_SUMS = 4 * _CL
+_CW_OUT = 28 * _CL
+_CW_SIZE = 32 * _CL
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs_ch, eF, gt, gG, gW):
+    """Target ``a`` against its far partners, by lanes (see above); ``S`` scratch for the
+    lanes' sums."""
+    la = L[a]
+    cax, cay, caz = C[a, 0], C[a, 1], C[a, 2]
+    # G and W are symmetric in their first two indices (Σ e eᵀ/l): six of G, 18 of W
+    g00, g01, g02, g11, g12, g22 = G[a, 0], G[a, 1], G[a, 2], G[a, 4], G[a, 5], G[a, 8]
+    a000, a001, a002 = Wm[a, 0], Wm[a, 1], Wm[a, 2]
+    a010, a011, a012 = Wm[a, 3], Wm[a, 4], Wm[a, 5]
+    a020, a021, a022 = Wm[a, 6], Wm[a, 7], Wm[a, 8]
+    a110, a111, a112 = Wm[a, 12], Wm[a, 13], Wm[a, 14]
+    a120, a121, a122 = Wm[a, 15], Wm[a, 16], Wm[a, 17]
+    a220, a221, a222 = Wm[a, 24], Wm[a, 25], Wm[a, 26]
+    v0 = a000 + a011 + a022
+    v1 = a010 + a111 + a122
+    v2 = a020 + a121 + a222
+    W[_CW_SUMS:_CW_OUT] = 0.0
+    p1 = foff[a + 1]
+    for p0 in range(foff[a], p1, _CL):
+        cnt = min(_CL, p1 - p0)
+        for j in range(_CL):
+            b = fpart[p0 + min(j, cnt - 1)]
+            W[j] = L[b] if j < cnt else 0.0
+            W[_CL + j] = C[b, 0]
+            W[2 * _CL + j] = C[b, 1]
+            W[3 * _CL + j] = C[b, 2]
+        for j in range(_CL):
+            lb = W[j]
+            dx = cax - W[_CL + j]
+            dy = cay - W[2 * _CL + j]
+            dz = caz - W[3 * _CL + j]
+            r2 = dx * dx + dy * dy + dz * dz
+            rho = _inv_beta(r2, beta, kind)
+            rho2 = rho / r2
+            gdx = g00 * dx + g01 * dy + g02 * dz
+            gdy = g01 * dx + g11 * dy + g12 * dz
+            gdz = g02 * dx + g12 * dy + g22 * dz
+            dgd = dx * gdx + dy * gdy + dz * gdz
+            vd = v0 * dx + v1 * dy + v2 * dz
+            # Wd_ab = Σ_c W_abc d_c; w_a = Σ_b Wd_ab d_b; s = dᵀ Wd d
+            d00 = a000 * dx + a001 * dy + a002 * dz
+            d01 = a010 * dx + a011 * dy + a012 * dz
+            d02 = a020 * dx + a021 * dy + a022 * dz
+            d11 = a110 * dx + a111 * dy + a112 * dz
+            d12 = a120 * dx + a121 * dy + a122 * dz
+            d22 = a220 * dx + a221 * dy + a222 * dz
+            w0 = d00 * dx + d01 * dy + d02 * dz
+            w1 = d01 * dx + d11 * dy + d12 * dz
+            w2 = d02 * dx + d12 * dy + d22 * dz
+            s = w0 * dx + w1 * dy + w2 * dz
+            inner = la * r2 * rho - rho * dgd - 2.0 * rho * vd + beta * rho2 * s
+            W[_CW_SUMS + j] += lb * inner
+            if grad:
+                # u_c = Σ_ab W_abc d_a d_b
+                xx = dx * dx
+                yy = dy * dy
+                zz = dz * dz
+                xy = 2.0 * dx * dy
+                xz = 2.0 * dx * dz
+                yz = 2.0 * dy * dz
+                u0 = a000 * xx + a110 * yy + a220 * zz + a010 * xy + a020 * xz + a120 * yz
+                u1 = a001 * xx + a111 * yy + a221 * zz + a011 * xy + a021 * xz + a121 * yz
+                u2 = a002 * xx + a112 * yy + a222 * zz + a012 * xy + a022 * xz + a122 * yz
+                # ∂/∂d of inner (docs: the derivation beside this kernel)
+                c1 = (la * rho * (2.0 - beta) + beta * rho2 * dgd + 2.0 * beta * rho2 * vd
+                      - beta * (beta + 2.0) * rho2 / r2 * s)
+                hx = lb * (c1 * dx - 2.0 * rho * gdx - 2.0 * rho * v0
+                           + beta * rho2 * (2.0 * w0 + u0))
+                hy = lb * (c1 * dy - 2.0 * rho * gdy - 2.0 * rho * v1
+                           + beta * rho2 * (2.0 * w1 + u1))
+                hz = lb * (c1 * dz - 2.0 * rho * gdz - 2.0 * rho * v2
+                           + beta * rho2 * (2.0 * w2 + u2))
+                k = -lb * rho
+                k3 = beta * lb * rho2
+                kx = k3 * xx
+                ky = k3 * yy
+                kz = k3 * zz
+                W[_CW_SUMS + _CL + j] += lb * r2 * rho
+                W[_CW_SUMS + 2 * _CL + j] += hx
+                W[_CW_SUMS + 3 * _CL + j] += hy
+                W[_CW_SUMS + 4 * _CL + j] += hz
+                W[_CW_SUMS + 5 * _CL + j] += 2.0 * k * dx
+                W[_CW_SUMS + 6 * _CL + j] += 2.0 * k * dy
+                W[_CW_SUMS + 7 * _CL + j] += 2.0 * k * dz
+                W[_CW_SUMS + 8 * _CL + j] += k * xx
+                W[_CW_SUMS + 9 * _CL + j] += k * dx * dy
+                W[_CW_SUMS + 10 * _CL + j] += k * dx * dz
+                W[_CW_SUMS + 11 * _CL + j] += k * yy
+                W[_CW_SUMS + 12 * _CL + j] += k * dy * dz
+                W[_CW_SUMS + 13 * _CL + j] += k * zz
+                W[_CW_SUMS + 14 * _CL + j] += kx * dx
+                W[_CW_SUMS + 15 * _CL + j] += kx * dy
+                W[_CW_SUMS + 16 * _CL + j] += kx * dz
+                W[_CW_SUMS + 17 * _CL + j] += ky * dx
+                W[_CW_SUMS + 18 * _CL + j] += k3 * dx * dy * dz
+                W[_CW_SUMS + 19 * _CL + j] += kz * dx
+                W[_CW_SUMS + 20 * _CL + j] += ky * dy
+                W[_CW_SUMS + 21 * _CL + j] += ky * dz
+                W[_CW_SUMS + 22 * _CL + j] += kz * dy
+                W[_CW_SUMS + 23 * _CL + j] += kz * dz
+                W[_CW_OUT + j] = inner
+                W[_CW_OUT + _CL + j] = hx
+                W[_CW_OUT + 2 * _CL + j] = hy
+                W[_CW_OUT + 3 * _CL + j] = hz
+        if grad:
+            for j in range(cnt):
+                gsb = gs_ch[fpart[p0 + j]]
+                gsb[0] += W[_CW_OUT + j]
+                gsb[1] -= W[_CW_OUT + _CL + j]
+                gsb[2] -= W[_CW_OUT + 2 * _CL + j]
+                gsb[3] -= W[_CW_OUT + 3 * _CL + j]
+    e = 0.0
+    for j in range(_CL):
+        e += W[_CW_SUMS + j]
+    eF[a] = e
+    if grad:
+        for k in range(1, 24):
+            t = 0.0
+            for j in range(_CL):
+                t += W[_CW_SUMS + k * _CL + j]
+            S[k] = t
+        for k in range(4):
+            gt[a, k] = S[1 + k]
+        o00, o01, o02, o11, o12, o22 = S[8], S[9], S[10], S[11], S[12], S[13]
+        gG[a, 0] = o00
+        gG[a, 1] = o01
+        gG[a, 2] = o02
+        gG[a, 3] = o01
+        gG[a, 4] = o11
+        gG[a, 5] = o12
+        gG[a, 6] = o02
+        gG[a, 7] = o12
+        gG[a, 8] = o22
+        for i in range(3):
+            for j in range(3):
+                for k in range(3):
+                    # the entry of the sorted index triple: txxx … tzzz at S[14 …]
+                    nx = (i == 0) + (j == 0) + (k == 0)
+                    ny = (i == 1) + (j == 1) + (k == 1)
+                    if nx == 3:
+                        tv = S[14]
+                    elif nx == 2:
+                        tv = S[15] if ny == 1 else S[16]
+                    elif nx == 1:
+                        tv = S[17] if ny == 2 else (S[18] if ny == 1 else S[19])
+                    else:
+                        tv = S[20] if ny == 3 else (S[21] if ny == 2 else (
+                            S[22] if ny == 1 else S[23]))
+                    gW[a, 9 * i + 3 * j + k] = tv
+        # ∂/∂W_abc of −2ρ<v, d> is −2ρ d_a δ_bc
+        for i in range(3):
+            for j in range(3):
+                gW[a, 9 * i + 4 * j] += S[5 + i]
+
+
 @nb.njit(cache=True, parallel=True, error_model="numpy")
 def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad):
     """Every node ``A`` against its far partners ``B`` (:func:`_cc_node`'s moments): per node
@@ -523,141 +691,32 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad):
     gs = np.zeros((nchunks, m if grad else 0, 4))
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
+        W = np.zeros(_CW_SIZE)
+        S = np.zeros(24)
         for a in range(ch * m // nchunks, (ch + 1) * m // nchunks):
             if foff[a + 1] == foff[a]:
                 continue
-            la = L[a]
-            # G and W are symmetric in their first two indices (Σ e eᵀ/l): six of G, 18 of W
-            g00, g01, g02, g11, g12, g22 = G[a, 0], G[a, 1], G[a, 2], G[a, 4], G[a, 5], G[a, 8]
-            a000, a001, a002 = Wm[a, 0], Wm[a, 1], Wm[a, 2]
-            a010, a011, a012 = Wm[a, 3], Wm[a, 4], Wm[a, 5]
-            a020, a021, a022 = Wm[a, 6], Wm[a, 7], Wm[a, 8]
-            a110, a111, a112 = Wm[a, 12], Wm[a, 13], Wm[a, 14]
-            a120, a121, a122 = Wm[a, 15], Wm[a, 16], Wm[a, 17]
-            a220, a221, a222 = Wm[a, 24], Wm[a, 25], Wm[a, 26]
-            v0 = a000 + a011 + a022
-            v1 = a010 + a111 + a122
-            v2 = a020 + a121 + a222
-            e = sla = scx = scy = scz = 0.0
-            p0 = p1 = p2 = 0.0  # Σ −2 L_B ρ d (∂/∂v)
-            o00 = o01 = o02 = o11 = o12 = o22 = 0.0  # Σ −L_B ρ d dᵀ (∂/∂G)
-            # Σ β L_B ρ₂ d ⊗ d ⊗ d (∂/∂W), symmetric: its ten entries
-            txxx = txxy = txxz = txyy = txyz = txzz = tyyy = tyyz = tyzz = tzzz = 0.0
-            for p in range(foff[a], foff[a + 1]):
-                b = fpart[p]
-                lb = L[b]
-                dx = C[a, 0] - C[b, 0]
-                dy = C[a, 1] - C[b, 1]
-                dz = C[a, 2] - C[b, 2]
-                r2 = dx * dx + dy * dy + dz * dz
-                rho = _inv_beta(r2, beta, kind)
-                rho2 = rho / r2
-                gdx = g00 * dx + g01 * dy + g02 * dz
-                gdy = g01 * dx + g11 * dy + g12 * dz
-                gdz = g02 * dx + g12 * dy + g22 * dz
-                dgd = dx * gdx + dy * gdy + dz * gdz
-                vd = v0 * dx + v1 * dy + v2 * dz
-                # Wd_ab = Σ_c W_abc d_c; w_a = Σ_b Wd_ab d_b; s = dᵀ Wd d; u_c = Σ_ab W_abc d_a d_b
-                d00 = a000 * dx + a001 * dy + a002 * dz
-                d01 = a010 * dx + a011 * dy + a012 * dz
-                d02 = a020 * dx + a021 * dy + a022 * dz
-                d11 = a110 * dx + a111 * dy + a112 * dz
-                d12 = a120 * dx + a121 * dy + a122 * dz
-                d22 = a220 * dx + a221 * dy + a222 * dz
-                w0 = d00 * dx + d01 * dy + d02 * dz
-                w1 = d01 * dx + d11 * dy + d12 * dz
-                w2 = d02 * dx + d12 * dy + d22 * dz
-                s = w0 * dx + w1 * dy + w2 * dz
-                xx = dx * dx
-                yy = dy * dy
-                zz = dz * dz
-                xy = 2.0 * dx * dy
-                xz = 2.0 * dx * dz
-                yz = 2.0 * dy * dz
-                u0 = a000 * xx + a110 * yy + a220 * zz + a010 * xy + a020 * xz + a120 * yz
-                u1 = a001 * xx + a111 * yy + a221 * zz + a011 * xy + a021 * xz + a121 * yz
-                u2 = a002 * xx + a112 * yy + a222 * zz + a012 * xy + a022 * xz + a122 * yz
-                inner = la * r2 * rho - rho * dgd - 2.0 * rho * vd + beta * rho2 * s
-                e += lb * inner
-                if grad:
-                    # ∂/∂d of inner (docs: the derivation beside this kernel)
-                    c1 = (la * rho * (2.0 - beta) + beta * rho2 * dgd + 2.0 * beta * rho2 * vd
-                          - beta * (beta + 2.0) * rho2 / r2 * s)
-                    hx = lb * (c1 * dx - 2.0 * rho * gdx - 2.0 * rho * v0
-                               + beta * rho2 * (2.0 * w0 + u0))
-                    hy = lb * (c1 * dy - 2.0 * rho * gdy - 2.0 * rho * v1
-                               + beta * rho2 * (2.0 * w1 + u1))
-                    hz = lb * (c1 * dz - 2.0 * rho * gdz - 2.0 * rho * v2
-                               + beta * rho2 * (2.0 * w2 + u2))
-                    sla += lb * r2 * rho
-                    scx += hx
-                    scy += hy
-                    scz += hz
-                    k = -lb * rho
-                    o00 += k * xx
-                    o01 += k * dx * dy
-                    o02 += k * dx * dz
-                    o11 += k * yy
-                    o12 += k * dy * dz
-                    o22 += k * zz
-                    p0 += 2.0 * k * dx
-                    p1 += 2.0 * k * dy
-                    p2 += 2.0 * k * dz
-                    k3 = beta * lb * rho2
-                    kx = k3 * xx
-                    ky = k3 * yy
-                    kz = k3 * zz
-                    txxx += kx * dx
-                    txxy += kx * dy
-                    txxz += kx * dz
-                    txyy += ky * dx
-                    txyz += k3 * dx * dy * dz
-                    txzz += kz * dx
-                    tyyy += ky * dy
-                    tyyz += ky * dz
-                    tyzz += kz * dy
-                    tzzz += kz * dz
-                    gsb = gs[ch, b]
-                    gsb[0] += inner
-                    gsb[1] -= hx
-                    gsb[2] -= hy
-                    gsb[3] -= hz
-            eF[a] = e
+            # kind and grad constants at each call (the branches fold away)
             if grad:
-                gt[a, 0] = sla
-                gt[a, 1] = scx
-                gt[a, 2] = scy
-                gt[a, 3] = scz
-                gG[a, 0] = o00
-                gG[a, 1] = o01
-                gG[a, 2] = o02
-                gG[a, 3] = o01
-                gG[a, 4] = o11
-                gG[a, 5] = o12
-                gG[a, 6] = o02
-                gG[a, 7] = o12
-                gG[a, 8] = o22
-                for i in range(3):
-                    for j in range(3):
-                        for k in range(3):
-                            # the entry of the sorted index triple
-                            nx = (i == 0) + (j == 0) + (k == 0)
-                            ny = (i == 1) + (j == 1) + (k == 1)
-                            if nx == 3:
-                                tv = txxx
-                            elif nx == 2:
-                                tv = txxy if ny == 1 else txxz
-                            elif nx == 1:
-                                tv = txyy if ny == 2 else (txyz if ny == 1 else txzz)
-                            else:
-                                tv = tyyy if ny == 3 else (tyyz if ny == 2 else (
-                                    tyzz if ny == 1 else tzzz))
-                            gW[a, 9 * i + 3 * j + k] = tv
-                # ∂/∂W_abc of −2ρ<v, d> is −2ρ d_a δ_bc
-                for i in range(3):
-                    pi = p0 if i == 0 else (p1 if i == 1 else p2)
-                    for j in range(3):
-                        gW[a, 9 * i + 4 * j] += pi
+                if kind == KIND_2_4:
+                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2_4, True, gs[ch], eF,
+                               gt, gG, gW)
+                elif kind == KIND_2_45:
+                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2_45, True, gs[ch], eF,
+                               gt, gG, gW)
+                else:
+                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2, True, gs[ch], eF,
+                               gt, gG, gW)
+            else:
+                if kind == KIND_2_4:
+                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2_4, False, gs[ch],
+                               eF, gt, gG, gW)
+                elif kind == KIND_2_45:
+                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2_45, False, gs[ch],
+                               eF, gt, gG, gW)
+                else:
+                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2, False, gs[ch],
+                               eF, gt, gG, gW)
     return eF, gt, gG, gW, gs
 
 
