@@ -76,8 +76,9 @@ ALPHA, BETA = 2.0, 4.0
 # -- our side, in a process of its own -------------------------------------------------------------
 
 def _core(core_from: str | None):
-    if core_from:
-        sys.path.insert(0, core_from)
+    # this checkout's core unless told otherwise: a venv may hold another (an editable install
+    # of the main tree measured a worktree's bench against main's code)
+    sys.path.insert(0, core_from or str(ROOT))
     from moebius_addon import core
     return core
 
