@@ -6,7 +6,7 @@ the same hierarchy, the same dual traversal, the same near and far lists), and s
 :func:`.energies.tangent_point.pair`:
 
 * **near pairs** (leaves close to each other): every ordered pair of edges exactly, except an
-  edge with itself and its neighbours along the curve;
+  edge with itself and its neighbours along the curve, both orders of a pair at once;
 * **far pairs** ``(A, B)`` (clusters apart, ``max(diam) ≤ θ · gap``), for ``α = 2``: **cluster
   against cluster**, one kernel per ordered pair of clusters (O(N) kernels). With ``α = 2``,
   ``f_IJ = l_I l_J dᵀ P_I d / |d|^β`` (``P_I = 1 − T_I T_Iᵀ``), so ``A`` enters through its
@@ -25,10 +25,11 @@ against cluster").
 The gradient is the exact derivative of this approximated sum for the fixed split: the far
 field's derivatives in the clusters' moments go to their edges by the chain rule
 (``∂L/∂l_J = 1``, ``∂c/∂m_J = l_J/L``, ``∂c/∂l_J = (m_J − c)/L``, ``G`` and ``W`` through
-``e eᵀ/l`` and ``δ``, ``∂W_abk/∂c_k = −G_ab``), each edge walking up its ancestors. Every
-edge's and every target cluster's own sums are sequential; what a pair gives its second edge
-or source cluster goes to fixed buffers per fixed piece of the leaves or nodes, added in a
-fixed order: the same bits for every thread count.
+``e eᵀ/l`` and ``δ``, ``∂W_abk/∂c_k = −G_ab``): for ``α = 2`` summed down the tree once
+(:func:`_cc_push`), for other ``α`` each edge walking up its ancestors. Every edge's and
+every target cluster's own sums are sequential; what a pair gives its second edge or source
+cluster goes to rows of the same fixed piece of the leaves or to fixed buffers per piece,
+added in a fixed order: the same bits for every thread count.
 """
 
 from __future__ import annotations
