@@ -34,8 +34,6 @@ added in a fixed order: the same bits for every thread count.
 
 from __future__ import annotations
 
-import math
-
 import numba as nb
 import numpy as np
 
@@ -53,6 +51,8 @@ from .energies.tangent_point import (
     check_exponents,
     kind_of,
     pair,
+    pair_radial,
+    radial,
 )
 
 #: Default admissibility of the tangent-point tree (with leaves of :data:`LEAF_SIZE` edges):
@@ -86,11 +86,11 @@ def _kernel(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, kind):
 # one partner edge at a time, both orders of each pair at once (the distance, |d|^−β and the
 # masks are shared). One work array per parallel piece: lane j's edge at W[_LANES k + j] (k:
 # midpoint, edge vector, length, then its tree position and neighbours' as floats, position −1
-# past the leaf's end, then 1 / length), its sums at W[_NW_SUMS + _LANES k + j] (f, ∂/∂e,
-# ∂/∂m, ∂/∂l) and what its pairs give the partner at W[_NW_OUT + _LANES k + j] (∂/∂e, ∂/∂m,
-# ∂/∂l), added over the lanes in lane order. Constant offsets plus j: the lane loop
-# vectorizes. No fast-math (see ``_near_field``). The first ten rows as in ``_near_field``, by
-# its _load_lanes.
+# past the leaf's end, then 1 / length, 1 / |d|², |d|^−β), its sums at
+# W[_NW_SUMS + _LANES k + j] (f, ∂/∂e, ∂/∂m, ∂/∂l) and what its pairs give the partner at
+# W[_NW_OUT + _LANES k + j] (∂/∂e, ∂/∂m, ∂/∂l), added over the lanes in lane order. Constant
+# offsets plus j: the lane loop vectorizes. No fast-math (see ``_near_field``). The first ten
+# rows as in ``_near_field``, by its _load_lanes.
 # Four lanes on leaves of four edges (:data:`LEAF_SIZE`): the finer split leaves about half the
 # near pairs, and the far field, cluster against cluster, is cheap per pair. The energy-only
 # pass loops over ``lanes``, a run-time argument equal to _LANES: a constant trip count of four
@@ -98,19 +98,20 @@ def _kernel(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, kind):
 _LANES = 4
 _NW_ID = 7 * _LANES
 _NW_IL = 10 * _LANES
-_NW_SUMS = 11 * _LANES
-_NW_OUT = 19 * _LANES
-_NW_SIZE = 26 * _LANES
+_NW_INV = 11 * _LANES
+_NW_RB = 12 * _LANES
+_NW_SUMS = 13 * _LANES
+_NW_OUT = 21 * _LANES
+_NW_SIZE = 28 * _LANES
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _near_lanes(W, rx, ry, rz, sx, sy, sz, lr, ir, r, lim, alpha, beta, kind, grad, lanes):
-    """Partner edge ``r`` (midpoint, edge vector, length and its inverse, tree position as a
-    float) against every lane's edge, both ordered pairs: added to the lane's sums, what they
-    give ``r`` in the lane's ``_NW_OUT`` slots. The edge itself, its neighbours, the lanes past
-    the leaf's end and lanes at positions ≥ ``lim`` (a leaf against itself: each pair once)
-    count zero: by a select (``|d|² = ∞``), no branch."""
-    for j in range(_LANES if grad else lanes):
+def _near_radial_k(W, rx, ry, rz, r, lim, beta, kind, lanes):
+    """Per lane ``1 / |d|²`` and ``|d|^−β`` (:func:`.energies.tangent_point.radial`) of the
+    lane's edge and partner edge ``r`` (midpoint, tree position as a float). The edge itself,
+    its neighbours, the lanes past the leaf's end and lanes at positions ≥ ``lim`` (a leaf
+    against itself: each pair once) count zero: ``|d|² = ∞`` by a select, no branch."""
+    for j in range(lanes):
         dx = W[j] - rx
         dy = W[_LANES + j] - ry
         dz = W[2 * _LANES + j] - rz
@@ -123,13 +124,40 @@ def _near_lanes(W, rx, ry, rz, sx, sy, sz, lr, ir, r, lim, alpha, beta, kind, gr
         r2 = np.inf if r == W[_NW_ID + 2 * _LANES + j] else r2
         r2 = np.inf if q < 0.0 else r2
         r2 = np.inf if q >= lim else r2
+        inv, rb = radial(r2, beta, kind)
+        W[_NW_INV + j] = inv
+        W[_NW_RB + j] = rb
+
+
+@nb.njit(cache=True, inline="always")
+def _near_radial(W, rx, ry, rz, r, lim, beta, kind, lanes):
+    """:func:`_near_radial_k` with ``kind`` a constant in each branch."""
+    if kind == KIND_2_4:
+        _near_radial_k(W, rx, ry, rz, r, lim, beta, KIND_2_4, lanes)
+    elif kind == KIND_2_45:
+        _near_radial_k(W, rx, ry, rz, r, lim, beta, KIND_2_45, lanes)
+    else:
+        _near_radial_k(W, rx, ry, rz, r, lim, beta, KIND_2, lanes)
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _near_lanes(W, rx, ry, rz, sx, sy, sz, lr, ir, alpha, beta, general, grad, lanes):
+    """Partner edge ``r`` (midpoint, edge vector, length and its inverse) against every lane's
+    edge, both ordered pairs, with the lanes' :func:`_near_radial`: added to the lane's sums,
+    what they give ``r`` in the lane's ``_NW_OUT`` slots. ``general``: ``α ≠ 2``."""
+    for j in range(_LANES if grad else lanes):
+        dx = W[j] - rx
+        dy = W[_LANES + j] - ry
+        dz = W[2 * _LANES + j] - rz
+        inv = W[_NW_INV + j]
+        rb = W[_NW_RB + j]
         lq = W[6 * _LANES + j]
         # (I, J) = (lane, r) and (r, lane)
-        f, fax, fay, faz, fdx, fdy, fdz, fl = _kernel(
+        f, fax, fay, faz, fdx, fdy, fdz, fl = pair_radial(
             dx, dy, dz, W[3 * _LANES + j], W[4 * _LANES + j], W[5 * _LANES + j],
-            lq, W[_NW_IL + j], lr, r2, alpha, beta, kind)
-        g, gax, gay, gaz, gdx, gdy, gdz, gl = _kernel(
-            -dx, -dy, -dz, sx, sy, sz, lr, ir, lq, r2, alpha, beta, kind)
+            lq, W[_NW_IL + j], lr, inv, rb, alpha, beta, general)
+        g, gax, gay, gaz, gdx, gdy, gdz, gl = pair_radial(
+            -dx, -dy, -dz, sx, sy, sz, lr, ir, lq, inv, rb, alpha, beta, general)
         W[_NW_SUMS + j] += f + g
         if grad:
             mx = fdx - gdx
@@ -153,12 +181,13 @@ def _near_lanes(W, rx, ry, rz, sx, sy, sz, lr, ir, r, lim, alpha, beta, kind, gr
 
 @nb.njit(cache=True, inline="always")
 def _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width, alpha, beta, kind,
-                grad, lanes):
+                general, grad, lanes):
     """The loaded lanes of leaf ``a`` against every edge ``r`` of the leaf itself (each pair
     once) and of its partners after it: what the pairs give ``r`` (edge vector, midpoint,
     length; the lanes in order) added to its columns 1–7 of ``acc`` for a leaf of the same piece,
-    else of ``ext`` in the partner's slot (rows ``width · slot …``). One call site per kind
-    and pass: with three (24 copies of the kernel pair inlined) compiling took minutes."""
+    else of ``ext`` in the partner's slot (rows ``width · slot …``). ``general`` and ``grad``
+    constants at each call site, ``kind`` only in the small loop of :func:`_near_radial`: a
+    copy of the pairs' loop per kind took minutes to compile."""
     for p in range(uoff[a] - 1, uoff[a + 1]):
         b = a if p < uoff[a] else upart[p]
         s = -1 if p < uoff[a] else uslot[p]
@@ -166,8 +195,10 @@ def _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width, alp
         off = 0 if s < 0 else width * s - lo[b]
         for r in range(lo[b], hi[b]):
             fr = float(r)
+            _near_radial(W, M[r, 0], M[r, 1], M[r, 2], fr, fr if b == a else np.inf, beta, kind,
+                         lanes)
             _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2], ln[r],
-                        1.0 / ln[r], fr, fr if b == a else np.inf, alpha, beta, kind, grad, lanes)
+                        1.0 / ln[r], alpha, beta, general, grad, lanes)
             if grad:
                 for k in range(7):
                     t = 0.0
@@ -193,33 +224,21 @@ def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, uoff, upart, uslot, nbr, widt
             for j in range(_LANES):
                 W[_NW_IL + j] = 1.0 / W[6 * _LANES + j]
             W[_NW_SUMS:] = 0.0
-            # kind and grad constants at each call (the branches fold away)
+            # general and grad constants at each call (the branches fold away)
             if grad:
-                if kind == KIND_2_4:
+                if kind == KIND_GENERAL:
                     _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
-                                alpha, beta, KIND_2_4, True, lanes)
-                elif kind == KIND_2_45:
-                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
-                                alpha, beta, KIND_2_45, True, lanes)
-                elif kind == KIND_2:
-                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
-                                alpha, beta, KIND_2, True, lanes)
+                                alpha, beta, kind, True, True, lanes)
                 else:
                     _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
-                                alpha, beta, KIND_GENERAL, True, lanes)
+                                alpha, beta, kind, False, True, lanes)
             else:
-                if kind == KIND_2_4:
+                if kind == KIND_GENERAL:
                     _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
-                                alpha, beta, KIND_2_4, False, lanes)
-                elif kind == KIND_2_45:
-                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
-                                alpha, beta, KIND_2_45, False, lanes)
-                elif kind == KIND_2:
-                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
-                                alpha, beta, KIND_2, False, lanes)
+                                alpha, beta, kind, True, False, lanes)
                 else:
                     _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
-                                alpha, beta, KIND_GENERAL, False, lanes)
+                                alpha, beta, kind, False, False, lanes)
             for j in range(count):
                 q = q0 + j
                 acc[q, 0] += W[_NW_SUMS + j]
@@ -497,17 +516,6 @@ def _cc_moments(E, M, ln, lo, hi, left, right, C):
     return G, Wm
 
 
-@nb.njit(cache=True, inline="always")
-def _inv_beta(r2, beta, kind):
-    """``|d|^−β`` from ``r2 = |d|²`` (no ``pow`` for β = 4 and 4.5)."""
-    inv = 1.0 / r2
-    if kind == KIND_2_4:
-        return inv * inv
-    if kind == KIND_2_45:
-        return inv * inv * math.sqrt(math.sqrt(inv))
-    return r2 ** (-0.5 * beta)
-
-
 # The cluster–cluster far field's lanes (the idea of ``_near_field``): up to this many partners
 # of one target at a time. One work array per parallel piece: lane j's partner at W[_CL k + j]
 # (k: L, c), its sums at W[_CW_SUMS + _CL k + j] (energy; ∂/∂L_A, ∂/∂c_A; −2 L ρ d; −L ρ d dᵀ,
@@ -515,13 +523,37 @@ def _inv_beta(r2, beta, kind):
 # (∂/∂L_B, ∂/∂c_B), added over the lanes in lane order. Lanes past the last partner repeat it
 # with L = 0: every term is a multiple of L_B.
 _CL = 4
-_CW_SUMS = 4 * _CL
-_CW_OUT = 28 * _CL
-_CW_SIZE = 32 * _CL
+_CW_RHO = 4 * _CL
+_CW_SUMS = 5 * _CL
+_CW_OUT = 29 * _CL
+_CW_SIZE = 33 * _CL
+
+
+@nb.njit(cache=True, inline="always")
+def _cc_radial_k(W, cax, cay, caz, beta, kind, lanes):
+    """Per lane ``|d|^−β`` (:func:`.energies.tangent_point.radial`) to ``W[_CW_RHO + j]``."""
+    for j in range(lanes):
+        dx = cax - W[_CL + j]
+        dy = cay - W[2 * _CL + j]
+        dz = caz - W[3 * _CL + j]
+        W[_CW_RHO + j] = radial(dx * dx + dy * dy + dz * dz, beta, kind)[1]
+
+
+@nb.njit(cache=True, inline="always")
+def _cc_radial(W, cax, cay, caz, beta, kind, lanes):
+    """:func:`_cc_radial_k` with ``kind`` a constant in each branch: the pairs' loop is one for
+    every kind (a copy per kind took minutes to compile)."""
+    if kind == KIND_2_4:
+        _cc_radial_k(W, cax, cay, caz, beta, KIND_2_4, lanes)
+    elif kind == KIND_2_45:
+        _cc_radial_k(W, cax, cay, caz, beta, KIND_2_45, lanes)
+    else:
+        _cc_radial_k(W, cax, cay, caz, beta, KIND_2, lanes)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs_ch, eF, gt, gG, gW):
+def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs_ch, eF, gt, gG, gW,
+               lanes):
     """Target ``a`` against its far partners, by lanes (see above); ``S`` scratch for the
     lanes' sums."""
     la = L[a]
@@ -547,13 +579,15 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs_ch, eF, g
             W[_CL + j] = C[b, 0]
             W[2 * _CL + j] = C[b, 1]
             W[3 * _CL + j] = C[b, 2]
-        for j in range(_CL):
+        _cc_radial(W, cax, cay, caz, beta, kind, lanes)
+        # a run-time count for the energy alone (as the near field's: a constant was unrolled)
+        for j in range(_CL if grad else lanes):
             lb = W[j]
             dx = cax - W[_CL + j]
             dy = cay - W[2 * _CL + j]
             dz = caz - W[3 * _CL + j]
             r2 = dx * dx + dy * dy + dz * dz
-            rho = _inv_beta(r2, beta, kind)
+            rho = W[_CW_RHO + j]
             rho2 = rho / r2
             gdx = g00 * dx + g01 * dy + g02 * dz
             gdy = g01 * dx + g11 * dy + g12 * dz
@@ -677,12 +711,13 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs_ch, eF, g
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad):
+def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad, lanes):
     """Every node ``A`` against its far partners ``B`` (:func:`_cc_node`'s moments): per node
     the energy of its pairs as target; with ``grad`` the derivatives of the sum in its own
     ``L`` (column 0 of ``gt``), ``c`` (1–3), ``G`` (``gG``) and ``W`` (``gW``) as a target,
     and, per fixed piece of the targets, in every partner's ``L`` and ``c`` as a source
-    (``gs``). Each target's sums are its own: the same bits for any thread count."""
+    (``gs``). Each target's sums are its own: the same bits for any thread count. ``lanes``:
+    always :data:`_CL`, passed at run time."""
     m = L.shape[0]
     nchunks = min(m, _FAR_CHUNKS)
     eF = np.zeros(m)
@@ -697,27 +732,12 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad):
         for a in range(ch * m // nchunks, (ch + 1) * m // nchunks):
             if foff[a + 1] == foff[a]:
                 continue
-            # kind and grad constants at each call (the branches fold away)
-            if grad:
-                if kind == KIND_2_4:
-                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2_4, True, gs[ch], eF,
-                               gt, gG, gW)
-                elif kind == KIND_2_45:
-                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2_45, True, gs[ch], eF,
-                               gt, gG, gW)
-                else:
-                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2, True, gs[ch], eF,
-                               gt, gG, gW)
+            if grad:  # a constant at each call (the branches fold away)
+                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, True, gs[ch], eF, gt,
+                           gG, gW, lanes)
             else:
-                if kind == KIND_2_4:
-                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2_4, False, gs[ch],
-                               eF, gt, gG, gW)
-                elif kind == KIND_2_45:
-                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2_45, False, gs[ch],
-                               eF, gt, gG, gW)
-                else:
-                    _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, KIND_2, False, gs[ch],
-                               eF, gt, gG, gW)
+                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, False, gs[ch], eF, gt,
+                           gG, gW, lanes)
     return eF, gt, gG, gW, gs
 
 
@@ -909,7 +929,7 @@ class TangentPointFrame(Frame):
                 if own:
                     self._cc_own = (G, Wm)
             eF, gt, gG, gW, gs = _cc_far(L, C, G, Wm, self.foff, self.fpart, self.beta,
-                                         self.kind, grad)
+                                         self.kind, grad, _CL)
             energy = float(np.sum(rows[0])) + float(np.sum(eF))
             if not grad:
                 return energy, None

@@ -86,6 +86,21 @@ def kind_of(alpha: float, beta: float) -> int:
 
 
 @nb.njit(cache=True, inline="always")
+def radial(r2, beta, kind):
+    """``(1 / |d|², |d|^−β)`` from ``r2 = |d|²`` (the only part of :func:`pair` that depends
+    on ``kind`` for ``α = 2``): a sum computes it in a small loop per kind and the pairs in one
+    loop for every kind (a loop per kind took minutes to compile)."""
+    inv = 1.0 / r2
+    if kind == KIND_2_4:
+        rb = inv * inv  # |d|^−4
+    elif kind == KIND_2_45:
+        rb = inv * inv * math.sqrt(math.sqrt(inv))  # r2^−2 r2^−¼, no pow
+    else:
+        rb = r2 ** (-0.5 * beta)
+    return inv, rb
+
+
+@nb.njit(cache=True, inline="always")
 def pair(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, kind):
     """The ordered pair ``(I, J)``: ``e_I = a``, lengths ``li``, ``lj``, ``il = 1 / li`` (a sum
     divides once per edge, not per pair), ``d = m_I − m_J`` with ``r2 = |d|²``.
@@ -93,28 +108,25 @@ def pair(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, kind):
     Returns ``(f, ∂f/∂e_I (3), ∂f/∂d (3), ∂f/∂l_J)``: ``∂f/∂e_I`` with its length term (``l_I``
     is ``|e_I|``); ``∂f/∂m_I = ∂f/∂d``, ``∂f/∂m_J = −∂f/∂d``; ``∂f/∂l_J = f/l_J`` (computed
     without the division, so a weight ``l_J = 0`` gives 0)."""
+    inv, rb = radial(r2, beta, kind)
+    return pair_radial(dx, dy, dz, ax, ay, az, li, il, lj, inv, rb, alpha, beta,
+                       kind == KIND_GENERAL)
+
+
+@nb.njit(cache=True, inline="always")
+def pair_radial(dx, dy, dz, ax, ay, az, li, il, lj, inv, rb, alpha, beta, general):
+    """:func:`pair` with :func:`radial`'s ``inv``, ``rb`` given; ``general``: ``α ≠ 2``."""
     # c = e_I × d; |c|^α = w |c|², its derivative in c: α w c
     cx = ay * dz - az * dy
     cy = az * dx - ax * dz
     cz = ax * dy - ay * dx
     c2 = cx * cx + cy * cy + cz * cz
-    inv = 1.0 / r2
-    if kind == KIND_2_4:
-        w = 1.0
-        rb = inv * inv  # |d|^−4
-        pl = il  # l_I^(1−α)
-    elif kind == KIND_2_45:
-        w = 1.0
-        rb = inv * inv * math.sqrt(math.sqrt(inv))  # r2^−2 r2^−¼, no pow
-        pl = il
-    elif kind == KIND_2:
-        w = 1.0
-        rb = r2 ** (-0.5 * beta)
-        pl = il
-    else:
+    if general:
         w = c2 ** (0.5 * alpha - 1.0) if c2 > 0.0 else 0.0
-        rb = r2 ** (-0.5 * beta)
         pl = li ** (1.0 - alpha)
+    else:
+        w = 1.0
+        pl = il  # l_I^(1−α)
     h = pl * w * rb  # f = lj h |c|²
     fl = h * c2  # ∂f/∂l_J
     f = lj * fl
