@@ -69,19 +69,6 @@ LEAF_SIZE = 4
 _FAR_CHUNKS = 16
 
 
-@nb.njit(cache=True, inline="always")
-def _kernel(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, kind):
-    """:func:`pair` with ``kind`` made a constant at each call site (the branches inside fold
-    away)."""
-    if kind == KIND_2_4:
-        return pair(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, KIND_2_4)
-    if kind == KIND_2_45:
-        return pair(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, KIND_2_45)
-    if kind == KIND_2:
-        return pair(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, KIND_2)
-    return pair(dx, dy, dz, ax, ay, az, li, il, lj, r2, alpha, beta, KIND_GENERAL)
-
-
 # The near field's lanes (the idea of ``_near_field``): up to this many edges of a leaf against
 # one partner edge at a time, both orders of each pair at once (the distance, |d|^−β and the
 # masks are shared). One work array per parallel piece: lane j's edge at W[_LANES k + j] (k:
@@ -371,13 +358,12 @@ def _near(E, M, ln, lo, hi, leaves, uoff, upart, uslot, slot_leaf, nbr, alpha, b
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def _far(E, M, ln, L, C, lo, hi, leaves, parent, foff, fpart, alpha, beta, kind, grad,
-         rows):
-    """Every edge against the far partners of its leaf and of the leaf's ancestors, each
-    partner ``B`` as one point of weight ``L_B`` at ``c_B``: added to ``rows`` (row 0 the
-    energy, 1–3 the edge vector, 4–6 the midpoint; :func:`_near`'s layout). Returns, per
-    fixed piece of the leaves, the derivatives of the sum in every cluster's ``L`` (column
-    0) and ``c`` (1–3)."""
+def _far(E, M, ln, L, C, lo, hi, leaves, parent, foff, fpart, alpha, beta, grad, rows):
+    """For ``α ≠ 2`` (``α = 2`` takes :func:`_cc_far`): every edge against the far partners of
+    its leaf and of the leaf's ancestors, each partner ``B`` as one point of weight ``L_B`` at
+    ``c_B``: added to ``rows`` (row 0 the energy, 1–3 the edge vector, 4–6 the midpoint;
+    :func:`_near`'s layout). Returns, per fixed piece of the leaves, the derivatives of the sum
+    in every cluster's ``L`` (column 0) and ``c`` (1–3)."""
     m = L.shape[0]
     nl = leaves.shape[0]
     nchunks = _FAR_CHUNKS
@@ -399,9 +385,9 @@ def _far(E, M, ln, L, C, lo, hi, leaves, parent, foff, fpart, alpha, beta, kind,
                         dx = px - C[b, 0]
                         dy = py - C[b, 1]
                         dz = pz - C[b, 2]
-                        f, fax, fay, faz, fdx, fdy, fdz, fl = _kernel(
+                        f, fax, fay, faz, fdx, fdy, fdz, fl = pair(
                             dx, dy, dz, ax, ay, az, li, il, L[b], dx * dx + dy * dy + dz * dz,
-                            alpha, beta, kind)
+                            alpha, beta, KIND_GENERAL)
                         s += f
                         if grad:
                             gax += fax
@@ -915,7 +901,7 @@ class TangentPointFrame(Frame):
         if self.kind == KIND_GENERAL:
             # |T × d|^α is no polynomial in T for α ≠ 2: every edge against the cluster
             gnode = _far(E, M, ln, L, C, tree.lo, tree.hi, self.leaves, self.parent, self.foff,
-                         self.fpart, *args, rows)
+                         self.fpart, self.alpha, self.beta, grad, rows)
             energy = float(np.sum(rows[0]))
             if not grad:
                 return energy, None
