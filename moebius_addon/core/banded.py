@@ -37,6 +37,11 @@ BANDED_METRICS = ("l2", "h1", "h2")
 # The band of several components is factored and solved in up to this many blocks of whole
 # components, in parallel (the same bits: no entry crosses a block's edge).
 _BLOCKS = 64
+#: From this many vertices on, a solver's band keeps only its packed factors (:func:`pack_factors`)
+#: and is not taken over by the next iterate's: the fine band of the hs preconditioner holds
+#: 0.70 GB at 10⁶ vertices, its packed U 0.31 GB; below, the reuse saves a fresh array's page
+#: faults (docs/benchmarks.md, session 15).
+COMPACT_FROM = 200_000
 
 
 @nb.njit(cache=True)
@@ -502,18 +507,27 @@ class BandedSaddle:
         np.add.at(diag, rows[rows == cols], vals[rows == cols])
         self.anchors, self.mu = anchors, diag[anchors]
         shape = (4 * lay.n, self.kl + self.ku + 1)
-        reuse = recycle is not None and recycle.ab.shape == shape
+        reuse = recycle is not None and recycle.ab is not None and recycle.ab.shape == shape
         ab = recycle.ab if reuse else np.empty(shape)
+        recycle = None
         self.D = _fill(rows, cols, vals, pos, anchors, self.mu, T, ln, lay.nxt, has_row, fixed,
                        self.kl, self.ku, ab)
-        self.ab = ab
         # blocks of whole components, some 64 at most (none for one component)
         self.cuts = block_cuts(ab, self.kl, self.ku, np.asarray(lay.starts[:-1], np.int64),
                                max(4 * lay.n // _BLOCKS, 1))
         piv, mult, bad = band_lu_blocks(ab, self.kl, self.ku, self.cuts)
         if bad >= 0:
             raise np.linalg.LinAlgError(f"singular band at unknown {bad}")
-        self.factors = (*pack_factors(ab, mult, self.kl, self.ku, self.cuts), piv)
+        U, *rest = pack_factors(ab, mult, self.kl, self.ku, self.cuts)
+        if lay.n >= COMPACT_FROM:
+            # U is packed at the start of ab: the rest goes back to the system (a realloc to
+            # the smaller size, no copy), and the next iterate's band is a fresh array
+            size = U.shape[0]
+            del U  # no view of ab may outlive the resize
+            ab.resize(size, refcheck=False)
+            U = ab
+        self.ab = ab if ab.shape == shape else None
+        self.factors = (U, *rest, piv)
         return diag
 
     def release(self) -> None:
@@ -521,7 +535,7 @@ class BandedSaddle:
         over (``recycle``): built while this one was still whole, the hs solver of a 7_2 at
         100 000 edges held two iterates' operators, coarse levels and band fields at once,
         about 240 MB more at the peak. The solver is unusable afterwards."""
-        self.__dict__ = {"ab": self.ab}
+        self.__dict__ = {"ab": self.ab}  # None when compacted (COMPACT_FROM)
 
     def _band_inverse(self, G, lam=None):
         """Band solve for right-hand sides given as fields ``G`` (m, N, 3) and edge values

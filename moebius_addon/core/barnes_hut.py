@@ -424,6 +424,9 @@ class Frame:
         Admissibility: clusters are far when ``max(diam) ≤ theta · gap`` of their boxes.
     leaf_size : int
         Edges per leaf at most.
+    keep_near : bool
+        Keep the near pairs of leaves as :attr:`near` (for checks; the evaluations read only
+        what :meth:`_near_setup` derives from them, and at 10⁶ edges they are 106 MB).
     """
 
     #: Whether open components take O'Hara's arc-length part (:mod:`._arc_field`; the Möbius
@@ -431,7 +434,7 @@ class Frame:
     arc_part = True
 
     def __init__(self, X: np.ndarray, layout: Layout, theta: float = THETA,
-                 leaf_size: int = bvh.LEAF_SIZE):
+                 leaf_size: int = bvh.LEAF_SIZE, keep_near: bool = False):
         self.layout = layout
         self.theta = check_theta(theta)
         # open components: their dummy edges (._layout) stay out of the tree
@@ -461,9 +464,11 @@ class Frame:
         self.far_pairs = far.shape[0]
         self.near_pairs = near.shape[0]
         self.foff, self.fpart = _by_target(far, m)
-        self.near = near
+        del far
+        self.near = near if keep_near else None
         self.leaves = np.flatnonzero(tree.left < 0).astype(np.int64)
         self._near_setup(near, m)
+        del near
         #: The arc-length part of the open components' energy (None: all closed).
         self.arc = (ArcField(layout, X, tree, self.foff, self.fpart)
                     if layout.has_open and self.arc_part else None)

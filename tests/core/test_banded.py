@@ -173,3 +173,34 @@ def test_packed_factors_keep_every_nonzero_and_solve_the_blocks():
     banded._solve_range(U, L, uw, lw, uoff[1], loff[0], piv, x[:40], 0, 40)
     banded._solve_range(U, L, uw, lw, uoff[2], loff[1], piv, x[40:], 40, n)
     assert np.allclose(x, np.linalg.solve(M, b), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["fhw", "link"])
+def test_compacted_band_solves_the_same_bits(name, monkeypatch):
+    """From COMPACT_FROM vertices on the band keeps only its packed U (the array shrunk in
+    place): the same solutions to the bit, the room given back, nothing left to recycle."""
+    X, lay, con, jac = _system(name)
+    parts = metrics.banded_parts("h1", X, lay)
+    rng = np.random.default_rng(2)
+    g = rng.standard_normal((lay.n, 3))
+    r = 1e-3 * rng.standard_normal(con.size)
+    kept = banded.BandedSaddle(parts, jac)
+    again = banded.BandedSaddle(parts, jac, recycle=kept)  # takes kept's band over
+    full = (4 * lay.n, again.kl + again.ku + 1)
+    assert again.ab is not None and again.ab.shape == full
+    again.release()
+    monkeypatch.setattr(banded, "COMPACT_FROM", lay.n)
+    small = banded.BandedSaddle(parts, jac, recycle=again)
+    assert small.ab is None
+    U = small.factors[0]
+    assert U.ndim == 1 and U.flags.owndata and U.size < 0.7 * full[0] * full[1]
+    # `again` was recycled (its band overwritten): build the reference anew
+    monkeypatch.setattr(banded, "COMPACT_FROM", lay.n + 1)
+    ref = banded.BandedSaddle(parts, jac)
+    for a, b in zip(small.solve(g, r), ref.solve(g, r)):
+        assert np.array_equal(a, b)
+    assert np.array_equal(small.pseudo_inverse(r), ref.pseudo_inverse(r))
+    small.release()
+    monkeypatch.setattr(banded, "COMPACT_FROM", lay.n)
+    fresh = banded.BandedSaddle(parts, jac, recycle=small)  # nothing to take over: a new band
+    assert np.array_equal(fresh.solve(g, r)[0], ref.solve(g, r)[0])

@@ -99,7 +99,7 @@ def test_frame_matches_slow_reference(which, leaf_size, rng):
     # leaves of 4 edges fill half the near field's 8 lanes, of 12 one block of 8 and one of 4
     P = _perturbed_trefoil(90 * leaf_size // 4, rng) if which == "knot" else _link()
     X, layout = as_layout(P)
-    frame = bh.Frame(X, layout, theta=0.6, leaf_size=leaf_size)
+    frame = bh.Frame(X, layout, theta=0.6, leaf_size=leaf_size, keep_near=True)
     assert frame.far_pairs > 10  # the test covers the far field
     assert frame.energy(X) == pytest.approx(slow_frame_energy(X, layout, frame), rel=1e-9)
 
