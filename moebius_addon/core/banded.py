@@ -101,29 +101,42 @@ def _lu_range(ab, kl, ku, piv, mult, lo, n):
     win = np.empty((h, 2 * kl + ku + 1))
     for r in range(lo, min(n, lo + h)):
         _load_row(win, ab, r, kl, ku)
+    # row r lives in win[r % h]; the place of row k + i is kh + i, less h past the end (a
+    # division per row touched cost more than the elimination's products at 10⁴ vertices)
+    kh = lo % h
     for k in range(lo, n):
         last = min(n - 1, k + kl)
         p = k
-        best = abs(win[k % h, kl])
+        ph = kh
+        best = abs(win[kh, kl])
+        i = kh
         for r in range(k + 1, last + 1):
-            v = abs(win[r % h, k - r + kl])
+            i += 1
+            if i == h:
+                i = 0
+            v = abs(win[i, k - r + kl])
             if v > best:
                 best = v
                 p = r
+                ph = i
         piv[k] = p
         if best == 0.0:
             return k
         jmax = min(n - 1, k + kl + ku)
-        wk = win[k % h]
+        wk = win[kh]
         if p != k:
-            wp = win[p % h]
+            wp = win[ph]
             for j in range(k, jmax + 1):
                 a = wk[j - k + kl]
                 wk[j - k + kl] = wp[j - p + kl]
                 wp[j - p + kl] = a
         d = wk[kl]
+        i = kh
         for r in range(k + 1, last + 1):
-            wr = win[r % h]
+            i += 1
+            if i == h:
+                i = 0
+            wr = win[i]
             f = wr[k - r + kl] / d
             mult[k, r - k - 1] = f
             if f != 0.0:
@@ -131,6 +144,9 @@ def _lu_range(ab, kl, ku, piv, mult, lo, n):
                     wr[j - r + kl] -= f * wk[j - k + kl]
         for t in range(kl + ku + 1):  # row k of U, done: back to ab (its input was read)
             ab[k, t] = wk[t + kl]
+        kh += 1
+        if kh == h:
+            kh = 0
         if k + h < n:
             _load_row(win, ab, k + h, kl, ku)
     return -1
