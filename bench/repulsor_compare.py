@@ -109,13 +109,26 @@ def _ours_relax(core, P: np.ndarray, theta: float | None, energy: str = "tangent
                                        energy="tangent_point", alpha=ALPHA, beta=BETA)
 
 
+def warm_up_size(core, n: int) -> int:
+    """Edges of the warm-up curve for a measurement at ``n``: the largest size threshold of
+    the core's paths that ``n`` reaches (at least 600), so the warm-up runs every kernel."""
+    from moebius_addon.core import banded, collision, engine, hs_solve
+    sizes = (collision.CLOSEST_TREE_FROM, collision.CONTACT_TREE_FROM, engine.AUTO_TREE_FROM,
+             engine.ENERGY_TREE_FROM, hs_solve.MULTILEVEL_FROM, engine.SINGLE_WEIGHTS_FROM,
+             banded.COMPACT_FROM)
+    return max([600] + [t for t in sizes if t <= n])
+
+
 def worker(args) -> None:
     """One measurement of ours; prints one ``ours ...`` line and one ``ours memory`` line."""
     core = _core(args.core_from)
     P = np.fromfile(args.curve, dtype=np.float64).reshape(-1, 3)
     n = len(P)
     theta = args.theta
-    small = core.resample(P, 600)  # warm-up: load (or compile) every kernel used below
+    # warm-up: load (or compile) every kernel used below, on a curve that takes the same paths
+    # (a 600-edge one missed the contact tree's, the multilevel's and the single-precision
+    # weights' kernels, and their loading from numba's cache, 40 ms at 10^4 edges, was timed)
+    small = core.resample(P, warm_up_size(core, n))
     _ours_eg(core, small, "tree", theta)
     _ours_relax(core, small, theta)
     _ours_relax(core, small, theta, "moebius")
