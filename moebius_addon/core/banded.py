@@ -140,8 +140,11 @@ def _lu_range(ab, kl, ku, piv, mult, lo, n):
             f = wr[k - r + kl] / d
             mult[k, r - k - 1] = f
             if f != 0.0:
-                for j in range(k + 1, jmax + 1):
-                    wr[j - r + kl] -= f * wk[j - k + kl]
+                # unsigned places: no wraparound test per entry, so the loop vectorizes
+                a = np.uint64(k + 1 - r + kl)
+                b = np.uint64(1 + kl)
+                for t in range(np.uint64(jmax - k)):
+                    wr[a + t] -= f * wk[b + t]
         for t in range(kl + ku + 1):  # row k of U, done: back to ab (its input was read)
             ab[k, t] = wk[t + kl]
         kh += 1
@@ -216,8 +219,10 @@ def _solve_range(U, L, uw, lw, uo, lo_, piv, x, lo, n):
         xk = x[k - lo]
         w = lw[k]
         if xk != 0.0:
-            for t in range(w):
-                x[k + 1 + t - lo] -= L[lo_ + t] * xk
+            a = np.uint64(k + 1 - lo)  # unsigned places: no wraparound test per entry
+            b = np.uint64(lo_)
+            for t in range(np.uint64(w)):
+                x[a + t] -= L[b + t] * xk
         lo_ += w
     # back substitution: row k's products with the columns k + 2 … in eight running sums
     # (column k + 2 + 8 i + c always in sum c), added pairwise, and the column k + 1, solved just
@@ -228,39 +233,39 @@ def _solve_range(U, L, uw, lw, uo, lo_, piv, x, lo, n):
     for k in range(n - 1, lo - 1, -1):
         uo -= uw[k]
         w = uw[k] - 1  # the columns k + 1 … k + w
-        o = k - lo
+        o = k - lo  # (places as unsigned below: no wraparound test per read)
         s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = 0.0
         j = 2
         while j + 7 <= w:
-            s0 += U[uo + j] * x[o + j]
-            s1 += U[uo + j + 1] * x[o + j + 1]
-            s2 += U[uo + j + 2] * x[o + j + 2]
-            s3 += U[uo + j + 3] * x[o + j + 3]
-            s4 += U[uo + j + 4] * x[o + j + 4]
-            s5 += U[uo + j + 5] * x[o + j + 5]
-            s6 += U[uo + j + 6] * x[o + j + 6]
-            s7 += U[uo + j + 7] * x[o + j + 7]
+            s0 += U[np.uint64(uo + j)] * x[np.uint64(o + j)]
+            s1 += U[np.uint64(uo + j + 1)] * x[np.uint64(o + j + 1)]
+            s2 += U[np.uint64(uo + j + 2)] * x[np.uint64(o + j + 2)]
+            s3 += U[np.uint64(uo + j + 3)] * x[np.uint64(o + j + 3)]
+            s4 += U[np.uint64(uo + j + 4)] * x[np.uint64(o + j + 4)]
+            s5 += U[np.uint64(uo + j + 5)] * x[np.uint64(o + j + 5)]
+            s6 += U[np.uint64(uo + j + 6)] * x[np.uint64(o + j + 6)]
+            s7 += U[np.uint64(uo + j + 7)] * x[np.uint64(o + j + 7)]
             j += 8
         # the rest in the same sums by column (a block's rows end where one band's go on with
         # zeros: the same bits, test_open_tree_runs)
         if j <= w:
-            s0 += U[uo + j] * x[o + j]
+            s0 += U[np.uint64(uo + j)] * x[np.uint64(o + j)]
         if j + 1 <= w:
-            s1 += U[uo + j + 1] * x[o + j + 1]
+            s1 += U[np.uint64(uo + j + 1)] * x[np.uint64(o + j + 1)]
         if j + 2 <= w:
-            s2 += U[uo + j + 2] * x[o + j + 2]
+            s2 += U[np.uint64(uo + j + 2)] * x[np.uint64(o + j + 2)]
         if j + 3 <= w:
-            s3 += U[uo + j + 3] * x[o + j + 3]
+            s3 += U[np.uint64(uo + j + 3)] * x[np.uint64(o + j + 3)]
         if j + 4 <= w:
-            s4 += U[uo + j + 4] * x[o + j + 4]
+            s4 += U[np.uint64(uo + j + 4)] * x[np.uint64(o + j + 4)]
         if j + 5 <= w:
-            s5 += U[uo + j + 5] * x[o + j + 5]
+            s5 += U[np.uint64(uo + j + 5)] * x[np.uint64(o + j + 5)]
         if j + 6 <= w:
-            s6 += U[uo + j + 6] * x[o + j + 6]
-        t = x[o] - (((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7)))
+            s6 += U[np.uint64(uo + j + 6)] * x[np.uint64(o + j + 6)]
+        t = x[np.uint64(o)] - (((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7)))
         if w >= 1:
-            t -= U[uo + 1] * x[o + 1]
-        x[o] = t / U[uo]
+            t -= U[np.uint64(uo + 1)] * x[np.uint64(o + 1)]
+        x[np.uint64(o)] = t / U[np.uint64(uo)]
 
 
 def band_solve(ab, mult, piv, kl, ku, b):
