@@ -279,7 +279,8 @@ def _near_weights(ln, mid, arc, clen, closed, nxt, starts, comp, lo, hi, leaves,
                     if not closed[cq] and same:  # along an open polyline: no way round
                         gap = abs(r - q)
                     else:
-                        gap = (r - q) % sq if same else 2
+                        # (r − q) mod sq without a division: both on one component
+                        gap = (r - q if r >= q else r - q + sq) if same else 2
                         if gap == sq - 1:
                             gap = 1
                     # an open component's dummy edge (length 0) is no edge
@@ -406,9 +407,9 @@ def _near_product(F, G, w, v, lo, hi, leaves, noff, npart, rowoff, Y):
             f0 = f1 = f2 = g0 = g1 = g2 = 0.0
             for p in range(noff[a], noff[a + 1]):
                 b = npart[p]
-                for r in range(lo[b], hi[b]):
-                    wq = w[pos]
-                    vq = v[pos]
+                for r in range(np.uint64(lo[b]), np.uint64(hi[b])):  # unsigned: no wraparound
+                    wq = w[np.uint64(pos)]
+                    vq = v[np.uint64(pos)]
                     f0 += wq * F[r, 0]
                     f1 += wq * F[r, 1]
                     f2 += wq * F[r, 2]
