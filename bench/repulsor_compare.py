@@ -40,13 +40,15 @@ our Möbius-energy flow (``iter_moebius``; issue 27 compares it with Repulsor's 
 iteration). Our iteration lines give the Krylov iterations of each hs solve (``krylov=``).
 
 Repulsor is never a dependency of the add-on and nothing of it is in this repository: the driver
-binary (``--driver``, default /work/repulsor-build/driver/driver) is a small C++ program that
-calls Repulsor's API, built outside the repository against Repulsor 5db79ff19cd8bbd17dafdd256017
-aa690d70b392 (submodules Tensors 6de11784d4d54403091410d9b622281c28e5f211, Tools dfa339a6d599fb
-166d543329a6b718a328a0d384, with upstream's later fix of ``Tools::Accumulate``, Tools 0525a91,
-applied: without it the block cluster tree reads uninitialised memory and the energy comes out
-NaN in most runs); docs/benchmarks.md, "Tangent-point energy against Repulsor", says
-with what it was compiled and what was measured. Without the binary, only our side runs.
+binary (``--driver``, default /work/repulsor-build/driver/driver) is a small C++ program of ours
+that calls Repulsor's API (``bench/repulsor_driver/driver.cpp``; ``bench/repulsor_driver/
+build.sh`` fetches Repulsor and builds the driver outside the repository), built against
+Repulsor 5db79ff19cd8bbd17dafdd256017aa690d70b392 (submodules Tensors 6de11784d4d54403091410d9
+b622281c28e5f211, Tools dfa339a6d599fb166d543329a6b718a328a0d384, with upstream's later fix of
+``Tools::Accumulate``, Tools 0525a91, applied: without it the block cluster tree reads
+uninitialised memory and the energy comes out NaN in most runs); docs/benchmarks.md,
+"Tangent-point energy against Repulsor", says with what it was compiled and what was
+measured. Without the binary, only our side runs.
 Results also go to ``out/repulsor_compare.json``.
 """
 
@@ -109,6 +111,28 @@ def _ours_relax(core, P: np.ndarray, theta: float | None, energy: str = "tangent
                                        energy="tangent_point", alpha=ALPHA, beta=BETA)
 
 
+def forget_warm_up() -> float:
+    """Give the warm-up's freed memory back (glibc's ``malloc_trim``) and restart the peak
+    (``VmHWM``, by writing 5 to ``/proc/self/clear_refs``), so that the peak measured after it
+    is the measurement's: a warm-up at 200 000 edges left 1.0 GB resident. The resident set now
+    (MB)."""
+    try:
+        import ctypes
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:
+        pass
+    try:
+        with open("/proc/self/status") as f:
+            return next(float(line.split()[1]) / 1024 for line in f if line.startswith("VmRSS:"))
+    except (OSError, StopIteration):
+        return peak_rss_mb()
+
+
 def warm_up_size(core, n: int) -> int:
     """Edges of the warm-up curve for a measurement at ``n``: the largest size threshold of
     the core's paths that ``n`` reaches (at least 600), so the warm-up runs every kernel."""
@@ -134,7 +158,7 @@ def worker(args) -> None:
     _ours_relax(core, small, theta, "moebius")
     if args.worker == "error":
         _ours_eg(core, small, "exact", theta)
-    before = peak_rss_mb()
+    before = forget_warm_up()
     head = f"ours {args.worker} edges={n} threads={args.threads}"
     if args.worker == "eg":
         t0 = time.perf_counter()

@@ -197,7 +197,7 @@ def test_compacted_band_solves_the_same_bits(name, monkeypatch):
     # `again` was recycled (its band overwritten): build the reference anew
     monkeypatch.setattr(banded, "COMPACT_FROM", lay.n + 1)
     ref = banded.BandedSaddle(parts, jac)
-    for a, b in zip(small.solve(g, r), ref.solve(g, r)):
+    for a, b in zip(small.solve(g, r), ref.solve(g, r), strict=True):
         assert np.array_equal(a, b)
     assert np.array_equal(small.pseudo_inverse(r), ref.pseudo_inverse(r))
     small.release()
