@@ -114,8 +114,8 @@ def _ours_relax(core, P: np.ndarray, theta: float | None, energy: str = "tangent
 def forget_warm_up() -> float:
     """Give the warm-up's freed memory back (glibc's ``malloc_trim``) and restart the peak
     (``VmHWM``, by writing 5 to ``/proc/self/clear_refs``), so that the peak measured after it
-    is the measurement's: a warm-up at 200 000 edges left 1.0 GB resident. The resident set now
-    (MB)."""
+    is the measurement's, not the warm-up's (a warm-up's peak can exceed a small measurement's).
+    The resident set now (MB)."""
     try:
         import ctypes
         ctypes.CDLL("libc.so.6").malloc_trim(0)
@@ -133,29 +133,22 @@ def forget_warm_up() -> float:
         return peak_rss_mb()
 
 
-def warm_up_size(core, n: int) -> int:
-    """Edges of the warm-up curve for a measurement at ``n``: the largest size threshold of
-    the core's paths that ``n`` reaches (at least 600), so the warm-up runs every kernel."""
-    from moebius_addon.core import banded, collision, engine, hs_solve
-    sizes = (collision.CLOSEST_TREE_FROM, collision.CONTACT_TREE_FROM, engine.AUTO_TREE_FROM,
-             engine.ENERGY_TREE_FROM, hs_solve.MULTILEVEL_FROM, engine.SINGLE_WEIGHTS_FROM,
-             banded.COMPACT_FROM)
-    return max([600] + [t for t in sizes if t <= n])
-
-
 def worker(args) -> None:
     """One measurement of ours; prints one ``ours ...`` line and one ``ours memory`` line."""
     core = _core(args.core_from)
     P = np.fromfile(args.curve, dtype=np.float64).reshape(-1, 3)
     n = len(P)
     theta = args.theta
-    # warm-up: load (or compile) every kernel used below, on a curve that takes the same paths
-    # (a 600-edge one missed the contact tree's, the multilevel's and the single-precision
-    # weights' kernels, and their loading from numba's cache, 40 ms at 10^4 edges, was timed)
-    small = core.resample(P, warm_up_size(core, n))
+    # warm-up: load (or compile) every kernel used below. A 600-edge curve alone misses the
+    # paths taken from a size on (the contact tree, the multilevel preconditioner, the single-
+    # precision weights), whose loading from numba's cache was timed (40 ms at 10^4 edges):
+    # core.warm runs those too, on small curves (no kernel loads in the timed call at 10^4,
+    # 10^5 or 10^6 edges, cProfile)
+    small = core.resample(P, 600)
     _ours_eg(core, small, "tree", theta)
     _ours_relax(core, small, theta)
     _ours_relax(core, small, theta, "moebius")
+    core.warm(("exact", "tree", "tangent_point"), say=None)
     if args.worker == "error":
         _ours_eg(core, small, "exact", theta)
     before = forget_warm_up()

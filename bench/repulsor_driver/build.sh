@@ -19,16 +19,19 @@ BASE=${GIT_BASE:-https://github.com/HenrikSchumacher}
 CXX=${CXX:-clang++-19}
 mkdir -p "$DIR/driver"
 R="$DIR/Repulsor"
-clone() {  # repository, commit, destination
-    [ -d "$3/.git" ] || [ -f "$3/.git" ] || git clone -q "$BASE/$1" "$3"
+clone() {  # repository, commit, destination (an empty submodule directory is cloned into;
+           # a clone made before is only checked out again)
+    [ -e "$3/.git" ] || git clone -q "$BASE/$1" "$3"
     git -C "$3" checkout -q "$2"
 }
 clone Repulsor 5db79ff19cd8bbd17dafdd256017aa690d70b392 "$R"
-rm -rf "$R/submodules/Tensors" && clone Tensors 6de11784d4d54403091410d9b622281c28e5f211 "$R/submodules/Tensors"
+clone Tensors 6de11784d4d54403091410d9b622281c28e5f211 "$R/submodules/Tensors"
 T="$R/submodules/Tensors/submodules/Tools"
-rm -rf "$T" && clone Tools dfa339a6d599fb166d543329a6b718a328a0d384 "$T"
-git -C "$T" fetch -q origin 2>/dev/null || true
-git -C "$T" diff 0525a91~1 0525a91 -- src/ParallelAlgorithms.hpp | git -C "$T" apply
+clone Tools dfa339a6d599fb166d543329a6b718a328a0d384 "$T"
+# the fix, once (a build run again finds the file changed already)
+if git -C "$T" diff --quiet -- src/ParallelAlgorithms.hpp; then
+    git -C "$T" diff 0525a91~1 0525a91 -- src/ParallelAlgorithms.hpp | git -C "$T" apply
+fi
 OPENBLAS_INC=/usr/include/x86_64-linux-gnu/openblas-pthread
 OPENBLAS_LIB=/usr/lib/x86_64-linux-gnu/openblas-pthread
 set -x

@@ -186,6 +186,27 @@ int main( int argc, char ** argv )
         return M_ptr;
     };
 
+    // What every mode starts with: a new mesh, then the energy and its differential
+    // (Differential first: it caches the energy it computes along; Value reads it), timed from t0.
+    struct Start
+    {
+        std::unique_ptr<Mesh_T>   M_ptr;
+        Mesh_T::CotangentVector_T diff;
+        Real                      en     = 0;
+        double                    t_mesh = 0;
+        double                    t_eg   = 0;
+    };
+    auto start = [&]( const Clock::time_point t0 )
+    {
+        Start s;
+        s.M_ptr  = make_mesh();
+        s.t_mesh = seconds_since( t0 );
+        s.diff   = tpe.Differential( *s.M_ptr );
+        s.en     = tpe.Value( *s.M_ptr );
+        s.t_eg   = seconds_since( t0 );
+        return s;
+    };
+
     const std::size_t len = static_cast<std::size_t>(n) * amb_dim;
 
     char head[256];
@@ -196,19 +217,12 @@ int main( int argc, char ** argv )
 
     if( mode == "eg" )
     {
-        const auto t0 = Clock::now();
-        std::unique_ptr<Mesh_T> M_ptr = make_mesh();
-        auto & M = *M_ptr;
-        const double t_mesh = seconds_since( t0 );
-        // Differential first (it caches the energy it computes along), then the cached Value.
-        Mesh_T::CotangentVector_T diff = tpe.Differential( M );
-        const Real en = tpe.Value( M );
-        const double s = seconds_since( t0 );
+        const Start st = start( Clock::now() );
 
         std::printf( "repulsor info eg mesh_seconds=%.6f energy_differential_seconds=%.6f\n",
-            t_mesh, s - t_mesh );
+            st.t_mesh, st.t_eg - st.t_mesh );
         std::printf( "repulsor eg %s seconds=%.6f energy=%.12e diff_norm=%.12e\n",
-            head, s, en, norm2( diff.data(), len ) );
+            head, st.t_eg, st.en, norm2( st.diff.data(), len ) );
     }
     else if( mode == "iter" )
     {
@@ -216,14 +230,12 @@ int main( int argc, char ** argv )
         const Real relative_tolerance = 0.00001;
 
         const auto t0 = Clock::now();
-
-        std::unique_ptr<Mesh_T> M_ptr = make_mesh();
-        auto & M = *M_ptr;
-        const double t_mesh = seconds_since( t0 );
-
-        Mesh_T::CotangentVector_T diff = tpe.Differential( M );
-        const Real en = tpe.Value( M );
-        const double t_eg = seconds_since( t0 );
+        Start st = start( t0 );
+        auto & M = *st.M_ptr;
+        const auto & diff = st.diff;
+        const Real en = st.en;
+        const double t_mesh = st.t_mesh;
+        const double t_eg = st.t_eg;
 
         Mesh_T::TangentVector_T gradient ( M.VertexCount(), M.AmbDim() );
         tpm.Solve( M,
@@ -269,12 +281,11 @@ int main( int argc, char ** argv )
         std::unique_ptr<Energy_T> ap_ptr = TPE_AP_factory.Make( dom_dim, amb_dim, q, p );
         const auto & tpe_ap = *ap_ptr;
 
-        const auto t0 = Clock::now();
-        std::unique_ptr<Mesh_T> M_ptr = make_mesh();
-        auto & M = *M_ptr;
-        Mesh_T::CotangentVector_T diff_tree = tpe.Differential( M );
-        const Real en_tree = tpe.Value( M );
-        const double s_tree = seconds_since( t0 );
+        const Start st = start( Clock::now() );
+        auto & M = *st.M_ptr;
+        const auto & diff_tree = st.diff;
+        const Real en_tree = st.en;
+        const double s_tree = st.t_eg;
 
         const auto t1 = Clock::now();
         Mesh_T::CotangentVector_T diff_exact = tpe_ap.Differential( M );

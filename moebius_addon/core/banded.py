@@ -516,8 +516,9 @@ class BandedSaddle:
         """The band of the iterate (:func:`_fill`: ``has_row``, ``fixed`` as there) with a
         spring at each of ``anchors`` as stiff as the metric's own diagonal there, in the
         memory of ``recycle``'s band when it fits (125 MB at 100 000 edges with h2: a fresh
-        array costs its page faults again), and its LU factors; returns the metric's
-        diagonal (N,)."""
+        array costs its page faults again), and its LU factors, the band shrunk to them from
+        :data:`COMPACT_FROM` vertices on (``ab`` None then); returns the metric's diagonal
+        (N,)."""
         lay = self.layout
         pos = zigzag_positions(lay)
         self.pos = pos
@@ -530,7 +531,6 @@ class BandedSaddle:
         shape = (4 * lay.n, self.kl + self.ku + 1)
         reuse = recycle is not None and recycle.ab is not None and recycle.ab.shape == shape
         ab = recycle.ab if reuse else np.empty(shape)
-        recycle = None
         self.D = _fill(rows, cols, vals, pos, anchors, self.mu, T, ln, lay.nxt, has_row, fixed,
                        self.kl, self.ku, ab)
         # blocks of whole components, some 64 at most (none for one component)
@@ -539,6 +539,7 @@ class BandedSaddle:
         piv, mult, bad = band_lu_blocks(ab, self.kl, self.ku, self.cuts)
         if bad >= 0:
             raise np.linalg.LinAlgError(f"singular band at unknown {bad}")
+        self.ab = ab
         U, *rest = pack_factors(ab, mult, self.kl, self.ku, self.cuts)
         if lay.n >= COMPACT_FROM:
             # U is packed at the start of ab: the rest goes back to the system (a realloc to
@@ -546,8 +547,7 @@ class BandedSaddle:
             size = U.shape[0]
             del U  # no view of ab may outlive the resize
             ab.resize(size, refcheck=False)
-            U = ab
-        self.ab = ab if ab.shape == shape else None
+            U, self.ab = ab, None
         self.factors = (U, *rest, piv)
         return diag
 
