@@ -35,9 +35,10 @@ engine="tree")``, the seconds of its one iteration from the run's history (``his
 ["seconds"][1] − [0]``; ``[0]`` is the setup with the first energy, gradient and solve): the
 projected Sobolev (hs) gradient under edge-length and barycenter constraints, Armijo line
 search with a collision-free step bound, back-projection onto the constraints, and the next
-energy, gradient and solve. With ``--moebius`` also the same iteration of
-our Möbius-energy flow (``iter_moebius``; issue 27 compares it with Repulsor's tangent-point
-iteration). Our iteration lines give the Krylov iterations of each hs solve (``krylov=``).
+energy, gradient and solve. With ``--moebius`` also our Möbius energy's E+g (``eg_moebius``)
+and the same iteration of our Möbius-energy flow (``iter_moebius``; issue 27 compares it with
+Repulsor's tangent-point iteration); ``ratio`` lines give each side's iteration ÷ E+g of the
+same energy (best of each). Our iteration lines give the Krylov iterations of each hs solve (``krylov=``).
 
 Repulsor is never a dependency of the add-on and nothing of it is in this repository: the driver
 binary (``--driver``, default /work/repulsor-build/driver/driver) is a small C++ program of ours
@@ -95,8 +96,12 @@ def peak_rss_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def _ours_eg(core, P: np.ndarray, engine: str, theta: float | None):
-    """(energy name, E, G) of one tangent-point energy+gradient."""
+def _ours_eg(core, P: np.ndarray, engine: str, theta: float | None,
+             energy: str = "tangent_point"):
+    """(energy name, E, G) of one tangent-point (or Möbius) energy+gradient."""
+    if energy == "moebius":
+        E, G = core.energy_gradient(P, energy="moebius", engine=engine, theta=theta)
+        return "moebius", E, np.asarray(G)
     E, G = core.energy_gradient(P, energy="tangent_point", alpha=ALPHA, beta=BETA,
                                 engine=engine, theta=theta)
     return "tangent_point", E, np.asarray(G)
@@ -153,9 +158,10 @@ def worker(args) -> None:
         _ours_eg(core, small, "exact", theta)
     before = forget_warm_up()
     head = f"ours {args.worker} edges={n} threads={args.threads}"
-    if args.worker == "eg":
+    if args.worker in ("eg", "eg_moebius"):
         t0 = time.perf_counter()
-        name, E, G = _ours_eg(core, P, "tree", theta)
+        name, E, G = _ours_eg(core, P, "tree", theta,
+                              "moebius" if args.worker == "eg_moebius" else "tangent_point")
         s = time.perf_counter() - t0
         print(f"{head} energy_name={name} seconds={s:.6f} energy={E:.12e} "
               f"diff_norm={np.linalg.norm(G):.12e}", flush=True)
@@ -281,8 +287,8 @@ def main() -> None:
     ap.add_argument("--core-from", default=None)
     ap.add_argument("--json", default=str(ROOT / "out" / "repulsor_compare.json"))
     ap.add_argument("--moebius", action="store_true",
-                    help="also time one iteration of our Möbius flow (issue 27's target)")
-    ap.add_argument("--worker", choices=("eg", "iter", "iter_moebius", "error"),
+                    help="also time our Möbius E+g and one iteration of its flow (issue 27)")
+    ap.add_argument("--worker", choices=("eg", "iter", "eg_moebius", "iter_moebius", "error"),
                     help=argparse.SUPPRESS)
     ap.add_argument("--curve", help=argparse.SUPPRESS)
     ap.add_argument("--threads-of-worker", type=int, dest="worker_threads", help=argparse.SUPPRESS)
@@ -342,21 +348,30 @@ def main() -> None:
                     measure(me + ["--worker", mode, "--curve", str(path), "--threads-of-worker",
                                   str(t)] + extra, env)
                 if args.moebius:
-                    measure(me + ["--worker", "iter_moebius", "--curve", str(path),
-                                  "--threads-of-worker", str(t)] + extra, env)
+                    for mode in ("eg_moebius", "iter_moebius"):
+                        measure(me + ["--worker", mode, "--curve", str(path),
+                                      "--threads-of-worker", str(t)] + extra, env)
             if n <= EXACT_UP_TO:  # both sides' all-pairs sums (Repulsor's: 300 s at 10^5)
                 if have_driver:
                     measure([str(driver), str(path), "error", str(t), "--theta",
                              str(args.repulsor_theta)], env)
                 measure(me + ["--worker", "error", "--curve", str(path), "--threads-of-worker",
                               str(t)] + extra, env)
+            best = {}
             for side in ("repulsor", "ours"):
-                for mode in ("eg", "iter", "iter_moebius"):
+                for mode in ("eg", "iter", "eg_moebius", "iter_moebius"):
                     s = summary(rows, side, mode, n, t)
                     if s:
+                        best[side, mode] = s["best"]
                         print(f"summary side={side} mode={mode} edges={n} threads={t} "
                               f"best={s['best']:.4f} median={s['median']:.4f} k={s['k']} "
                               f"peak_rss_mb={s['peak_rss_mb']}", flush=True)
+            # iteration ÷ E+g of the same energy, best of each (issue 27's "iteration ≤ 6 E+g")
+            for side, it, eg in (("repulsor", "iter", "eg"), ("ours", "iter", "eg"),
+                                 ("ours", "iter_moebius", "eg_moebius")):
+                if (side, it) in best and (side, eg) in best:
+                    print(f"ratio side={side} {it}/{eg} edges={n} threads={t} "
+                          f"{best[side, it] / best[side, eg]:.2f}", flush=True)
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(out, indent=1))
 
