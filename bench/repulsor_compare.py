@@ -38,7 +38,8 @@ search with a collision-free step bound, back-projection onto the constraints, a
 energy, gradient and solve. With ``--moebius`` also our Möbius energy's E+g (``eg_moebius``)
 and the same iteration of our Möbius-energy flow (``iter_moebius``; issue 27 compares it with
 Repulsor's tangent-point iteration); ``ratio`` lines give each side's iteration ÷ E+g of the
-same energy (best of each). Our iteration lines give the Krylov iterations of each hs solve (``krylov=``).
+same energy (best of each). Our iteration lines give the Krylov iterations of each hs solve
+(``krylov=``).
 
 Repulsor is never a dependency of the add-on and nothing of it is in this repository: the driver
 binary (``--driver``, default /work/repulsor-build/driver/driver) is a small C++ program of ours

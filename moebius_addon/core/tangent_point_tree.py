@@ -537,11 +537,26 @@ def _cc_radial(W, cax, cay, caz, beta, kind, lanes):
         _cc_radial_k(W, cax, cay, caz, beta, KIND_2, lanes)
 
 
+@nb.njit(cache=True, inline="always")
+def _seen(bits, b):
+    """Whether node ``b``'s bit is set in ``bits`` (uint64 words)."""
+    u = np.uint64(b)
+    return (bits[u >> np.uint64(6)] >> (u & np.uint64(63))) & np.uint64(1) != np.uint64(0)
+
+
+@nb.njit(cache=True, inline="always")
+def _mark(bits, b):
+    """Set node ``b``'s bit in ``bits``."""
+    u = np.uint64(b)
+    bits[u >> np.uint64(6)] |= np.uint64(1) << (u & np.uint64(63))
+
+
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs_ch, eF, gt, gG, gW,
-               lanes):
+def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs_ch, seen_ch, eF, gt,
+               gG, gW, lanes):
     """Target ``a`` against its far partners, by lanes (see above); ``S`` scratch for the
-    lanes' sums."""
+    lanes' sums; ``gs_ch`` the piece's source rows, written first where ``seen_ch`` (one bit
+    per node) has no bit yet (:func:`_cc_far`)."""
     la = L[a]
     cax, cay, caz = C[a, 0], C[a, 1], C[a, 2]
     # G and W are symmetric in their first two indices (Σ e eᵀ/l): six of G, 18 of W
@@ -647,11 +662,19 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs_ch, eF, g
                 W[_CW_OUT + 3 * _CL + j] = hz
         if grad:
             for j in range(cnt):
-                gsb = gs_ch[fpart[p0 + j]]
-                gsb[0] += W[_CW_OUT + j]
-                gsb[1] -= W[_CW_OUT + _CL + j]
-                gsb[2] -= W[_CW_OUT + 2 * _CL + j]
-                gsb[3] -= W[_CW_OUT + 3 * _CL + j]
+                b = fpart[p0 + j]
+                gsb = gs_ch[b]
+                if _seen(seen_ch, b):
+                    gsb[0] += W[_CW_OUT + j]
+                    gsb[1] -= W[_CW_OUT + _CL + j]
+                    gsb[2] -= W[_CW_OUT + 2 * _CL + j]
+                    gsb[3] -= W[_CW_OUT + 3 * _CL + j]
+                else:  # a zero row plus the first terms, as np.zeros gave them
+                    _mark(seen_ch, b)
+                    gsb[0] = 0.0 + W[_CW_OUT + j]
+                    gsb[1] = 0.0 - W[_CW_OUT + _CL + j]
+                    gsb[2] = 0.0 - W[_CW_OUT + 2 * _CL + j]
+                    gsb[3] = 0.0 - W[_CW_OUT + 3 * _CL + j]
     e = 0.0
     for j in range(_CL):
         e += W[_CW_SUMS + j]
@@ -702,15 +725,20 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad, lanes):
     the energy of its pairs as target; with ``grad`` the derivatives of the sum in its own
     ``L`` (column 0 of ``gt``), ``c`` (1–3), ``G`` (``gG``) and ``W`` (``gW``) as a target,
     and, per fixed piece of the targets, in every partner's ``L`` and ``c`` as a source
-    (``gs``). Each target's sums are its own: the same bits for any thread count. ``lanes``:
-    always :data:`_CL`, passed at run time."""
+    (``gs``; rows of partners a piece never met are left unwritten, ``seen`` has a bit per
+    piece and node that is set where a row was written). Each target's sums are its own: the
+    same bits for any thread count. ``lanes``: always :data:`_CL`, passed at run time."""
     m = L.shape[0]
     nchunks = min(m, _FAR_CHUNKS)
     eF = np.zeros(m)
     gt = np.zeros((m if grad else 0, 4))
     gG = np.zeros((m if grad else 0, 9))
     gW = np.zeros((m if grad else 0, 27))
-    gs = np.zeros((nchunks, m if grad else 0, 4))
+    # a piece meets few of the nodes as partners (at 10⁶ edges 526 000 rows of 16 × 500 000):
+    # untouched rows stay unwritten, and their pages are never faulted in (np.zeros wrote all
+    # 256 MB; docs/benchmarks.md, session 16)
+    gs = np.empty((nchunks, m if grad else 0, 4))
+    seen = np.zeros((nchunks, (m + 63) // 64 if grad else 0), np.uint64)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
         W = np.zeros(_CW_SIZE)
@@ -719,16 +747,16 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad, lanes):
             if foff[a + 1] == foff[a]:
                 continue
             if grad:  # a constant at each call (the branches fold away)
-                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, True, gs[ch], eF, gt,
-                           gG, gW, lanes)
+                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, True, gs[ch],
+                           seen[ch], eF, gt, gG, gW, lanes)
             else:
-                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, False, gs[ch], eF, gt,
-                           gG, gW, lanes)
-    return eF, gt, gG, gW, gs
+                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, False, gs[ch],
+                           seen[ch], eF, gt, gG, gW, lanes)
+    return eF, gt, gG, gW, (gs, seen)
 
 
 @nb.njit(cache=True, parallel=True)
-def _cc_node_grad(L, G, gt, gs, gG, gW):
+def _cc_node_grad(L, G, gt, gs, seen, gG, gW):
     """Per node, the derivatives the edges need: ``∂/∂L`` (target and source parts) and
     ``∂/∂c`` with ``W``'s dependence on ``c`` (``∂W_abk/∂c_k = −G_ab``) folded in."""
     m = L.shape[0]
@@ -741,10 +769,16 @@ def _cc_node_grad(L, G, gt, gs, gG, gW):
         s2 = gt[b, 2]
         s3 = gt[b, 3]
         for ch in range(nchunks):  # in piece order: the same bits for any thread count
-            s0 += gs[ch, b, 0]
-            s1 += gs[ch, b, 1]
-            s2 += gs[ch, b, 2]
-            s3 += gs[ch, b, 3]
+            if _seen(seen[ch], b):
+                s0 += gs[ch, b, 0]
+                s1 += gs[ch, b, 1]
+                s2 += gs[ch, b, 2]
+                s3 += gs[ch, b, 3]
+            else:  # the zeros the row stands for (a −0.0 sum becomes +0.0, as before)
+                s0 += 0.0
+                s1 += 0.0
+                s2 += 0.0
+                s3 += 0.0
         for ab in range(9):
             s1 -= gW[b, 3 * ab] * G[b, ab]
             s2 -= gW[b, 3 * ab + 1] * G[b, ab]
@@ -919,7 +953,7 @@ class TangentPointFrame(Frame):
             energy = float(np.sum(rows[0])) + float(np.sum(eF))
             if not grad:
                 return energy, None
-            gn = _cc_node_grad(L, G, gt, gs, gG, gW)
+            gn = _cc_node_grad(L, G, gt, *gs, gG, gW)
             _cc_push(L, C, self.parent, gn, gG, gW)
             _cc_to_edges(E, M, ln, C, tree.lo, tree.hi, self.leaves, gn, gG, gW, rows)
         rows[1:4] += rows[7] / ln * E.T  # ∂l/∂e = e/l
