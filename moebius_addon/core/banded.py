@@ -287,14 +287,16 @@ def _band_solve(F, b):
 
 
 @nb.njit(cache=True, parallel=True)
-def _solve_fields(F, D, pos, G, lam, cuts):
+def _solve_fields(F, D, pos, G, lam, cuts, work):
     """Band solves for right-hand sides given as fields ``G`` (m, N, 3) and edge values
     ``lam`` (m, N) (or (0, N): none), scaled by ``D`` on both sides, with the packed factors
     ``F`` (:func:`pack_factors`, then the pivots); the solutions' fields and edge multipliers
     (``G`` of shape (m, 0, 3): zero fields, without their memory). In parallel over the
     right-hand sides and the blocks of the band (``cuts``, :func:`block_cuts`: whole
     components, whose vertices are the rows' ``cuts / 4``): each block's unknowns are solved
-    alone, the same bits for any thread count."""
+    alone, the same bits for any thread count. ``work`` (m, 4N): room for the unknowns, every
+    entry written before it is read (right-hand side ``q``, block ``b`` in ``work[q, cuts[b] :
+    cuts[b + 1]]``)."""
     U, L, uw, lw, uoff, loff, piv = F
     m, n = G.shape[0], pos.shape[0]
     zero = G.shape[1] == 0
@@ -305,7 +307,7 @@ def _solve_fields(F, D, pos, G, lam, cuts):
         q = t // nblocks
         b = t - q * nblocks
         lo, hi = cuts[b], cuts[b + 1]
-        x = np.empty(hi - lo)
+        x = work[q, lo:hi]
         for v in range(lo // 4, hi // 4):  # a component's vertices are its rows' places
             i = 4 * pos[v]
             for d in range(3):
@@ -563,7 +565,18 @@ class BandedSaddle:
         ``lam`` (m, N): the core solution's fields and edge multipliers."""
         G = np.ascontiguousarray(G, dtype=np.float64)
         lam = np.zeros((0, G.shape[1])) if lam is None else np.ascontiguousarray(lam, float)
-        return _solve_fields(self.factors, self.D, self.pos, G, lam, self.cuts)
+        m, rows = G.shape[0], self.D.shape[0]
+        if m != 1:
+            work = np.empty((m, rows))
+        else:
+            # one right-hand side (every Krylov iteration's): the same room every time. A fresh
+            # array of the 4N unknowns (32 MB at 10⁶ vertices, past glibc's mmap threshold)
+            # came as new pages from the kernel at every solve: 626 000 faults and 3.7 s of
+            # system time in 158 solves at 10⁶ (docs/benchmarks.md, session 16)
+            work = self.__dict__.get("_work")
+            if work is None:
+                work = self._work = np.empty((1, rows))
+        return _solve_fields(self.factors, self.D, self.pos, G, lam, self.cuts, work)
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(u, λ)`` of ``[[G, Cᵀ], [C, 0]] [u; λ] = [g; r]`` (λ: edge rows, then three
