@@ -4,7 +4,9 @@
                                                             # threads, 5 alternated rounds
     python bench/repulsor_compare.py --sizes 100000 --reps 2
     python bench/repulsor_compare.py --million              # adds 10^6 edges (slow)
-    python bench/repulsor_compare.py --moebius              # also our Möbius iteration
+    python bench/repulsor_compare.py --moebius              # also our Möbius E+g and iteration
+    python bench/repulsor_compare.py --parts                # also E+g in two parts: the trees
+                                                            # built, the sums on built trees
     python bench/repulsor_compare.py --core-from DIR        # our side imported from DIR (e.g. an
                                                             # export of another branch)
 
@@ -166,6 +168,20 @@ def worker(args) -> None:
         s = time.perf_counter() - t0
         print(f"{head} energy_name={name} seconds={s:.6f} energy={E:.12e} "
               f"diff_norm={np.linalg.norm(G):.12e}", flush=True)
+    elif args.worker == "eg_parts":
+        # the same E+g in its two parts: the frame (hierarchy, split, cluster data) and the
+        # sums on it, as the driver's "info eg" line splits Repulsor's (mesh; energy and
+        # differential on the built trees)
+        from moebius_addon.core.engine import as_checked_layout
+        choice = core.check_energy("tangent_point", ALPHA, BETA)
+        t0 = time.perf_counter()
+        X, layout, _ = as_checked_layout(P, True)
+        frame = choice.frame(X, layout, choice.default_theta if theta is None else theta)
+        t1 = time.perf_counter()
+        E, G = frame.energy_gradient(X)
+        t2 = time.perf_counter()
+        print(f"{head} energy_name=tangent_point seconds={t2 - t0:.6f} build_seconds="
+              f"{t1 - t0:.6f} kernel_seconds={t2 - t1:.6f}", flush=True)
     elif args.worker in ("iter", "iter_moebius"):
         t0 = time.perf_counter()
         name, r = _ours_relax(core, P, theta,
@@ -236,7 +252,15 @@ def run(cmd: list[str], env: dict) -> list[dict]:
     rows = []
     for line in out.stdout.splitlines():
         words = line.split()
-        if len(words) < 2 or words[0] not in ("repulsor", "ours") or words[1] == "info":
+        if len(words) < 2 or words[0] not in ("repulsor", "ours"):
+            continue
+        if words[1] == "info":
+            # the driver's split of its E+g: mesh (trees) and the sums on the built trees
+            if words[0] == "repulsor" and len(words) > 2 and words[2] == "eg":
+                kv = dict(w.split("=", 1) for w in words[3:])
+                rows.append({"side": "repulsor", "mode": "eg_parts",
+                             "build_seconds": float(kv["mesh_seconds"]),
+                             "kernel_seconds": float(kv["energy_differential_seconds"])})
             continue
         row = {"side": words[0], "mode": words[1]}
         for w in words[2:]:
@@ -247,6 +271,10 @@ def run(cmd: list[str], env: dict) -> list[dict]:
             except ValueError:
                 row[k] = v
         rows.append(row)
+    for r in rows:  # the info line names no size: the eg line of the same process does
+        if r["mode"] == "eg_parts" and "edges" not in r:
+            eg = next((q for q in rows if q["mode"] == "eg"), {})
+            r["edges"], r["threads"] = eg.get("edges"), eg.get("threads")
     return rows
 
 
@@ -289,7 +317,10 @@ def main() -> None:
     ap.add_argument("--json", default=str(ROOT / "out" / "repulsor_compare.json"))
     ap.add_argument("--moebius", action="store_true",
                     help="also time our Möbius E+g and one iteration of its flow (issue 27)")
-    ap.add_argument("--worker", choices=("eg", "iter", "eg_moebius", "iter_moebius", "error"),
+    ap.add_argument("--parts", action="store_true",
+                    help="also time our E+g in two parts: frame built, sums on it")
+    ap.add_argument("--worker", choices=("eg", "eg_parts", "iter", "eg_moebius", "iter_moebius",
+                                         "error"),
                     help=argparse.SUPPRESS)
     ap.add_argument("--curve", help=argparse.SUPPRESS)
     ap.add_argument("--threads-of-worker", type=int, dest="worker_threads", help=argparse.SUPPRESS)
@@ -348,6 +379,9 @@ def main() -> None:
                                  str(args.repulsor_theta)], env)
                     measure(me + ["--worker", mode, "--curve", str(path), "--threads-of-worker",
                                   str(t)] + extra, env)
+                if args.parts:
+                    measure(me + ["--worker", "eg_parts", "--curve", str(path),
+                                  "--threads-of-worker", str(t)] + extra, env)
                 if args.moebius:
                     for mode in ("eg_moebius", "iter_moebius"):
                         measure(me + ["--worker", mode, "--curve", str(path),
@@ -367,6 +401,13 @@ def main() -> None:
                         print(f"summary side={side} mode={mode} edges={n} threads={t} "
                               f"best={s['best']:.4f} median={s['median']:.4f} k={s['k']} "
                               f"peak_rss_mb={s['peak_rss_mb']}", flush=True)
+            for side in ("repulsor", "ours"):  # E+g's parts: trees built, sums on them
+                parts = [summary(rows, side, "eg_parts", n, t, key) for key in
+                         ("build_seconds", "kernel_seconds")]
+                if all(parts):
+                    print(f"summary side={side} mode=eg_parts edges={n} threads={t} "
+                          f"build_best={parts[0]['best']:.4f} kernel_best={parts[1]['best']:.4f} "
+                          f"k={parts[1]['k']}", flush=True)
             # iteration ÷ E+g of the same energy, best of each (issue 27's "iteration ≤ 6 E+g")
             for side, it, eg in (("repulsor", "iter", "eg"), ("ours", "iter", "eg"),
                                  ("ours", "iter_moebius", "eg_moebius")):
