@@ -571,9 +571,10 @@ class BandedSaddle:
         else:
             # one right-hand side (every Krylov iteration's): the same room every time. A fresh
             # array of the 4N unknowns (32 MB at 10⁶ vertices, past glibc's mmap threshold)
-            # came as new pages from the kernel at every solve: 626 000 faults and 3.7 s of
-            # system time in 158 solves at 10⁶ (docs/benchmarks.md, session 16)
-            work = self.__dict__.get("_work")
+            # came as new pages from the kernel at every solve: 616 000-646 000 page faults in
+            # the 158 solves of relax(max_iter=1) at 10⁶, 268 000-283 000 with this, and
+            # 3-4 % less time in them (docs/benchmarks.md, session 16)
+            work = getattr(self, "_work", None)
             if work is None:
                 work = self._work = np.empty((1, rows))
         return _solve_fields(self.factors, self.D, self.pos, G, lam, self.cuts, work)
