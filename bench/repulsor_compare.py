@@ -99,24 +99,24 @@ def peak_rss_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
+def _energy(energy: str) -> dict:
+    """The energy options of our evaluators and runs: the tangent-point energy with the
+    bench's exponents, or the Möbius energy."""
+    return {"energy": energy} if energy == "moebius" else {
+        "energy": "tangent_point", "alpha": ALPHA, "beta": BETA}
+
+
 def _ours_eg(core, P: np.ndarray, engine: str, theta: float | None,
              energy: str = "tangent_point"):
     """(energy name, E, G) of one tangent-point (or Möbius) energy+gradient."""
-    if energy == "moebius":
-        E, G = core.energy_gradient(P, energy="moebius", engine=engine, theta=theta)
-        return "moebius", E, np.asarray(G)
-    E, G = core.energy_gradient(P, energy="tangent_point", alpha=ALPHA, beta=BETA,
-                                engine=engine, theta=theta)
-    return "tangent_point", E, np.asarray(G)
+    E, G = core.energy_gradient(P, engine=engine, theta=theta, **_energy(energy))
+    return energy, E, np.asarray(G)
 
 
 def _ours_relax(core, P: np.ndarray, theta: float | None, energy: str = "tangent_point"):
     """(energy name, result) of one iteration of the tangent-point (or Möbius) flow on the
     tree."""
-    if energy == "moebius":
-        return "moebius", core.relax(P, max_iter=1, engine="tree", theta=theta)
-    return "tangent_point", core.relax(P, max_iter=1, engine="tree", theta=theta,
-                                       energy="tangent_point", alpha=ALPHA, beta=BETA)
+    return energy, core.relax(P, max_iter=1, engine="tree", theta=theta, **_energy(energy))
 
 
 def forget_warm_up() -> float:
@@ -172,11 +172,11 @@ def worker(args) -> None:
         # the same E+g in its two parts: the frame (hierarchy, split, cluster data) and the
         # sums on it, as the driver's "info eg" line splits Repulsor's (mesh; energy and
         # differential on the built trees)
-        from moebius_addon.core.engine import as_checked_layout
+        from moebius_addon.core.engine import _frame, as_checked_layout
         choice = core.check_energy("tangent_point", ALPHA, BETA)
         t0 = time.perf_counter()
         X, layout, _ = as_checked_layout(P, True)
-        frame = choice.frame(X, layout, choice.default_theta if theta is None else theta)
+        frame = _frame(X, layout, "tree", theta, choice)  # the evaluators' own frame
         t1 = time.perf_counter()
         E, G = frame.energy_gradient(X)
         t2 = time.perf_counter()
