@@ -42,6 +42,8 @@ _BLOCKS = 64
 #: 0.70 GB at 10⁶ vertices, its packed U 0.31 GB; below, the reuse saves a fresh array's page
 #: faults (docs/benchmarks.md, session 15).
 COMPACT_FROM = 200_000
+# Vertices per piece of the low-rank correction's parallel sums (:func:`_correction`).
+_CHUNK = 4096
 
 
 @nb.njit(cache=True)
@@ -494,25 +496,47 @@ class BandedSaddle:
         self._factor(rows, cols, vals, np.asarray(lay.starts[:-1], np.int64), T, 1.0 / inv_l,
                      np.ones(n, np.bool_), np.zeros(n, np.bool_), recycle)
         recycle = None  # its band is overwritten now: it must not be used again
-        # the correction's columns per component: spring (3), barycenter term (3),
-        # barycenter rows (3) as (N, 3) fields; the multipliers' unit columns (3) implicit
-        k = lay.k
-        F = jac.barycenter_fields()  # (3k, N, 3): columns of C_bᵀ
-        self.U = np.zeros((k, 9, lay.n, 3))
-        for c in range(k):
-            s = slice(lay.starts[c], lay.starts[c + 1])
-            for d in range(3):
-                self.U[c, d, self.anchors[c], d] = 1.0
-                self.U[c, 3 + d, s, d] = beta[s]
-                self.U[c, 6 + d] = F[3 * c + d]
-        Z = self._band_inverse(self.U.reshape(9 * k, lay.n, 3))  # (9k, N, 3) core x parts
-        self.Z, self.Zlam = Z
-        self.cap = np.empty((k, 12, 12))
-        for c in range(k):
-            W = self.U[c].reshape(9, -1) @ self.Z[9 * c:9 * c + 9].reshape(9, -1).T
-            self.cap[c] = _capacitance(W, self.mu[c])
+        U = self._columns(beta, jac.barycenter_fields(), np.arange(lay.k),
+                          np.arange(lay.k, dtype=np.int64))
+        for c in range(lay.k):
+            self.cap[c] = _capacitance(self._gram(U, c), self.mu[c])
         if not product:
             self.rows = self.cols = self.vals = None
+
+    def _columns(self, beta, F, bary_components, brow):
+        """The correction's columns, every component's in one field per column (the
+        components are independent blocks of the band: nine band solves per iterate for any
+        number of them): spring at each component's first vertex (3), barycenter term (3),
+        barycenter rows (3; ``F`` the rows of ``bary_components`` as fields), and their band
+        solves ``Z``, ``Zlam``. Only what :func:`_correction` reads of the columns is kept:
+        ``beta`` and the barycenter rows' fields (a third of the columns' memory); returns
+        the columns (9, N, 3) for the capacitances (:meth:`_gram`)."""
+        lay = self.layout
+        n = lay.n
+        U = np.zeros((9, n, 3))
+        for d in range(3):
+            U[d, lay.starts[:-1][brow >= 0], d] = 1.0
+            U[3 + d, :, d] = beta
+        for r, c in enumerate(bary_components):
+            s = slice(lay.starts[c], lay.starts[c + 1])
+            for d in range(3):
+                U[6 + d, s] += F[3 * r + d, s]
+        self.Z, self.Zlam = self._band_inverse(U)
+        self.beta, self.F = np.ascontiguousarray(beta, float), U[6:].copy()
+        self.brow = brow
+        self.cap = np.zeros((lay.k, 12, 12))
+        # the pieces of the components for :func:`_correction`: at most _CHUNK vertices each
+        starts = np.asarray(lay.starts, np.int64)
+        self.chunks = np.array([(a, min(a + _CHUNK, starts[c + 1]), c)
+                                for c in range(lay.k)
+                                for a in range(int(starts[c]), int(starts[c + 1]), _CHUNK)],
+                               np.int64).reshape(-1, 3)
+        return U
+
+    def _gram(self, U: np.ndarray, c: int) -> np.ndarray:
+        """``Uᵀ A⁻¹ U`` (9, 9) of component ``c``'s columns ``U`` (:meth:`_columns`)."""
+        s = slice(int(self.layout.starts[c]), int(self.layout.starts[c + 1]))
+        return U[:, s].reshape(9, -1) @ self.Z[:, s].reshape(9, -1).T
 
     def _factor(self, rows, cols, vals, anchors, T, ln, has_row, fixed, recycle):
         """The band of the iterate (:func:`_fill`: ``has_row``, ``fixed`` as there) with a
@@ -593,43 +617,28 @@ class BandedSaddle:
 
     def _solve(self, g: np.ndarray | None, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`solve` without its refinement; ``g`` None: zero."""
-        lay = self.layout
-        n, k = lay.n, lay.k
+        n = self.layout.n
         G = np.empty((1, 0, 3)) if g is None else g[None]
-        (y,), (ylam,) = self._band_inverse(G, r[None, :n])
-        yb = np.asarray(r[n:], float).reshape(k, 3)
-        # every component's coefficients from y first; then y and ylam become u and λ
-        t = np.empty((k, 12))
-        for c in range(k):
-            t[c, :9] = self.U[c].reshape(9, -1) @ y.ravel()
-            t[c, 9:] = yb[c]
-        u, lam_e = y, ylam  # (fresh arrays of the band solve)
-        lam_b = yb.copy()
-        for c in range(k):
-            w = self.cap[c] @ t[c]
-            u -= (w[:9] @ self.Z[9 * c:9 * c + 9].reshape(9, -1)).reshape(u.shape)
-            lam_e -= w[:9] @ self.Zlam[9 * c:9 * c + 9]
-            lam_b[c] -= w[9:]
+        (u,), (lam_e,) = self._band_inverse(G, r[None, :n])  # fresh arrays: corrected in place
+        lam_b = np.asarray(r[n:], float).reshape(-1, 3).copy()
+        self._correct(u, lam_b.copy(), u, lam_e, lam_b)
         return u, np.concatenate([lam_e, lam_b.ravel()])
+
+    def _correct(self, y, yb, u, lam_e, lam_b) -> None:
+        """The low-rank correction of a band solve ``y`` (barycenter rows' right-hand sides
+        ``yb``) onto ``u``, ``lam_e``, ``lam_b``, in place (:func:`_correction`)."""
+        _correction(y, yb, self.beta, self.F, self.Z, self.Zlam, self.layout.starts,
+                    self.brow, self.cap, self.chunks, u, lam_e, lam_b)
 
     def solve_many(self, G: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_solve` (no refinement) for many right-hand sides at once: fields ``G``
         (m, N, 3) and rows ``R`` (m, N + 3K); one parallel band solve for all of them."""
-        lay = self.layout
-        n, k = lay.n, lay.k
+        n = self.layout.n
         m = G.shape[0]
-        Y, Ylam = self._band_inverse(G, R[:, :n])
-        Yb = np.asarray(R[:, n:], float).reshape(m, k, 3)
-        U, Le, Lb = Y.copy(), Ylam.copy(), Yb.copy()
-        Yf = Y.reshape(m, -1)
-        for c in range(k):
-            t = np.empty((m, 12))
-            t[:, :9] = Yf @ self.U[c].reshape(9, -1).T
-            t[:, 9:] = Yb[:, c]
-            w = t @ self.cap[c].T
-            U -= (w[:, :9] @ self.Z[9 * c:9 * c + 9].reshape(9, -1)).reshape(U.shape)
-            Le -= w[:, :9] @ self.Zlam[9 * c:9 * c + 9]
-            Lb[:, c] -= w[:, 9:]
+        U, Le = self._band_inverse(G, R[:, :n])
+        Lb = np.asarray(R[:, n:], float).reshape(m, -1, 3).copy()
+        for q in range(m):
+            self._correct(U[q], Lb[q].copy(), U[q], Le[q], Lb[q])
         return U, np.concatenate([Le, Lb.reshape(m, -1)], axis=1)
 
     def pseudo_inverse(self, phi: np.ndarray) -> np.ndarray:
@@ -654,47 +663,76 @@ class BandedSaddle:
 # layouts with open components, and pins by elimination (issue 28)
 
 
-@nb.njit(cache=True)
-def _open_correction(y, yb, U, Z, Zlam, starts, brow, cap, u, lam_e, lam_b):
-    """The low-rank correction of :meth:`OpenBandedSaddle._solve`, every component in turn,
-    in place on ``u``, ``lam_e`` and ``lam_b``: a component with barycenter rows (row
-    ``brow[c]`` of ``yb``) takes the columns 0–8 of ``U``/``Z``/``Zlam`` and its 12×12
-    capacitance, one with a pin (``brow[c]`` −1) the columns 3–5 (barycenter term) and a 3×3
-    one (in ``cap[c, :3, :3]``). (Small numpy products per component before: 17 700
-    ``tensordot`` calls, 0.9 s, in 6 iterations of the 100 cables with the torus.)"""
+@nb.njit(cache=True, parallel=True)
+def _correction(y, yb, beta, F, Z, Zlam, starts, brow, cap, chunks, u, lam_e, lam_b):
+    """The low-rank correction of :meth:`BandedSaddle._solve` for the band solve ``y`` (N, 3)
+    (``yb``: the barycenter rows' right-hand sides), in place on ``u`` (may be ``y``),
+    ``lam_e`` and ``lam_b``. A component with barycenter rows (row ``brow[c]`` of ``yb``)
+    takes the nine columns and its 12 × 12 capacitance, one with a pin (``brow[c]`` −1) the
+    barycenter term's three and a 3 × 3 one (``cap[c, :3, :3]``). The columns' products with
+    ``y`` from their structure: the springs read ``y`` at the component's first vertex, the
+    barycenter term ``β`` per coordinate, the barycenter rows their fields ``F`` (3, N, 3).
+    The pieces of ``chunks`` (first, end, component) in parallel, their sums added in order:
+    the same bits for any thread count. (Products with the columns as dense (9, N, 3) fields
+    by BLAS before: three times the bytes, and OpenBLAS's threads woke at every solve.)"""
+    nch = chunks.shape[0]
+    part = np.empty((nch, 6))
+    for h in nb.prange(nch):
+        b0 = b1 = b2 = f0 = f1 = f2 = 0.0
+        for v in range(chunks[h, 0], chunks[h, 1]):
+            y0, y1, y2 = y[v, 0], y[v, 1], y[v, 2]
+            b = beta[v]
+            b0 += b * y0
+            b1 += b * y1
+            b2 += b * y2
+            f0 += F[0, v, 0] * y0 + F[0, v, 1] * y1 + F[0, v, 2] * y2
+            f1 += F[1, v, 0] * y0 + F[1, v, 1] * y1 + F[1, v, 2] * y2
+            f2 += F[2, v, 0] * y0 + F[2, v, 1] * y1 + F[2, v, 2] * y2
+        part[h, 0], part[h, 1], part[h, 2] = b0, b1, b2
+        part[h, 3], part[h, 4], part[h, 5] = f0, f1, f2
+    k = starts.shape[0] - 1
+    W = np.zeros((k, 9))  # each component's coefficients of the columns of Z
     t = np.empty(12)
-    w = np.empty(12)
-    for c in range(starts.shape[0] - 1):
-        a0, a1 = starts[c], starts[c + 1]
+    h = 0
+    for c in range(k):
+        t[:] = 0.0
+        while h < nch and chunks[h, 2] == c:
+            for a in range(6):
+                t[3 + a] += part[h, a]
+            h += 1
         r = brow[c]
-        first, cols, m = (0, 9, 12) if r >= 0 else (3, 3, 3)
-        for a in range(cols):
-            acc = 0.0
-            for v in range(a0, a1):
-                acc += (U[first + a, v, 0] * y[v, 0] + U[first + a, v, 1] * y[v, 1]
-                        + U[first + a, v, 2] * y[v, 2])
-            t[a] = acc
         if r >= 0:
+            a0 = starts[c]
             for d in range(3):
+                t[d] = y[a0, d]
                 t[9 + d] = yb[r, d]
-        for i in range(m):
-            acc = 0.0
-            for j in range(m):
-                acc += cap[c, i, j] * t[j]
-            w[i] = acc
-        for v in range(a0, a1):
+            for i in range(12):
+                acc = 0.0
+                for j in range(12):
+                    acc += cap[c, i, j] * t[j]
+                if i < 9:
+                    W[c, i] = acc
+                else:
+                    lam_b[r, i - 9] -= acc
+        else:  # the barycenter term alone
+            for i in range(3):
+                acc = 0.0
+                for j in range(3):
+                    acc += cap[c, i, j] * t[3 + j]
+                W[c, 3 + i] = acc
+    for h in nb.prange(nch):
+        c = chunks[h, 2]
+        w = W[c]
+        for v in range(chunks[h, 0], chunks[h, 1]):
             for d in range(3):
                 acc = 0.0
-                for a in range(cols):
-                    acc += w[a] * Z[first + a, v, d]
+                for a in range(9):
+                    acc += w[a] * Z[a, v, d]
                 u[v, d] -= acc
             acc = 0.0
-            for a in range(cols):
-                acc += w[a] * Zlam[first + a, v]
+            for a in range(9):
+                acc += w[a] * Zlam[a, v]
             lam_e[v] -= acc
-        if r >= 0:
-            for d in range(3):
-                lam_b[r, d] -= w[9 + d]
 
 
 class OpenBandedSaddle(BandedSaddle):
@@ -731,30 +769,15 @@ class OpenBandedSaddle(BandedSaddle):
         diag = self._factor(rows, cols, vals, np.asarray(lay.starts[:-1], np.int64)[
             self.free_comps], T, ln, con.edge_rows >= 0, fixed, recycle)
         recycle = None
-        # the correction's columns, every component's in one field per column: spring (3),
-        # barycenter term (3), barycenter rows (3)
-        F = jac.barycenter_fields()  # (3k', N, 3), k' = the components with barycenter rows
-        U = np.zeros((9, n, 3))
-        for d in range(3):
-            U[d, self.anchors, d] = 1.0
-            U[3 + d, :, d] = beta
-        for r, c in enumerate(con.bary_components):
-            s = slice(lay.starts[c], lay.starts[c + 1])
-            for d in range(3):
-                U[6 + d, s] += F[3 * r + d, s]
-        self.U = U
-        self.Z, self.Zlam = self._band_inverse(U)
-        self.slices = [slice(int(lay.starts[c]), int(lay.starts[c + 1])) for c in range(k)]
         # per component its row among the barycenter rows (−1: it has none, it is pinned) and
-        # its capacitance's inverse: 12 × 12, or 3 × 3 in the corner (:func:`_open_correction`)
-        self.brow = np.full(k, -1, np.int64)
-        self.brow[np.asarray(con.bary_components, np.int64)] = np.arange(
-            len(con.bary_components))
-        self.cap = np.zeros((k, 12, 12))
+        # its capacitance's inverse: 12 × 12, or 3 × 3 in the corner (:func:`_correction`)
+        brow = np.full(k, -1, np.int64)
+        brow[np.asarray(con.bary_components, np.int64)] = np.arange(len(con.bary_components))
+        U = self._columns(beta, jac.barycenter_fields(), con.bary_components, brow)
+        self.slices = [slice(int(lay.starts[c]), int(lay.starts[c + 1])) for c in range(k)]
         for c in range(k):
-            s = self.slices[c]
-            W = U[:, s].reshape(9, -1) @ self.Z[:, s].reshape(9, -1).T
-            if self.brow[c] >= 0:
+            W = self._gram(U, c)
+            if brow[c] >= 0:
                 self.cap[c] = _capacitance(W, diag[lay.starts[c]])
             else:  # the barycenter term alone: (K + β βᵀ)⁻¹ by Sherman–Morrison–Woodbury
                 self.cap[c, :3, :3] = np.linalg.inv(np.eye(3) + W[3:6, 3:6])
@@ -769,11 +792,8 @@ class OpenBandedSaddle(BandedSaddle):
         lam0[con.edge_index] = r[:ne]
         (y,), (ylam,) = self._band_inverse(G, lam0[None])
         yb = np.asarray(r[ne:], float).reshape(-1, 3)
-        u = y.copy()
-        lam_e = ylam.copy()
-        lam_b = yb.copy()
-        _open_correction(y, yb, self.U, self.Z, self.Zlam, self.layout.starts, self.brow,
-                         self.cap, u, lam_e, lam_b)
+        u, lam_e, lam_b = y, ylam, yb.copy()  # (fresh arrays of the band solve)
+        self._correct(y, yb, u, lam_e, lam_b)
         u[self.fixed] = 0.0
         return u, np.concatenate([lam_e[con.edge_index], lam_b.ravel()])
 

@@ -345,7 +345,7 @@ def test_the_previous_iterates_solver_is_let_go_before_the_next_is_built(monkeyp
     eng.update(X, jac)
     old = eng._saddle
     band = old.K.ab if metric == "hs" else old.ab
-    held = weakref.ref(old.op if metric == "hs" else old.U)
+    held = weakref.ref(old.op if metric == "hs" else old.Z)
     alive_at_build = []
     if metric == "hs":
         assert isinstance(old.coarse, hs_solve.Multilevel) and old.coarse.levels == 1
