@@ -379,7 +379,7 @@ def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, has_row, fixed, kl, ku
     :func:`band_lu` (4 unknowns per vertex: x, y, z and the multiplier of its edge) and the
     diagonal ``D`` (4N,). ``D`` balances the blocks: h2's entries grow like N³ and C_e's like
     N, and without it pivoting on the unscaled band lost the constraints at 100 000 edges.
-    ``ab``: the memory of the band (4N, kl + ku + 1), overwritten.
+    ``ab``: the memory of the band (4N, kl + ku + 1), zeros (:func:`_zero`).
 
     Edge slots without a row (``has_row`` False: an open component's dummy edge, an edge
     between two pins) and pinned vertices (``fixed``) are eliminated: their unknowns get the
@@ -405,7 +405,6 @@ def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, has_row, fixed, kl, ku
             D[4 * pos[i] + 3] = 1.0 / np.sqrt(s)
         else:
             D[4 * pos[i] + 3] = 1.0
-    ab[:] = 0.0
     for t in range(rows.shape[0]):
         if fixed[rows[t]] or fixed[cols[t]]:
             continue
@@ -440,6 +439,17 @@ def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, has_row, fixed, kl, ku
                 ab[lam, xj + d - lam + kl] += b
                 ab[xj + d, lam - xj - d + kl] += b
     return D
+
+
+@nb.njit(cache=True, parallel=True)
+def _zero(ab):
+    """``ab[:] = 0`` by rows in parallel: a fresh array's first touch (its page faults, the
+    kernel clearing the pages) on every thread. FHW at 10⁶ vertices, 2 threads: the fine band's
+    736 MB took 0.9-1.3 s to clear in one thread, 0.6-1.0 s in two (docs/benchmarks.md,
+    session 17)."""
+    for r in nb.prange(ab.shape[0]):
+        for t in range(ab.shape[1]):
+            ab[r, t] = 0.0
 
 
 @nb.njit(cache=True)
@@ -557,6 +567,7 @@ class BandedSaddle:
         shape = (4 * lay.n, self.kl + self.ku + 1)
         reuse = recycle is not None and recycle.ab is not None and recycle.ab.shape == shape
         ab = recycle.ab if reuse else np.empty(shape)
+        _zero(ab)
         self.D = _fill(rows, cols, vals, pos, anchors, self.mu, T, ln, lay.nxt, has_row, fixed,
                        self.kl, self.ku, ab)
         # blocks of whole components, some 64 at most (none for one component)
