@@ -26,6 +26,8 @@ block per component: memory and work stay O(N) for links too.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
@@ -44,6 +46,17 @@ _BLOCKS = 64
 COMPACT_FROM = 200_000
 # Vertices per piece of the low-rank correction's parallel sums (:func:`_correction`).
 _CHUNK = 4096
+
+
+class EdgeParts(NamedTuple):
+    """A banded metric of closed components made of one symmetric 2 × 2 block per edge ``I``
+    on its two vertices, ``[[p_I, q_I], [q_I, p_I]]``, plus the barycenter term ``β βᵀ`` per
+    component: the parts of :class:`BandedSaddle` without triplets (the hs preconditioner's,
+    :meth:`.hs_tree.HsOperator.preconditioner_edges`), its band filled by vertices in
+    parallel (:func:`_fill_edges`)."""
+    p: np.ndarray
+    q: np.ndarray
+    beta: np.ndarray
 
 
 @nb.njit(cache=True)
@@ -442,6 +455,46 @@ def _fill(rows, cols, vals, pos, anchors, mu, T, ln, nxt, has_row, fixed, kl, ku
 
 
 @nb.njit(cache=True, parallel=True)
+def _fill_edges(p, q, pos, spring, T, ln, nxt, prv, kl, ku, ab):
+    """:func:`_fill` for :class:`EdgeParts` (closed components, every edge a row, nothing
+    fixed; ``spring`` (N,): the spring's stiffness at each vertex, 0 but at the anchors):
+    every vertex's four rows written by one thread from its two edges, the vertices in
+    parallel. The band's entries are the same sums as :func:`_fill`'s of the same metric's
+    triplets, added in another order. ``ab`` zeros (:func:`_zero`)."""
+    n = pos.shape[0]
+    diag = np.empty(n)
+    for v in nb.prange(n):
+        diag[v] = p[prv[v]] + p[v] + spring[v]
+    D = np.empty(4 * n)
+    for v in nb.prange(n):
+        r0 = 4 * pos[v]
+        w = 1.0 / np.sqrt(diag[v])
+        for d in range(3):
+            D[r0 + d] = w
+        s = (diag[v] ** -1.0 + diag[nxt[v]] ** -1.0) / (ln[v] * ln[v])
+        D[r0 + 3] = 1.0 / np.sqrt(s)
+    for v in nb.prange(n):
+        a = prv[v]
+        b = nxt[v]
+        r0 = 4 * pos[v]
+        ra = 4 * pos[a]
+        rb = 4 * pos[b]
+        lam = r0 + 3  # the multiplier of edge v (from v to b)
+        for d in range(3):
+            x = r0 + d
+            ab[x, kl] += (p[a] + p[v] + spring[v]) * D[x] * D[x]
+            ab[x, ra + d - x + kl] += q[a] * D[x] * D[ra + d]
+            ab[x, rb + d - x + kl] += q[v] * D[x] * D[rb + d]
+            # d(log l_v)/d(x_v) = −T_v / l_v, d(log l_a)/d(x_v) = T_a / l_a
+            ab[x, lam - x + kl] += -T[v, d] / ln[v] * D[lam] * D[x]
+            ab[x, ra + 3 - x + kl] += T[a, d] / ln[a] * D[ra + 3] * D[x]
+            t = T[v, d] / ln[v] * D[lam]
+            ab[lam, x - lam + kl] += -t * D[x]
+            ab[lam, rb + d - lam + kl] += t * D[rb + d]
+    return D
+
+
+@nb.njit(cache=True, parallel=True)
 def _zero(ab):
     """``ab[:] = 0`` by rows in parallel: a fresh array's first touch (its page faults, the
     kernel clearing the pages) on every thread. FHW at 10⁶ vertices, 2 threads: the fine band's
@@ -493,7 +546,13 @@ class BandedSaddle:
 
     def __init__(self, parts, jac: Jacobian, recycle: BandedSaddle | None = None,
                  product: bool = True):
-        rows, cols, vals, beta = parts
+        if isinstance(parts, EdgeParts):
+            if product or jac.con.layout.has_open:
+                raise ValueError("edge parts are for a preconditioner of closed components "
+                                 "(product=False)")
+            rows, cols, vals, beta = parts, None, None, parts.beta
+        else:
+            rows, cols, vals, beta = parts
         con = jac.con
         if not (con.edge_lengths and con.barycenter) or con.pinned is not None:
             raise ValueError("the banded saddle-point solver needs the edge-length and "
@@ -549,7 +608,8 @@ class BandedSaddle:
         return U[:, s].reshape(9, -1) @ self.Z[:, s].reshape(9, -1).T
 
     def _factor(self, rows, cols, vals, anchors, T, ln, has_row, fixed, recycle):
-        """The band of the iterate (:func:`_fill`: ``has_row``, ``fixed`` as there) with a
+        """The band of the iterate (:func:`_fill`: ``has_row``, ``fixed`` as there; ``rows``
+        an :class:`EdgeParts`: :func:`_fill_edges`, the others unused) with a
         spring at each of ``anchors`` as stiff as the metric's own diagonal there, in the
         memory of ``recycle``'s band when it fits (125 MB at 100 000 edges with h2: a fresh
         array costs its page faults again), and its LU factors, the band shrunk to them from
@@ -558,18 +618,28 @@ class BandedSaddle:
         lay = self.layout
         pos = zigzag_positions(lay)
         self.pos = pos
-        width = int(np.max(np.abs(pos[rows] - pos[cols]), initial=0))
+        edges = rows if isinstance(rows, EdgeParts) else None
+        width = 0 if edges else int(np.max(np.abs(pos[rows] - pos[cols]), initial=0))
         width = max(width, int(np.max(np.abs(pos[lay.nxt] - pos), initial=0)))
         self.kl = self.ku = 4 * width + 3
-        diag = np.zeros(lay.n)
-        np.add.at(diag, rows[rows == cols], vals[rows == cols])
+        if edges:
+            diag = edges.p[lay.prv] + edges.p
+        else:
+            diag = np.zeros(lay.n)
+            np.add.at(diag, rows[rows == cols], vals[rows == cols])
         self.anchors, self.mu = anchors, diag[anchors]
         shape = (4 * lay.n, self.kl + self.ku + 1)
         reuse = recycle is not None and recycle.ab is not None and recycle.ab.shape == shape
         ab = recycle.ab if reuse else np.empty(shape)
         _zero(ab)
-        self.D = _fill(rows, cols, vals, pos, anchors, self.mu, T, ln, lay.nxt, has_row, fixed,
-                       self.kl, self.ku, ab)
+        if edges:
+            spring = np.zeros(lay.n)
+            spring[anchors] = self.mu
+            self.D = _fill_edges(edges.p, edges.q, pos, spring, T, ln, lay.nxt, lay.prv,
+                                 self.kl, self.ku, ab)
+        else:
+            self.D = _fill(rows, cols, vals, pos, anchors, self.mu, T, ln, lay.nxt, has_row,
+                           fixed, self.kl, self.ku, ab)
         # blocks of whole components, some 64 at most (none for one component)
         self.cuts = block_cuts(ab, self.kl, self.ku, np.asarray(lay.starts[:-1], np.int64),
                                max(4 * lay.n // _BLOCKS, 1))

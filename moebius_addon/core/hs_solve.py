@@ -367,7 +367,7 @@ class Multilevel:
 def _parts(X, layout, metric, order):
     """The banded parts of the hs operator at ``X`` (:meth:`HsOperator.preconditioner_parts`),
     the same for single-precision weights, which take half the memory while built."""
-    return HsOperator(X, layout, metric, order=order, single=True).preconditioner_parts()
+    return HsOperator(X, layout, metric, order=order, single=True).preconditioner_edges()
 
 
 class HsSaddle:
@@ -418,7 +418,7 @@ class HsSaddle:
             self.coarse = None
             return
         if jac.con.pinned is None:
-            self.K = BandedSaddle(op.preconditioner_parts(), jac, old, product=False)
+            self.K = BandedSaddle(op.preconditioner_edges(), jac, old, product=False)
         else:  # the constraint preconditioner with pins: bordered (the iterates stay 0 there)
             self.K = BorderedPins(BandedSaddle(op.preconditioner_parts(),
                                                unpinned_jacobian(jac), old), jac)
