@@ -546,37 +546,31 @@ class BandedSaddle:
 
     def __init__(self, parts, jac: Jacobian, recycle: BandedSaddle | None = None,
                  product: bool = True):
-        if isinstance(parts, EdgeParts):
-            if product or jac.con.layout.has_open:
-                raise ValueError("edge parts are for a preconditioner of closed components "
-                                 "(product=False)")
-            rows, cols, vals, beta = parts, None, None, parts.beta
-        else:
-            rows, cols, vals, beta = parts
+        if isinstance(parts, EdgeParts) and (product or jac.con.layout.has_open):
+            raise ValueError("edge parts are for a preconditioner of closed components "
+                             "(product=False)")
         con = jac.con
         if not (con.edge_lengths and con.barycenter) or con.pinned is not None:
             raise ValueError("the banded saddle-point solver needs the edge-length and "
                              "barycenter constraints and no pinned vertices")
         lay = con.layout
         self.layout, self.jac = lay, jac
-        self.rows, self.cols, self.vals, self.beta = rows, cols, vals, beta
+        self.rows, self.cols, self.vals = parts[:3] if product else (None, None, None)
         T, inv_l = jac.edge_fields()
         n = lay.n
-        self._factor(rows, cols, vals, np.asarray(lay.starts[:-1], np.int64), T, 1.0 / inv_l,
+        self._factor(parts, np.asarray(lay.starts[:-1], np.int64), T, 1.0 / inv_l,
                      np.ones(n, np.bool_), np.zeros(n, np.bool_), recycle)
         recycle = None  # its band is overwritten now: it must not be used again
-        U = self._columns(beta, jac.barycenter_fields(), np.arange(lay.k),
-                          np.arange(lay.k, dtype=np.int64))
+        U = self._columns(parts[-1], jac.barycenter_fields(), np.arange(lay.k, dtype=np.int64))
         for c in range(lay.k):
             self.cap[c] = _capacitance(self._gram(U, c), self.mu[c])
-        if not product:
-            self.rows = self.cols = self.vals = None
 
-    def _columns(self, beta, F, bary_components, brow):
+    def _columns(self, beta, F, brow):
         """The correction's columns, every component's in one field per column (the
         components are independent blocks of the band: nine band solves per iterate for any
         number of them): spring at each component's first vertex (3), barycenter term (3),
-        barycenter rows (3; ``F`` the rows of ``bary_components`` as fields), and their band
+        barycenter rows (3; ``F`` their rows as fields, of the components ``c`` with
+        ``brow[c]`` ≥ 0 in order), and their band
         solves ``Z``, ``Zlam``. Only what :func:`_correction` reads of the columns is kept:
         ``beta`` and the barycenter rows' fields (a third of the columns' memory); returns
         the columns (9, N, 3) for the capacitances (:meth:`_gram`)."""
@@ -586,10 +580,10 @@ class BandedSaddle:
         for d in range(3):
             U[d, lay.starts[:-1][brow >= 0], d] = 1.0
             U[3 + d, :, d] = beta
-        for r, c in enumerate(bary_components):
+        for c in np.flatnonzero(brow >= 0):
             s = slice(lay.starts[c], lay.starts[c + 1])
             for d in range(3):
-                U[6 + d, s] += F[3 * r + d, s]
+                U[6 + d, s] += F[3 * brow[c] + d, s]
         self.Z, self.Zlam = self._band_inverse(U)
         self.beta, self.F = np.ascontiguousarray(beta, float), U[6:].copy()
         self.brow = brow
@@ -607,9 +601,10 @@ class BandedSaddle:
         s = slice(int(self.layout.starts[c]), int(self.layout.starts[c + 1]))
         return U[:, s].reshape(9, -1) @ self.Z[:, s].reshape(9, -1).T
 
-    def _factor(self, rows, cols, vals, anchors, T, ln, has_row, fixed, recycle):
-        """The band of the iterate (:func:`_fill`: ``has_row``, ``fixed`` as there; ``rows``
-        an :class:`EdgeParts`: :func:`_fill_edges`, the others unused) with a
+    def _factor(self, parts, anchors, T, ln, has_row, fixed, recycle):
+        """The band of the iterate from ``parts``, the metric's triplets ``(rows, cols, vals,
+        beta)`` (:func:`_fill`: ``has_row``, ``fixed`` as there) or an :class:`EdgeParts`
+        (:func:`_fill_edges`), with a
         spring at each of ``anchors`` as stiff as the metric's own diagonal there, in the
         memory of ``recycle``'s band when it fits (125 MB at 100 000 edges with h2: a fresh
         array costs its page faults again), and its LU factors, the band shrunk to them from
@@ -618,7 +613,8 @@ class BandedSaddle:
         lay = self.layout
         pos = zigzag_positions(lay)
         self.pos = pos
-        edges = rows if isinstance(rows, EdgeParts) else None
+        edges = parts if isinstance(parts, EdgeParts) else None
+        rows, cols, vals = (None, None, None) if edges else parts[:3]
         width = 0 if edges else int(np.max(np.abs(pos[rows] - pos[cols]), initial=0))
         width = max(width, int(np.max(np.abs(pos[lay.nxt] - pos), initial=0)))
         self.kl = self.ku = 4 * width + 3
@@ -702,7 +698,7 @@ class BandedSaddle:
         G = np.empty((1, 0, 3)) if g is None else g[None]
         (u,), (lam_e,) = self._band_inverse(G, r[None, :n])  # fresh arrays: corrected in place
         lam_b = np.asarray(r[n:], float).reshape(-1, 3).copy()
-        self._correct(u, lam_b.copy(), u, lam_e, lam_b)
+        self._correct(u, lam_b, u, lam_e, lam_b)
         return u, np.concatenate([lam_e, lam_b.ravel()])
 
     def _correct(self, y, yb, u, lam_e, lam_b) -> None:
@@ -719,7 +715,7 @@ class BandedSaddle:
         U, Le = self._band_inverse(G, R[:, :n])
         Lb = np.asarray(R[:, n:], float).reshape(m, -1, 3).copy()
         for q in range(m):
-            self._correct(U[q], Lb[q].copy(), U[q], Le[q], Lb[q])
+            self._correct(U[q], Lb[q], U[q], Le[q], Lb[q])
         return U, np.concatenate([Le, Lb.reshape(m, -1)], axis=1)
 
     def pseudo_inverse(self, phi: np.ndarray) -> np.ndarray:
@@ -748,7 +744,7 @@ class BandedSaddle:
 def _correction(y, yb, beta, F, Z, Zlam, starts, brow, cap, chunks, u, lam_e, lam_b):
     """The low-rank correction of :meth:`BandedSaddle._solve` for the band solve ``y`` (N, 3)
     (``yb``: the barycenter rows' right-hand sides), in place on ``u`` (may be ``y``),
-    ``lam_e`` and ``lam_b``. A component with barycenter rows (row ``brow[c]`` of ``yb``)
+    ``lam_e`` and ``lam_b`` (may be ``yb``: a row is read before it is written). A component with barycenter rows (row ``brow[c]`` of ``yb``)
     takes the nine columns and its 12 × 12 capacitance, one with a pin (``brow[c]`` −1) the
     barycenter term's three and a 3 × 3 one (``cap[c, :3, :3]``). The columns' products with
     ``y`` from their structure: the springs read ``y`` at the component's first vertex, the
@@ -841,20 +837,20 @@ class OpenBandedSaddle(BandedSaddle):
             fixed[con.pinned] = True
         self.fixed = fixed
         beta = np.where(fixed, 0.0, beta)  # the metric of the free coordinates
-        self.beta_full, self.beta = parts[3], beta
+        self.beta_full = parts[3]
         pinned_comp = np.zeros(k, bool)
         pinned_comp[lay.comp[fixed]] = True
         self.free_comps = np.flatnonzero(~pinned_comp)
         T, inv_l = jac.edge_fields()
         ln = np.where(inv_l > 0, 1.0 / np.where(inv_l > 0, inv_l, 1.0), 0.0)
-        diag = self._factor(rows, cols, vals, np.asarray(lay.starts[:-1], np.int64)[
-            self.free_comps], T, ln, con.edge_rows >= 0, fixed, recycle)
+        diag = self._factor(parts, np.asarray(lay.starts[:-1], np.int64)[self.free_comps], T,
+                            ln, con.edge_rows >= 0, fixed, recycle)
         recycle = None
         # per component its row among the barycenter rows (−1: it has none, it is pinned) and
         # its capacitance's inverse: 12 × 12, or 3 × 3 in the corner (:func:`_correction`)
         brow = np.full(k, -1, np.int64)
         brow[np.asarray(con.bary_components, np.int64)] = np.arange(len(con.bary_components))
-        U = self._columns(beta, jac.barycenter_fields(), con.bary_components, brow)
+        U = self._columns(beta, jac.barycenter_fields(), brow)
         self.slices = [slice(int(lay.starts[c]), int(lay.starts[c + 1])) for c in range(k)]
         for c in range(k):
             W = self._gram(U, c)
