@@ -132,6 +132,9 @@ def _near_lanes(W, rx, ry, rz, sx, sy, sz, lr, ir, alpha, beta, general, grad, l
     """Partner edge ``r`` (midpoint, edge vector, length and its inverse) against every lane's
     edge, both ordered pairs, with the lanes' :func:`_near_radial`: added to the lane's sums,
     what they give ``r`` in the lane's ``_NW_OUT`` slots. ``general``: ``α ≠ 2``."""
+    if not general:
+        _near_lanes_2(W, rx, ry, rz, sx, sy, sz, lr, ir, beta, grad, lanes)
+        return
     for j in range(_LANES if grad else lanes):
         dx = W[j] - rx
         dy = W[_LANES + j] - ry
@@ -164,6 +167,69 @@ def _near_lanes(W, rx, ry, rz, sx, sy, sz, lr, ir, alpha, beta, general, grad, l
             W[_NW_OUT + 4 * _LANES + j] = -my
             W[_NW_OUT + 5 * _LANES + j] = -mz
             W[_NW_OUT + 6 * _LANES + j] = fl
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _near_lanes_2(W, rx, ry, rz, sx, sy, sz, lr, ir, beta, grad, lanes):
+    """:func:`_near_lanes` for ``α = 2``: both orders of a pair from one ``d = m_I − m_J``
+    (I the lane's edge, J the partner) and the cross products ``c = e_I × d``, ``u = e_J × d``:
+    ``f_IJ + f_JI = ρ (l_J/l_I |c|² + l_I/l_J |u|²)`` (``ρ = |d|^−β``),
+    ``∂/∂e_I = d × 2 p_I c``, ``∂/∂e_J = d × 2 p_J u``,
+    ``∂/∂d = 2 p_I c × e_I + 2 p_J u × e_J − β (f_IJ + f_JI) d/|d|²`` (``p_I = ρ l_J/l_I``,
+    ``p_J = ρ l_I/l_J``) and the prefactors' lengths in the length rows
+    (``∂/∂l_I = (f_JI − f_IJ)/l_I``). Cross products, not ``l²|d|² − (e·d)²``: no cancellation
+    where ``d`` is nearly parallel to an edge. Less arithmetic than two :func:`pair_radial`
+    (one radial term, one ``d``): times in docs/benchmarks.md, session 18."""
+    for j in range(_LANES if grad else lanes):
+        dx = W[j] - rx
+        dy = W[_LANES + j] - ry
+        dz = W[2 * _LANES + j] - rz
+        inv = W[_NW_INV + j]
+        rb = W[_NW_RB + j]
+        lq = W[6 * _LANES + j]
+        il = W[_NW_IL + j]
+        ax = W[3 * _LANES + j]
+        ay = W[4 * _LANES + j]
+        az = W[5 * _LANES + j]
+        cx = ay * dz - az * dy
+        cy = az * dx - ax * dz
+        cz = ax * dy - ay * dx
+        ux = sy * dz - sz * dy
+        uy = sz * dx - sx * dz
+        uz = sx * dy - sy * dx
+        pi = lr * il * rb
+        pj = lq * ir * rb
+        fi = pi * (cx * cx + cy * cy + cz * cz)
+        fj = pj * (ux * ux + uy * uy + uz * uz)
+        F = fi + fj
+        W[_NW_SUMS + j] += F
+        if grad:
+            gi = 2.0 * pi
+            gj = 2.0 * pj
+            gx = gi * cx
+            gy = gi * cy
+            gz = gi * cz
+            hx = gj * ux
+            hy = gj * uy
+            hz = gj * uz
+            tb = beta * F * inv
+            mx = gy * az - gz * ay + hy * sz - hz * sy - tb * dx
+            my = gz * ax - gx * az + hz * sx - hx * sz - tb * dy
+            mz = gx * ay - gy * ax + hx * sy - hy * sx - tb * dz
+            W[_NW_SUMS + _LANES + j] += dy * gz - dz * gy
+            W[_NW_SUMS + 2 * _LANES + j] += dz * gx - dx * gz
+            W[_NW_SUMS + 3 * _LANES + j] += dx * gy - dy * gx
+            W[_NW_SUMS + 4 * _LANES + j] += mx
+            W[_NW_SUMS + 5 * _LANES + j] += my
+            W[_NW_SUMS + 6 * _LANES + j] += mz
+            W[_NW_SUMS + 7 * _LANES + j] += (fj - fi) * il
+            W[_NW_OUT + j] = dy * hz - dz * hy
+            W[_NW_OUT + _LANES + j] = dz * hx - dx * hz
+            W[_NW_OUT + 2 * _LANES + j] = dx * hy - dy * hx
+            W[_NW_OUT + 3 * _LANES + j] = -mx
+            W[_NW_OUT + 4 * _LANES + j] = -my
+            W[_NW_OUT + 5 * _LANES + j] = -mz
+            W[_NW_OUT + 6 * _LANES + j] = (fi - fj) * ir
 
 
 @nb.njit(cache=True, inline="always")
@@ -458,30 +524,70 @@ def _far_sources(M, ln, L, C, lo, hi, leaves, parent, gnode, rows):
 @nb.njit(cache=True, inline="always")
 def _cc_node(node, E, M, ln, lo, hi, left, right, C, G, Wm):
     """``G`` (9, row-major) and ``W`` (27, index 9a + 3b + c) of one node about its centre
-    ``C[node]``: a leaf from its edges, a parent from its children's moved to its centre
-    (``W += G_child ⊗ (c_child − c)``)."""
-    for k in range(9):
-        G[node, k] = 0.0
-    for k in range(27):
-        Wm[node, k] = 0.0
+    ``C[node]``: a leaf from its edges (``G`` and ``W`` symmetric in ``a, b``: six and
+    eighteen sums in registers), a parent from its children's moved to its centre
+    (``W = W_l + W_r + G_l ⊗ (c_l − c) + G_r ⊗ (c_r − c)``), each entry written once."""
     if left[node] < 0:
+        c0, c1, c2 = C[node, 0], C[node, 1], C[node, 2]
+        g00 = g01 = g02 = g11 = g12 = g22 = 0.0
+        w000 = w001 = w002 = w010 = w011 = w012 = w020 = w021 = w022 = 0.0
+        w110 = w111 = w112 = w120 = w121 = w122 = w220 = w221 = w222 = 0.0
         for q in range(lo[node], hi[node]):
             il = 1.0 / ln[q]
-            for a in range(3):
-                for b in range(3):
-                    g = E[q, a] * E[q, b] * il
-                    G[node, 3 * a + b] += g
-                    for c in range(3):
-                        Wm[node, 9 * a + 3 * b + c] += g * (M[q, c] - C[node, c])
+            e0, e1, e2 = E[q, 0], E[q, 1], E[q, 2]
+            d0, d1, d2 = M[q, 0] - c0, M[q, 1] - c1, M[q, 2] - c2
+            f0, f1, f2 = e0 * il, e1 * il, e2 * il
+            t00, t01, t02, t11, t12, t22 = e0 * f0, e0 * f1, e0 * f2, e1 * f1, e1 * f2, e2 * f2
+            g00 += t00
+            g01 += t01
+            g02 += t02
+            g11 += t11
+            g12 += t12
+            g22 += t22
+            w000 += t00 * d0
+            w001 += t00 * d1
+            w002 += t00 * d2
+            w010 += t01 * d0
+            w011 += t01 * d1
+            w012 += t01 * d2
+            w020 += t02 * d0
+            w021 += t02 * d1
+            w022 += t02 * d2
+            w110 += t11 * d0
+            w111 += t11 * d1
+            w112 += t11 * d2
+            w120 += t12 * d0
+            w121 += t12 * d1
+            w122 += t12 * d2
+            w220 += t22 * d0
+            w221 += t22 * d1
+            w222 += t22 * d2
+        G[node, 0] = g00
+        G[node, 1] = G[node, 3] = g01
+        G[node, 2] = G[node, 6] = g02
+        G[node, 4] = g11
+        G[node, 5] = G[node, 7] = g12
+        G[node, 8] = g22
+        Wm[node, 0], Wm[node, 1], Wm[node, 2] = w000, w001, w002
+        Wm[node, 3], Wm[node, 4], Wm[node, 5] = w010, w011, w012
+        Wm[node, 9], Wm[node, 10], Wm[node, 11] = w010, w011, w012
+        Wm[node, 6], Wm[node, 7], Wm[node, 8] = w020, w021, w022
+        Wm[node, 18], Wm[node, 19], Wm[node, 20] = w020, w021, w022
+        Wm[node, 12], Wm[node, 13], Wm[node, 14] = w110, w111, w112
+        Wm[node, 15], Wm[node, 16], Wm[node, 17] = w120, w121, w122
+        Wm[node, 21], Wm[node, 22], Wm[node, 23] = w120, w121, w122
+        Wm[node, 24], Wm[node, 25], Wm[node, 26] = w220, w221, w222
     else:
-        for ch in (left[node], right[node]):
-            for a in range(3):
-                for b in range(3):
-                    g = G[ch, 3 * a + b]
-                    G[node, 3 * a + b] += g
-                    for c in range(3):
-                        Wm[node, 9 * a + 3 * b + c] += (Wm[ch, 9 * a + 3 * b + c]
-                                                        + g * (C[ch, c] - C[node, c]))
+        a0, b0 = left[node], right[node]
+        u0, u1, u2 = C[a0, 0] - C[node, 0], C[a0, 1] - C[node, 1], C[a0, 2] - C[node, 2]
+        v0, v1, v2 = C[b0, 0] - C[node, 0], C[b0, 1] - C[node, 1], C[b0, 2] - C[node, 2]
+        for k in range(9):
+            ga = G[a0, k]
+            gb = G[b0, k]
+            G[node, k] = ga + gb
+            Wm[node, 3 * k] = Wm[a0, 3 * k] + Wm[b0, 3 * k] + ga * u0 + gb * v0
+            Wm[node, 3 * k + 1] = Wm[a0, 3 * k + 1] + Wm[b0, 3 * k + 1] + ga * u1 + gb * v1
+            Wm[node, 3 * k + 2] = Wm[a0, 3 * k + 2] + Wm[b0, 3 * k + 2] + ga * u2 + gb * v2
 
 
 @nb.njit(cache=True, parallel=True)
