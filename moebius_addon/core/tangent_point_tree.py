@@ -51,6 +51,7 @@ from .energies.tangent_point import (
     check_exponents,
     kind_of,
     pair,
+    pair_both_2,
     pair_radial,
     radial,
 )
@@ -145,9 +146,9 @@ def _near_lanes(W, rx, ry, rz, sx, sy, sz, lr, ir, alpha, beta, general, grad, l
         # (I, J) = (lane, r) and (r, lane)
         f, fax, fay, faz, fdx, fdy, fdz, fl = pair_radial(
             dx, dy, dz, W[3 * _LANES + j], W[4 * _LANES + j], W[5 * _LANES + j],
-            lq, W[_NW_IL + j], lr, inv, rb, alpha, beta, general)
+            lq, W[_NW_IL + j], lr, inv, rb, alpha, beta, True)
         g, gax, gay, gaz, gdx, gdy, gdz, gl = pair_radial(
-            -dx, -dy, -dz, sx, sy, sz, lr, ir, lq, inv, rb, alpha, beta, general)
+            -dx, -dy, -dz, sx, sy, sz, lr, ir, lq, inv, rb, alpha, beta, True)
         W[_NW_SUMS + j] += f + g
         if grad:
             mx = fdx - gdx
@@ -171,65 +172,30 @@ def _near_lanes(W, rx, ry, rz, sx, sy, sz, lr, ir, alpha, beta, general, grad, l
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
 def _near_lanes_2(W, rx, ry, rz, sx, sy, sz, lr, ir, beta, grad, lanes):
-    """:func:`_near_lanes` for ``α = 2``: both orders of a pair from one ``d = m_I − m_J``
-    (I the lane's edge, J the partner) and the cross products ``c = e_I × d``, ``u = e_J × d``:
-    ``f_IJ + f_JI = ρ (l_J/l_I |c|² + l_I/l_J |u|²)`` (``ρ = |d|^−β``),
-    ``∂/∂e_I = d × 2 p_I c``, ``∂/∂e_J = d × 2 p_J u``,
-    ``∂/∂d = 2 p_I c × e_I + 2 p_J u × e_J − β (f_IJ + f_JI) d/|d|²`` (``p_I = ρ l_J/l_I``,
-    ``p_J = ρ l_I/l_J``) and the prefactors' lengths in the length rows
-    (``∂/∂l_I = (f_JI − f_IJ)/l_I``). Cross products, not ``l²|d|² − (e·d)²``: no cancellation
-    where ``d`` is nearly parallel to an edge. Less arithmetic than two :func:`pair_radial`
-    (one radial term, one ``d``): times in docs/benchmarks.md, session 18."""
+    """:func:`_near_lanes` for ``α = 2``: both orders of each pair at once
+    (:func:`.energies.tangent_point.pair_both_2`)."""
     for j in range(_LANES if grad else lanes):
-        dx = W[j] - rx
-        dy = W[_LANES + j] - ry
-        dz = W[2 * _LANES + j] - rz
-        inv = W[_NW_INV + j]
-        rb = W[_NW_RB + j]
-        lq = W[6 * _LANES + j]
-        il = W[_NW_IL + j]
-        ax = W[3 * _LANES + j]
-        ay = W[4 * _LANES + j]
-        az = W[5 * _LANES + j]
-        cx = ay * dz - az * dy
-        cy = az * dx - ax * dz
-        cz = ax * dy - ay * dx
-        ux = sy * dz - sz * dy
-        uy = sz * dx - sx * dz
-        uz = sx * dy - sy * dx
-        pi = lr * il * rb
-        pj = lq * ir * rb
-        fi = pi * (cx * cx + cy * cy + cz * cz)
-        fj = pj * (ux * ux + uy * uy + uz * uz)
-        F = fi + fj
+        (F, eix, eiy, eiz, ejx, ejy, ejz, mx, my, mz, gli, glj) = pair_both_2(
+            W[j] - rx, W[_LANES + j] - ry, W[2 * _LANES + j] - rz,
+            W[3 * _LANES + j], W[4 * _LANES + j], W[5 * _LANES + j],
+            W[6 * _LANES + j], W[_NW_IL + j], sx, sy, sz, lr, ir,
+            W[_NW_INV + j], W[_NW_RB + j], beta)
         W[_NW_SUMS + j] += F
         if grad:
-            gi = 2.0 * pi
-            gj = 2.0 * pj
-            gx = gi * cx
-            gy = gi * cy
-            gz = gi * cz
-            hx = gj * ux
-            hy = gj * uy
-            hz = gj * uz
-            tb = beta * F * inv
-            mx = gy * az - gz * ay + hy * sz - hz * sy - tb * dx
-            my = gz * ax - gx * az + hz * sx - hx * sz - tb * dy
-            mz = gx * ay - gy * ax + hx * sy - hy * sx - tb * dz
-            W[_NW_SUMS + _LANES + j] += dy * gz - dz * gy
-            W[_NW_SUMS + 2 * _LANES + j] += dz * gx - dx * gz
-            W[_NW_SUMS + 3 * _LANES + j] += dx * gy - dy * gx
+            W[_NW_SUMS + _LANES + j] += eix
+            W[_NW_SUMS + 2 * _LANES + j] += eiy
+            W[_NW_SUMS + 3 * _LANES + j] += eiz
             W[_NW_SUMS + 4 * _LANES + j] += mx
             W[_NW_SUMS + 5 * _LANES + j] += my
             W[_NW_SUMS + 6 * _LANES + j] += mz
-            W[_NW_SUMS + 7 * _LANES + j] += (fj - fi) * il
-            W[_NW_OUT + j] = dy * hz - dz * hy
-            W[_NW_OUT + _LANES + j] = dz * hx - dx * hz
-            W[_NW_OUT + 2 * _LANES + j] = dx * hy - dy * hx
+            W[_NW_SUMS + 7 * _LANES + j] += gli
+            W[_NW_OUT + j] = ejx
+            W[_NW_OUT + _LANES + j] = ejy
+            W[_NW_OUT + 2 * _LANES + j] = ejz
             W[_NW_OUT + 3 * _LANES + j] = -mx
             W[_NW_OUT + 4 * _LANES + j] = -my
             W[_NW_OUT + 5 * _LANES + j] = -mz
-            W[_NW_OUT + 6 * _LANES + j] = (fi - fj) * ir
+            W[_NW_OUT + 6 * _LANES + j] = glj
 
 
 @nb.njit(cache=True, inline="always")

@@ -144,3 +144,45 @@ def pair_radial(dx, dy, dz, ax, ay, az, li, il, lj, inv, rb, alpha, beta, genera
     fdy = gz * ax - gx * az - tb * dy
     fdz = gx * ay - gy * ax - tb * dz
     return f, fax, fay, faz, fdx, fdy, fdz, fl
+
+
+@nb.njit(cache=True, inline="always")
+def pair_both_2(dx, dy, dz, ax, ay, az, li, il, sx, sy, sz, lj, jl, inv, rb, beta):
+    """Both orders of a pair for ``α = 2`` with :func:`radial`'s ``inv``, ``rb`` given:
+    ``d = m_I − m_J``, ``e_I = a``, ``e_J = s``, lengths ``li``, ``lj`` and their inverses.
+    With ``c = e_I × d``, ``u = e_J × d``, ``p_I = ρ l_J/l_I``, ``p_J = ρ l_I/l_J``
+    (``ρ = |d|^−β``): ``F = f_IJ + f_JI = p_I |c|² + p_J |u|²``, ``∂F/∂e_I = d × 2 p_I c``,
+    ``∂F/∂e_J = d × 2 p_J u``, ``∂F/∂d = 2 p_I c × e_I + 2 p_J u × e_J − β F d/|d|²`` and
+    the prefactors' lengths ``∂F/∂l_I = (f_JI − f_IJ)/l_I``, ``∂F/∂l_J = (f_IJ − f_JI)/l_J``
+    (the edge-vector derivatives without their length terms). Cross products, not
+    ``l²|d|² − (e·d)²``: no cancellation where ``d`` is nearly parallel to an edge. Less
+    arithmetic than :func:`pair_radial` twice (one radial term, one ``d``; docs/benchmarks.md,
+    session 18).
+
+    Returns ``(F, ∂e_I (3), ∂e_J (3), ∂d (3), ∂l_I, ∂l_J)``."""
+    cx = ay * dz - az * dy
+    cy = az * dx - ax * dz
+    cz = ax * dy - ay * dx
+    ux = sy * dz - sz * dy
+    uy = sz * dx - sx * dz
+    uz = sx * dy - sy * dx
+    pi = lj * il * rb
+    pj = li * jl * rb
+    fi = pi * (cx * cx + cy * cy + cz * cz)
+    fj = pj * (ux * ux + uy * uy + uz * uz)
+    F = fi + fj
+    gi = 2.0 * pi
+    gj = 2.0 * pj
+    gx = gi * cx
+    gy = gi * cy
+    gz = gi * cz
+    hx = gj * ux
+    hy = gj * uy
+    hz = gj * uz
+    tb = beta * F * inv
+    mx = gy * az - gz * ay + hy * sz - hz * sy - tb * dx
+    my = gz * ax - gx * az + hz * sx - hx * sz - tb * dy
+    mz = gx * ay - gy * ax + hx * sy - hy * sx - tb * dz
+    return (F, dy * gz - dz * gy, dz * gx - dx * gz, dx * gy - dy * gx,
+            dy * hz - dz * hy, dz * hx - dx * hz, dx * hy - dy * hx,
+            mx, my, mz, (fj - fi) * il, (fi - fj) * jl)
