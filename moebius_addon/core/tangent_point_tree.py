@@ -199,19 +199,19 @@ def _near_lanes_2(W, rx, ry, rz, sx, sy, sz, lr, ir, beta, grad, lanes):
 
 
 @nb.njit(cache=True, inline="always")
-def _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width, alpha, beta, kind,
+def _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width, alpha, beta, kind,
                 general, grad, lanes):
     """The loaded lanes of leaf ``a`` against every edge ``r`` of the leaf itself (each pair
     once) and of its partners after it: what the pairs give ``r`` (edge vector, midpoint,
-    length; the lanes in order) added to its columns 1–7 of ``acc`` for a leaf of the same piece,
-    else of ``ext`` in the partner's slot (rows ``width · slot …``). ``general`` and ``grad``
+    length; the lanes in order) added to its columns 1–7 of ``acc``: its own row for a leaf of
+    the same piece, else the partner's slot (rows ``n + width · slot …``). ``general`` and ``grad``
     constants at each call site, ``kind`` only in the small loop of :func:`_near_radial`: a
     copy of the pairs' loop per kind took minutes to compile."""
     for p in range(uoff[a] - 1, uoff[a + 1]):
         b = a if p < uoff[a] else upart[p]
         s = -1 if p < uoff[a] else uslot[p]
-        tgt = acc if s < 0 else ext
-        off = 0 if s < 0 else width * s - lo[b]
+        # one array, not a choice of two: that counted a reference per partner, atomically
+        off = 0 if s < 0 else n + width * s - lo[b]
         for r in range(lo[b], hi[b]):
             fr = float(r)
             _near_radial(W, M[r, 0], M[r, 1], M[r, 2], fr, fr if b == a else np.inf, beta, kind,
@@ -223,14 +223,14 @@ def _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width, alp
                     t = 0.0
                     for j in range(_LANES):
                         t += W[_NW_OUT + k * _LANES + j]
-                    tgt[r + off, 1 + k] += t
+                    acc[r + off, 1 + k] += t
 
 
 @nb.njit(cache=True, error_model="numpy")
 def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, uoff, upart, uslot, nbr, width, alpha,
-                 beta, kind, grad, acc, ext, lanes):
+                 beta, kind, grad, acc, n, lanes):
     """The leaves ``leaves[t0:t1]`` of :func:`_near` (one piece): the sums of their edges and
-    what their pairs give other edges to ``acc`` and ``ext`` (:func:`_near_group`). A function
+    what their pairs give other edges to ``acc`` (:func:`_near_group`). A function
     of its own, called from the parallel loop: in a copy of a variant, compiled without
     ``parallel``, the gradient pass took 0.28 s against 0.33 s inside the loop's body (10⁵
     edges); in place the difference was in the noise (docs/benchmarks.md, session 11)."""
@@ -246,17 +246,17 @@ def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, uoff, upart, uslot, nbr, widt
             # general and grad constants at each call (the branches fold away)
             if grad:
                 if kind == KIND_GENERAL:
-                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                    _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
                                 alpha, beta, kind, True, True, lanes)
                 else:
-                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                    _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
                                 alpha, beta, kind, False, True, lanes)
             else:
                 if kind == KIND_GENERAL:
-                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                    _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
                                 alpha, beta, kind, True, False, lanes)
                 else:
-                    _near_group(W, acc, ext, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                    _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
                                 alpha, beta, kind, False, False, lanes)
             for j in range(count):
                 q = q0 + j
@@ -369,18 +369,18 @@ def _near(E, M, ln, lo, hi, leaves, uoff, upart, uslot, slot_leaf, nbr, alpha, b
     for t in range(nl):
         width = max(width, hi[leaves[t]] - lo[leaves[t]])
     slots = slot_leaf.shape[0] if grad else 0
-    acc = np.zeros((n, 8 if grad else 1))  # an edge's sums in one cache line
-    ext = np.zeros((width * slots, 8 if grad else 1))
+    # an edge's sums in one cache line; the slots after the edges
+    acc = np.zeros((n + width * slots, 8 if grad else 1))
     nchunks = min(nl, _FAR_CHUNKS)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
         _near_leaves(E, M, ln, lo, hi, leaves, ch * nl // nchunks, (ch + 1) * nl // nchunks,
-                     uoff, upart, uslot, nbr, width, alpha, beta, kind, grad, acc, ext, lanes)
+                     uoff, upart, uslot, nbr, width, alpha, beta, kind, grad, acc, n, lanes)
     for s in range(slots):  # in slot order: the same bits for any thread count
         b = slot_leaf[s]
         for i in range(hi[b] - lo[b]):
             for k in range(1, 8):
-                acc[lo[b] + i, k] += ext[width * s + i, k]
+                acc[lo[b] + i, k] += acc[n + width * s + i, k]
     rows = np.empty((acc.shape[1], n))
     for qq in nb.prange(n):
         q = np.int64(qq)
@@ -610,25 +610,27 @@ def _cc_radial(W, cax, cay, caz, beta, kind, lanes):
 
 
 @nb.njit(cache=True, inline="always")
-def _seen(bits, b):
-    """Whether node ``b``'s bit is set in ``bits`` (uint64 words)."""
+def _seen(bits, ch, b):
+    """Whether node ``b``'s bit is set in piece ``ch``'s row of ``bits`` (uint64 words)."""
     u = np.uint64(b)
-    return (bits[u >> np.uint64(6)] >> (u & np.uint64(63))) & np.uint64(1) != np.uint64(0)
+    return (bits[ch, u >> np.uint64(6)] >> (u & np.uint64(63))) & np.uint64(1) != np.uint64(0)
 
 
 @nb.njit(cache=True, inline="always")
-def _mark(bits, b):
-    """Set node ``b``'s bit in ``bits``."""
+def _mark(bits, ch, b):
+    """Set node ``b``'s bit in piece ``ch``'s row of ``bits``."""
     u = np.uint64(b)
-    bits[u >> np.uint64(6)] |= np.uint64(1) << (u & np.uint64(63))
+    bits[ch, u >> np.uint64(6)] |= np.uint64(1) << (u & np.uint64(63))
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs_ch, seen_ch, eF, gt,
+def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, seen, ch, eF, gt,
                gG, gW, lanes):
     """Target ``a`` against its far partners, by lanes (see above); ``S`` scratch for the
-    lanes' sums; ``gs_ch`` the piece's source rows, written first where ``seen_ch`` (one bit
-    per node) has no bit yet (:func:`_cc_far`)."""
+    lanes' sums; ``gs[ch]`` the piece's source rows, written first where ``seen[ch]`` (one
+    bit per node) has no bit yet (:func:`_cc_far`). The piece's rows are indexed in place, not
+    taken as views: a view per partner counted its reference up and down, atomically
+    (docs/benchmarks.md, session 19)."""
     la = L[a]
     cax, cay, caz = C[a, 0], C[a, 1], C[a, 2]
     # G and W are symmetric in their first two indices (Σ e eᵀ/l): six of G, 18 of W
@@ -735,18 +737,17 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs_ch, seen_
         if grad:
             for j in range(cnt):
                 b = fpart[p0 + j]
-                gsb = gs_ch[b]
-                if _seen(seen_ch, b):
-                    gsb[0] += W[_CW_OUT + j]
-                    gsb[1] -= W[_CW_OUT + _CL + j]
-                    gsb[2] -= W[_CW_OUT + 2 * _CL + j]
-                    gsb[3] -= W[_CW_OUT + 3 * _CL + j]
+                if _seen(seen, ch, b):
+                    gs[ch, b, 0] += W[_CW_OUT + j]
+                    gs[ch, b, 1] -= W[_CW_OUT + _CL + j]
+                    gs[ch, b, 2] -= W[_CW_OUT + 2 * _CL + j]
+                    gs[ch, b, 3] -= W[_CW_OUT + 3 * _CL + j]
                 else:  # a zero row plus the first terms, as np.zeros gave them
-                    _mark(seen_ch, b)
-                    gsb[0] = 0.0 + W[_CW_OUT + j]
-                    gsb[1] = 0.0 - W[_CW_OUT + _CL + j]
-                    gsb[2] = 0.0 - W[_CW_OUT + 2 * _CL + j]
-                    gsb[3] = 0.0 - W[_CW_OUT + 3 * _CL + j]
+                    _mark(seen, ch, b)
+                    gs[ch, b, 0] = 0.0 + W[_CW_OUT + j]
+                    gs[ch, b, 1] = 0.0 - W[_CW_OUT + _CL + j]
+                    gs[ch, b, 2] = 0.0 - W[_CW_OUT + 2 * _CL + j]
+                    gs[ch, b, 3] = 0.0 - W[_CW_OUT + 3 * _CL + j]
     e = 0.0
     for j in range(_CL):
         e += W[_CW_SUMS + j]
@@ -802,10 +803,12 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad, lanes):
     same bits for any thread count. ``lanes``: always :data:`_CL`, passed at run time."""
     m = L.shape[0]
     nchunks = min(m, _FAR_CHUNKS)
-    eF = np.zeros(m)
-    gt = np.zeros((m if grad else 0, 4))
-    gG = np.zeros((m if grad else 0, 9))
-    gW = np.zeros((m if grad else 0, 27))
+    # every row written below (a target's own, zeros where it has no partner): np.zeros
+    # cleared the 16 MB of these at 10⁵ edges once more (docs/benchmarks.md, session 19)
+    eF = np.empty(m)
+    gt = np.empty((m if grad else 0, 4))
+    gG = np.empty((m if grad else 0, 9))
+    gW = np.empty((m if grad else 0, 27))
     # a piece meets few of the nodes as partners (at 10⁶ edges 526 000 rows of 16 × 500 000):
     # untouched rows stay unwritten, and their pages are never faulted in (np.zeros wrote all
     # 256 MB; docs/benchmarks.md, session 16)
@@ -817,13 +820,18 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad, lanes):
         S = np.zeros(24)
         for a in range(ch * m // nchunks, (ch + 1) * m // nchunks):
             if foff[a + 1] == foff[a]:
+                eF[a] = 0.0
+                if grad:
+                    gt[a] = 0.0
+                    gG[a] = 0.0
+                    gW[a] = 0.0
                 continue
             if grad:  # a constant at each call (the branches fold away)
-                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, True, gs[ch],
-                           seen[ch], eF, gt, gG, gW, lanes)
+                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, True, gs,
+                           seen, ch, eF, gt, gG, gW, lanes)
             else:
-                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, False, gs[ch],
-                           seen[ch], eF, gt, gG, gW, lanes)
+                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, False, gs,
+                           seen, ch, eF, gt, gG, gW, lanes)
     return eF, gt, gG, gW, (gs, seen)
 
 
@@ -832,7 +840,7 @@ def _cc_node_grad(L, G, gt, gs, seen, gG, gW):
     """Per node, the derivatives the edges need: ``∂/∂L`` (target and source parts) and
     ``∂/∂c`` with ``W``'s dependence on ``c`` (``∂W_abk/∂c_k = −G_ab``) folded in."""
     m = L.shape[0]
-    out = np.zeros((m, 4))
+    out = np.empty((m, 4))  # every row written
     nchunks = gs.shape[0]
     for bb in nb.prange(m):
         b = np.int64(bb)
@@ -841,7 +849,7 @@ def _cc_node_grad(L, G, gt, gs, seen, gG, gW):
         s2 = gt[b, 2]
         s3 = gt[b, 3]
         for ch in range(nchunks):  # in piece order: the same bits for any thread count
-            if _seen(seen[ch], b):
+            if _seen(seen, ch, b):
                 s0 += gs[ch, b, 0]
                 s1 += gs[ch, b, 1]
                 s2 += gs[ch, b, 2]
@@ -894,8 +902,8 @@ def _cc_push(L, C, parent, gn, gG, gW):
 def _cc_to_edges(E, M, ln, C, lo, hi, leaves, gn, gG, gW, rows):
     """The nodes' derivatives, summed to the leaves (:func:`_cc_push`), passed to their edges:
     ``L`` and ``c`` as in :func:`_far_sources`; ``G`` and ``W`` through ``e eᵀ / l`` (edge
-    vector rows 1–3 without the length term, length row 7) and ``δ = m − c`` (midpoint rows
-    4–6)."""
+    vector rows 1–3, length row 7) and ``δ = m − c`` (midpoint rows 4–6). Last, the length
+    row's part of the edge vector's rows (``∂l/∂e = e/l``): ``rows`` is then complete."""
     nl = leaves.shape[0]
     for tt in nb.prange(nl):
         b = leaves[np.int64(tt)]
@@ -937,13 +945,15 @@ def _cc_to_edges(E, M, ln, C, lo, hi, leaves, gn, gG, gW, rows):
                 else:
                     ga2 += g
             gl -= ehe * il * il
-            rows[1, q] += ga0
-            rows[2, q] += ga1
-            rows[3, q] += ga2
             rows[4, q] += gm0
             rows[5, q] += gm1
             rows[6, q] += gm2
             rows[7, q] += gl
+            # and the length row's part of the edge vector's, ∂l/∂e = e/l (the last sums)
+            t = rows[7, q] / ln[q]
+            rows[1, q] = (rows[1, q] + ga0) + t * e0
+            rows[2, q] = (rows[2, q] + ga1) + t * e1
+            rows[3, q] = (rows[3, q] + ga2) + t * e2
 
 
 class TangentPointFrame(Frame):
@@ -1013,6 +1023,7 @@ class TangentPointFrame(Frame):
                 return energy, None
             _far_sources(M, ln, L, C, tree.lo, tree.hi, self.leaves, self.parent,
                          gnode.sum(axis=0), rows)
+            rows[1:4] += rows[7] / ln * E.T  # ∂l/∂e = e/l
         else:
             if own and self._cc_own is not None:
                 G, Wm = self._cc_own
@@ -1027,8 +1038,8 @@ class TangentPointFrame(Frame):
                 return energy, None
             gn = _cc_node_grad(L, G, gt, *gs, gG, gW)
             _cc_push(L, C, self.parent, gn, gG, gW)
+            # with ∂l/∂e = e/l of every sum (numpy's three temporaries took about 1 ms at 10⁵)
             _cc_to_edges(E, M, ln, C, tree.lo, tree.hi, self.leaves, gn, gG, gW, rows)
-        rows[1:4] += rows[7] / ln * E.T  # ∂l/∂e = e/l
         return energy, _to_vertices(rows, lay.prv, self._at)
 
 
