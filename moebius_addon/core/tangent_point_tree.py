@@ -74,11 +74,17 @@ _FAR_CHUNKS = 16
 # one partner edge at a time, both orders of each pair at once (the distance, |d|^−β and the
 # masks are shared). One work array per parallel piece: lane j's edge at W[_LANES k + j] (k:
 # midpoint, edge vector, length, then its tree position and neighbours' as floats, position −1
-# past the leaf's end, then 1 / length, 1 / |d|², |d|^−β), its sums at
-# W[_NW_SUMS + _LANES k + j] (f, ∂/∂e, ∂/∂m, ∂/∂l) and what its pairs give the partner at
-# W[_NW_OUT + _LANES k + j] (∂/∂e, ∂/∂m, ∂/∂l), added over the lanes in lane order. Constant
-# offsets plus j: the lane loop vectorizes. No fast-math (see ``_near_field``). The first ten
-# rows as in ``_near_field``, by its _load_lanes.
+# past the leaf's end, then 1 / length), its sums at W[_NW_SUMS + _LANES k + j] (f, ∂/∂e,
+# ∂/∂m, ∂/∂l) and what its pairs give the partner at W[_NW_OUT + _LANES k + j] (∂/∂e, ∂/∂m,
+# ∂/∂l), added over the lanes in lane order. Constant offsets plus j: the lane loop
+# vectorizes. No fast-math (see ``_near_field``). The first ten rows as in ``_near_field``, by
+# its _load_lanes.
+# For α = 2 the partner edges go two at a time: the radial parts of both (1 / |d|², |d|^−β,
+# the masks) first, each in its own rows (_NW_INV, and _NW_INV + _LANES for the second;
+# |d|^−β _NW_RB further on), so that their divisions overlap (one at a time, the pairs waited
+# for each division: the near field's gradient pass at 10⁵ edges 43 → 37 ms, at the price of
+# _near_leaves compiling in 35 s instead of 15 s; one loop over twice the lanes for both kept
+# scalar divisions and gave nothing; docs/benchmarks.md, session 19).
 # Four lanes on leaves of four edges (:data:`LEAF_SIZE`): the finer split leaves about half the
 # near pairs, and the far field, cluster against cluster, is cheap per pair. The energy-only
 # pass loops over ``lanes``, a run-time argument equal to _LANES: a constant trip count of four
@@ -86,19 +92,20 @@ _FAR_CHUNKS = 16
 _LANES = 4
 _NW_ID = 7 * _LANES
 _NW_IL = 10 * _LANES
-_NW_INV = 11 * _LANES
-_NW_RB = 12 * _LANES
-_NW_SUMS = 13 * _LANES
-_NW_OUT = 21 * _LANES
-_NW_SIZE = 28 * _LANES
+_NW_SUMS = 11 * _LANES
+_NW_OUT = 19 * _LANES
+_NW_INV = 26 * _LANES
+_NW_RB = 2 * _LANES
+_NW_SIZE = 30 * _LANES
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _near_radial_k(W, rx, ry, rz, r, lim, beta, kind, lanes):
+def _near_radial_k(W, ri, rx, ry, rz, r, lim, beta, kind, lanes):
     """Per lane ``1 / |d|²`` and ``|d|^−β`` (:func:`.energies.tangent_point.radial`) of the
-    lane's edge and partner edge ``r`` (midpoint, tree position as a float). The edge itself,
-    its neighbours, the lanes past the leaf's end and lanes at positions ≥ ``lim`` (a leaf
-    against itself: each pair once) count zero: ``|d|² = ∞`` by a select, no branch."""
+    lane's edge and partner edge ``r`` (midpoint, tree position as a float), to rows ``ri``
+    and ``ri + _NW_RB`` (``ri`` a constant at each call). The edge itself, its neighbours,
+    the lanes past the leaf's end and lanes at positions ≥ ``lim`` (a leaf against itself:
+    each pair once) count zero: ``|d|² = ∞`` by a select, no branch."""
     for j in range(lanes):
         dx = W[j] - rx
         dy = W[_LANES + j] - ry
@@ -113,35 +120,33 @@ def _near_radial_k(W, rx, ry, rz, r, lim, beta, kind, lanes):
         r2 = np.inf if q < 0.0 else r2
         r2 = np.inf if q >= lim else r2
         inv, rb = radial(r2, beta, kind)
-        W[_NW_INV + j] = inv
-        W[_NW_RB + j] = rb
+        W[ri + j] = inv
+        W[ri + _NW_RB + j] = rb
 
 
 @nb.njit(cache=True, inline="always")
-def _near_radial(W, rx, ry, rz, r, lim, beta, kind, lanes):
+def _near_radial(W, ri, rx, ry, rz, r, lim, beta, kind, lanes):
     """:func:`_near_radial_k` with ``kind`` a constant in each branch."""
     if kind == KIND_2_4:
-        _near_radial_k(W, rx, ry, rz, r, lim, beta, KIND_2_4, lanes)
+        _near_radial_k(W, ri, rx, ry, rz, r, lim, beta, KIND_2_4, lanes)
     elif kind == KIND_2_45:
-        _near_radial_k(W, rx, ry, rz, r, lim, beta, KIND_2_45, lanes)
+        _near_radial_k(W, ri, rx, ry, rz, r, lim, beta, KIND_2_45, lanes)
     else:
-        _near_radial_k(W, rx, ry, rz, r, lim, beta, KIND_2, lanes)
+        _near_radial_k(W, ri, rx, ry, rz, r, lim, beta, KIND_2, lanes)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _near_lanes(W, rx, ry, rz, sx, sy, sz, lr, ir, alpha, beta, general, grad, lanes):
+def _near_lanes(W, ri, rx, ry, rz, sx, sy, sz, lr, ir, alpha, beta, grad, lanes):
     """Partner edge ``r`` (midpoint, edge vector, length and its inverse) against every lane's
-    edge, both ordered pairs, with the lanes' :func:`_near_radial`: added to the lane's sums,
-    what they give ``r`` in the lane's ``_NW_OUT`` slots. ``general``: ``α ≠ 2``."""
-    if not general:
-        _near_lanes_2(W, rx, ry, rz, sx, sy, sz, lr, ir, beta, grad, lanes)
-        return
+    edge, both ordered pairs, with the lanes' :func:`_near_radial` in rows ``ri``: added to the
+    lane's sums, what they give ``r`` in the lane's ``_NW_OUT`` slots. Any ``α``
+    (:func:`_near_lanes_2` for ``α = 2``)."""
     for j in range(_LANES if grad else lanes):
         dx = W[j] - rx
         dy = W[_LANES + j] - ry
         dz = W[2 * _LANES + j] - rz
-        inv = W[_NW_INV + j]
-        rb = W[_NW_RB + j]
+        inv = W[ri + j]
+        rb = W[ri + _NW_RB + j]
         lq = W[6 * _LANES + j]
         # (I, J) = (lane, r) and (r, lane)
         f, fax, fay, faz, fdx, fdy, fdz, fl = pair_radial(
@@ -171,7 +176,7 @@ def _near_lanes(W, rx, ry, rz, sx, sy, sz, lr, ir, alpha, beta, general, grad, l
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _near_lanes_2(W, rx, ry, rz, sx, sy, sz, lr, ir, beta, grad, lanes):
+def _near_lanes_2(W, ri, rx, ry, rz, sx, sy, sz, lr, ir, beta, grad, lanes):
     """:func:`_near_lanes` for ``α = 2``: both orders of each pair at once
     (:func:`.energies.tangent_point.pair_both_2`)."""
     for j in range(_LANES if grad else lanes):
@@ -179,7 +184,7 @@ def _near_lanes_2(W, rx, ry, rz, sx, sy, sz, lr, ir, beta, grad, lanes):
             W[j] - rx, W[_LANES + j] - ry, W[2 * _LANES + j] - rz,
             W[3 * _LANES + j], W[4 * _LANES + j], W[5 * _LANES + j],
             W[6 * _LANES + j], W[_NW_IL + j], sx, sy, sz, lr, ir,
-            W[_NW_INV + j], W[_NW_RB + j], beta)
+            W[ri + j], W[ri + _NW_RB + j], beta)
         W[_NW_SUMS + j] += F
         if grad:
             W[_NW_SUMS + _LANES + j] += eix
@@ -199,6 +204,17 @@ def _near_lanes_2(W, rx, ry, rz, sx, sy, sz, lr, ir, beta, grad, lanes):
 
 
 @nb.njit(cache=True, inline="always")
+def _near_out(W, acc, row):
+    """What the pairs gave the partner edge (the lanes' ``_NW_OUT`` slots, in lane order) added
+    to its columns 1–7 of row ``row`` of ``acc``."""
+    for k in range(7):
+        t = 0.0
+        for j in range(_LANES):
+            t += W[_NW_OUT + k * _LANES + j]
+        acc[row, 1 + k] += t
+
+
+@nb.njit(cache=True, inline="always")
 def _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width, alpha, beta, kind,
                 general, grad, lanes):
     """The loaded lanes of leaf ``a`` against every edge ``r`` of the leaf itself (each pair
@@ -212,18 +228,35 @@ def _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width, alpha
         s = -1 if p < uoff[a] else uslot[p]
         # one array, not a choice of two: that counted a reference per partner, atomically
         off = 0 if s < 0 else n + width * s - lo[b]
-        for r in range(lo[b], hi[b]):
+        if general:  # one partner edge at a time (kind: the general power)
+            for r in range(lo[b], hi[b]):
+                fr = float(r)
+                _near_radial_k(W, _NW_INV, M[r, 0], M[r, 1], M[r, 2], fr,
+                               fr if b == a else np.inf, beta, KIND_2, lanes)
+                _near_lanes(W, _NW_INV, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
+                            ln[r], 1.0 / ln[r], alpha, beta, grad, lanes)
+                if grad:
+                    _near_out(W, acc, r + off)
+            continue
+        # two partner edges at a time (see the lanes' comment). An odd last edge goes with
+        # itself as the second, every lane off (lim −∞), and is not added to acc.
+        for r in range(lo[b], hi[b], 2):
+            r1 = min(r + 1, hi[b] - 1)
             fr = float(r)
-            _near_radial(W, M[r, 0], M[r, 1], M[r, 2], fr, fr if b == a else np.inf, beta, kind,
+            fr1 = float(r1)
+            _near_radial(W, _NW_INV, M[r, 0], M[r, 1], M[r, 2], fr, fr if b == a else np.inf,
+                         beta, kind, lanes)
+            _near_radial(W, _NW_INV + _LANES, M[r1, 0], M[r1, 1], M[r1, 2], fr1,
+                         -np.inf if r1 == r else (fr1 if b == a else np.inf), beta, kind,
                          lanes)
-            _near_lanes(W, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2], ln[r],
-                        1.0 / ln[r], alpha, beta, general, grad, lanes)
+            _near_lanes_2(W, _NW_INV, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
+                          ln[r], 1.0 / ln[r], beta, grad, lanes)
             if grad:
-                for k in range(7):
-                    t = 0.0
-                    for j in range(_LANES):
-                        t += W[_NW_OUT + k * _LANES + j]
-                    acc[r + off, 1 + k] += t
+                _near_out(W, acc, r + off)
+            _near_lanes_2(W, _NW_INV + _LANES, M[r1, 0], M[r1, 1], M[r1, 2], E[r1, 0],
+                          E[r1, 1], E[r1, 2], ln[r1], 1.0 / ln[r1], beta, grad, lanes)
+            if grad and r1 != r:
+                _near_out(W, acc, r1 + off)
 
 
 @nb.njit(cache=True, error_model="numpy")
@@ -242,7 +275,7 @@ def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, uoff, upart, uslot, nbr, widt
             _load_lanes(W, E, M, ln, nbr, q0, count, True, _LANES)  # past the leaf's end: off
             for j in range(_LANES):
                 W[_NW_IL + j] = 1.0 / W[6 * _LANES + j]
-            W[_NW_SUMS:] = 0.0
+            W[_NW_SUMS:_NW_INV] = 0.0
             # general and grad constants at each call (the branches fold away)
             if grad:
                 if kind == KIND_GENERAL:
