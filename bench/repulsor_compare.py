@@ -7,6 +7,9 @@
     python bench/repulsor_compare.py --moebius              # also our Möbius E+g and iteration
     python bench/repulsor_compare.py --parts                # also E+g in two parts: the trees
                                                             # built, the sums on built trees
+    python bench/repulsor_compare.py --parts --again 4      # and 4 more trees and sums in the
+                                                            # same process, both sides (warm
+                                                            # allocator: as in a flow)
     python bench/repulsor_compare.py --core-from DIR        # our side imported from DIR (e.g. an
                                                             # export of another branch)
 
@@ -59,6 +62,7 @@ Results also go to ``out/repulsor_compare.json``.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import resource
@@ -174,14 +178,17 @@ def worker(args) -> None:
         # differential on the built trees)
         from moebius_addon.core.engine import _frame, as_checked_layout
         choice = core.check_energy("tangent_point", ALPHA, BETA)
-        t0 = time.perf_counter()
-        X, layout, _ = as_checked_layout(P, True)
-        frame = _frame(X, layout, "tree", theta, choice)  # the evaluators' own frame
-        t1 = time.perf_counter()
-        E, G = frame.energy_gradient(X)
-        t2 = time.perf_counter()
-        print(f"{head} energy_name=tangent_point seconds={t2 - t0:.6f} build_seconds="
-              f"{t1 - t0:.6f} kernel_seconds={t2 - t1:.6f}", flush=True)
+        for again in range(1 + args.again):  # --again: new frames in the same process
+            t0 = time.perf_counter()
+            X, layout, _ = as_checked_layout(P, True)
+            frame = _frame(X, layout, "tree", theta, choice)  # the evaluators' own frame
+            t1 = time.perf_counter()
+            E, G = frame.energy_gradient(X)
+            t2 = time.perf_counter()
+            mode = "eg_parts_again" if again else "eg_parts"
+            print(f"ours {mode} edges={n} threads={args.threads} energy_name=tangent_point "
+                  f"seconds={t2 - t0:.6f} build_seconds={t1 - t0:.6f} "
+                  f"kernel_seconds={t2 - t1:.6f}", flush=True)
     elif args.worker in ("iter", "iter_moebius"):
         t0 = time.perf_counter()
         name, r = _ours_relax(core, P, theta,
@@ -256,9 +263,10 @@ def run(cmd: list[str], env: dict) -> list[dict]:
             continue
         if words[1] == "info":
             # the driver's split of its E+g: mesh (trees) and the sums on the built trees
-            if words[0] == "repulsor" and len(words) > 2 and words[2] == "eg":
+            if words[0] == "repulsor" and len(words) > 2 and words[2] in ("eg", "eg_again"):
                 kv = dict(w.split("=", 1) for w in words[3:])
-                rows.append({"side": "repulsor", "mode": "eg_parts",
+                rows.append({"side": "repulsor",
+                             "mode": "eg_parts" if words[2] == "eg" else "eg_parts_again",
                              "build_seconds": float(kv["mesh_seconds"]),
                              "kernel_seconds": float(kv["energy_differential_seconds"])})
             continue
@@ -272,7 +280,7 @@ def run(cmd: list[str], env: dict) -> list[dict]:
                 row[k] = v
         rows.append(row)
     for r in rows:  # the info line names no size: the eg line of the same process does
-        if r["mode"] == "eg_parts" and "edges" not in r:
+        if r["mode"] in ("eg_parts", "eg_parts_again") and "edges" not in r:
             eg = next((q for q in rows if q["mode"] == "eg"), {})
             r["edges"], r["threads"] = eg.get("edges"), eg.get("threads")
     return rows
@@ -319,6 +327,9 @@ def main() -> None:
                     help="also time our Möbius E+g and one iteration of its flow (issue 27)")
     ap.add_argument("--parts", action="store_true",
                     help="also time our E+g in two parts: frame built, sums on it")
+    ap.add_argument("--again", type=int, default=0,
+                    help="with --parts: K more trees and sums on them in the same process, on "
+                         "both sides (warm allocator and caches; summary mode eg_parts_again)")
     ap.add_argument("--worker", choices=("eg", "eg_parts", "iter", "eg_moebius", "iter_moebius",
                                          "error"),
                     help=argparse.SUPPRESS)
@@ -375,13 +386,16 @@ def main() -> None:
             for _ in range(args.reps):
                 for mode in ("eg", "iter"):
                     if have_driver:
+                        again = (["--repeat", str(1 + args.again)]
+                                 if mode == "eg" and args.parts and args.again else [])
                         measure([str(driver), str(path), mode, str(t), "--theta",
-                                 str(args.repulsor_theta)], env)
+                                 str(args.repulsor_theta)] + again, env)
                     measure(me + ["--worker", mode, "--curve", str(path), "--threads-of-worker",
                                   str(t)] + extra, env)
                 if args.parts:
                     measure(me + ["--worker", "eg_parts", "--curve", str(path),
-                                  "--threads-of-worker", str(t)] + extra, env)
+                                  "--threads-of-worker", str(t), "--again", str(args.again)]
+                            + extra, env)
                 if args.moebius:
                     for mode in ("eg_moebius", "iter_moebius"):
                         measure(me + ["--worker", mode, "--curve", str(path),
@@ -401,11 +415,13 @@ def main() -> None:
                         print(f"summary side={side} mode={mode} edges={n} threads={t} "
                               f"best={s['best']:.4f} median={s['median']:.4f} k={s['k']} "
                               f"peak_rss_mb={s['peak_rss_mb']}", flush=True)
-            for side in ("repulsor", "ours"):  # E+g's parts: trees built, sums on them
-                parts = [summary(rows, side, "eg_parts", n, t, key) for key in
+            for side, mode in itertools.product(("repulsor", "ours"),
+                                                ("eg_parts", "eg_parts_again")):
+                # E+g's parts: trees built, sums on them (first in a process, and again)
+                parts = [summary(rows, side, mode, n, t, key) for key in
                          ("build_seconds", "kernel_seconds")]
                 if all(parts):
-                    print(f"summary side={side} mode=eg_parts edges={n} threads={t} "
+                    print(f"summary side={side} mode={mode} edges={n} threads={t} "
                           f"build_best={parts[0]['best']:.4f} kernel_best={parts[1]['best']:.4f} "
                           f"k={parts[1]['k']}", flush=True)
             # iteration ÷ E+g of the same energy, best of each (issue 27's "iteration ≤ 6 E+g")

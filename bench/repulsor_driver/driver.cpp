@@ -101,7 +101,7 @@ static double diff_norm2( const Real * a, const Real * b, const std::size_t n )
 
 static int usage()
 {
-    std::fprintf( stderr, "usage: driver CURVE (eg|iter|error) THREADS [--theta THETA]\n" );
+    std::fprintf( stderr, "usage: driver CURVE (eg|iter|error) THREADS [--theta THETA] [--repeat K]\n" );
     return 2;
 }
 
@@ -113,12 +113,17 @@ int main( int argc, char ** argv )
     const std::string mode       = argv[2];
     const int thread_count       = std::atoi( argv[3] );
     double theta = 0.5;
+    int repeat = 1;
 
     for( int i = 4; i < argc; ++i )
     {
         if( (std::strcmp( argv[i], "--theta" ) == 0) && (i + 1 < argc) )
         {
             theta = std::strtod( argv[++i], nullptr );
+        }
+        else if( (std::strcmp( argv[i], "--repeat" ) == 0) && (i + 1 < argc) )
+        {
+            repeat = std::atoi( argv[++i] );
         }
         else
         {
@@ -127,7 +132,7 @@ int main( int argc, char ** argv )
     }
 
     if( (mode != "eg") && (mode != "iter") && (mode != "error") ) { return usage(); }
-    if( thread_count < 1 ) { return usage(); }
+    if( (thread_count < 1) || (repeat < 1) ) { return usage(); }
 
     // Read the curve.
     std::vector<Real> V;
@@ -223,6 +228,14 @@ int main( int argc, char ** argv )
             st.t_mesh, st.t_eg - st.t_mesh );
         std::printf( "repulsor eg %s seconds=%.6f energy=%.12e diff_norm=%.12e\n",
             head, st.t_eg, st.en, norm2( st.diff.data(), len ) );
+        // --repeat K: K - 1 more new meshes and their E+g in the same process (the allocator
+        // and caches warm, as in a flow that evaluates again and again)
+        for( int r = 1; r < repeat; ++r )
+        {
+            const Start again = start( Clock::now() );
+            std::printf( "repulsor info eg_again mesh_seconds=%.6f energy_differential_seconds=%.6f\n",
+                again.t_mesh, again.t_eg - again.t_mesh );
+        }
     }
     else if( mode == "iter" )
     {
