@@ -5,7 +5,7 @@ the other they left the second core idle for most of `make test`. Here two worke
 parts in this order, each the next one it can run:
 
 1. the test repository (``make build/test-repo/index.json``: the zip with its kernel cache,
-   two compiling processes);
+   two compiling processes), and ``make lint``'s ruff check (seconds);
 2. the UI test in a real Blender window (``make ui-test``), beside the repository's build;
 3. the core suite (everything outside ``tests/blender``), once the repository is built: it
    loads the kernels the zip ships (``$MOEBIUS_KERNEL_CACHE``) rather than compiling them;
@@ -100,7 +100,10 @@ def plan(args) -> list[tuple[str, list[str], dict | None, bool]]:
     # on linux-x64 run them) instead of compiling every one natively (core/_shipped_cache.py);
     # the Blender tests install the zip, whose own cache they test, so they are not pointed
     core_env = {"MOEBIUS_KERNEL_CACHE": str(ROOT / "build" / "test-kernel-cache")}
-    parts = [("test repository", [*make, f"{args.repo}/index.json"], None, False)]
+    parts = [("test repository", [*make, f"{args.repo}/index.json"], None, False),
+             # make lint's check (seconds): outside CI, three findings had come in unseen
+             ("lint (ruff)", [args.python, "-m", "ruff", "check", "moebius_addon", "tests",
+                              "bench"], None, False)]
     if not args.no_ui:
         parts.append(("UI test, Blender 3.4 window", [*make, "ui-test"], None, False))
     parts += [("core suite (all but tests/blender)",

@@ -744,9 +744,10 @@ class BandedSaddle:
 def _correction(y, yb, beta, F, Z, Zlam, starts, brow, cap, chunks, u, lam_e, lam_b):
     """The low-rank correction of :meth:`BandedSaddle._solve` for the band solve ``y`` (N, 3)
     (``yb``: the barycenter rows' right-hand sides), in place on ``u`` (may be ``y``),
-    ``lam_e`` and ``lam_b`` (may be ``yb``: a row is read before it is written). A component with barycenter rows (row ``brow[c]`` of ``yb``)
-    takes the nine columns and its 12 × 12 capacitance, one with a pin (``brow[c]`` −1) the
-    barycenter term's three and a 3 × 3 one (``cap[c, :3, :3]``). The columns' products with
+    ``lam_e`` and ``lam_b`` (may be ``yb``: a row is read before it is written). A component
+    with barycenter rows (row ``brow[c]`` of ``yb``) takes the nine columns and its 12 × 12
+    capacitance, one with a pin (``brow[c]`` −1) the barycenter term's three and a 3 × 3 one
+    (``cap[c, :3, :3]``). The columns' products with
     ``y`` from their structure: the springs read ``y`` at the component's first vertex, the
     barycenter term ``β`` per coordinate, the barycenter rows their fields ``F`` (3, N, 3).
     The pieces of ``chunks`` (first, end, component) in parallel, their sums added in order:

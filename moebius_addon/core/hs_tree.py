@@ -36,8 +36,8 @@ import numba as nb
 import numpy as np
 
 from . import bvh
-from .banded import EdgeParts
 from ._layout import Layout
+from .banded import EdgeParts
 from .barnes_hut import _by_target
 from .metrics import (
     _PURE_L2,
@@ -615,7 +615,7 @@ class HsOperator:
         (:class:`.banded.EdgeParts`; closed components): no triplets to build, and the band is
         filled in parallel. FHW at 10⁶ edges, 2 threads, setup and one iteration: the triplets'
         build and fill took 3.6 s, the fill from edges 0.2 s (docs/benchmarks.md, session 17)."""
-        ln, n = self.ln, self.layout.n
+        ln = self.ln
         total = float(ln.sum())
         m = ln / 3 * (1.0 / total**3)  # h1's mass and stiffness, as banded_parts_of_lengths
         k = (1.0 / ln) * (1.0 / total)
