@@ -14,11 +14,14 @@ def test_every_part_is_planned_in_order():
     args = run_tests.parser().parse_args(["--lines", "4.2", "4.5", "5.2"])
     parts = run_tests.plan(args)
     assert [p[0] for p in parts] == [
-        "test repository", "UI test, Blender 3.4 window", "core suite (all but tests/blender)",
-        "Blender 5.0 (tests/blender)", "Blender 4.2 (lines)", "Blender 4.5 (lines)",
-        "Blender 5.2 (lines)"]
+        "test repository", "lint (ruff)", "UI test, Blender 3.4 window",
+        "core suite (all but tests/blender)", "Blender 5.0 (tests/blender)",
+        "Blender 4.2 (lines)", "Blender 4.5 (lines)", "Blender 5.2 (lines)"]
     needs_repo = {name for name, _, _, needs in parts if needs}
-    assert "test repository" not in needs_repo and "UI test, Blender 3.4 window" not in needs_repo
+    assert not needs_repo & {"test repository", "lint (ruff)", "UI test, Blender 3.4 window"}
+    lint = dict((p[0], p) for p in parts)["lint (ruff)"]
+    assert lint[1][1:] == ["-m", "ruff", "check", "moebius_addon", "tests", "bench"]
+    assert "$(PY) -m ruff check moebius_addon tests bench" in (ROOT / "Makefile").read_text()
     core = dict((p[0], p) for p in parts)["core suite (all but tests/blender)"]
     assert "--ignore=tests/blender" in core[1] and "MOEBIUS_KERNEL_CACHE" in core[2]
     lines = [p for p in parts if p[0].endswith("(lines)")]
