@@ -633,28 +633,49 @@ def _cc_radial(W, cax, cay, caz, beta, kind, lanes):
         _cc_radial_k(W, cax, cay, caz, beta, KIND_2, lanes)
 
 
-@nb.njit(cache=True, inline="always")
-def _seen(bits, ch, b):
-    """Whether node ``b``'s bit is set in piece ``ch``'s row of ``bits`` (uint64 words)."""
-    u = np.uint64(b)
-    return (bits[ch, u >> np.uint64(6)] >> (u & np.uint64(63))) & np.uint64(1) != np.uint64(0)
-
-
-@nb.njit(cache=True, inline="always")
-def _mark(bits, ch, b):
-    """Set node ``b``'s bit in piece ``ch``'s row of ``bits``."""
-    u = np.uint64(b)
-    bits[ch, u >> np.uint64(6)] |= np.uint64(1) << (u & np.uint64(63))
+@nb.njit(cache=True)
+def _cc_slots(foff, fpart, m, nchunks):
+    """The far field's rows of what targets give their partners as sources: one row per piece
+    (a fixed range of ``nchunks`` of the targets) and partner it meets, numbered piece by
+    piece; ``fslot`` the row of each far pair (``fpart``'s order), ``soff``/``sidx`` per node
+    its rows, in piece order (CSR). At 10⁵ edges (θ 0.7) 58 582 rows against 16 × 50 000 for
+    a row per piece and node, whose scattered writes faulted in 25 MB of pages per evaluation
+    (docs/benchmarks.md, session 20)."""
+    fslot = np.empty(fpart.shape[0], np.int32)
+    stamp = np.full(m, -1, np.int64)
+    slot = np.empty(m, np.int64)
+    count = np.zeros(m + 1, np.int64)
+    ns = 0
+    for ch in range(nchunks):
+        for a in range(ch * m // nchunks, (ch + 1) * m // nchunks):
+            for p in range(foff[a], foff[a + 1]):
+                b = fpart[p]
+                if stamp[b] != ch:
+                    stamp[b] = ch
+                    slot[b] = ns
+                    count[b + 1] += 1
+                    ns += 1
+                fslot[p] = slot[b]
+    soff = np.cumsum(count)
+    node = np.empty(ns, np.int64)  # the partner of each row
+    for p in range(fpart.shape[0]):
+        node[fslot[p]] = fpart[p]
+    sidx = np.empty(ns, np.int32)
+    fill = soff[:m].copy()
+    for r in range(ns):  # in row order, so in piece order per node
+        b = node[r]
+        sidx[fill[b]] = r
+        fill[b] += 1
+    return fslot, soff, sidx
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, seen, ch, eF, gt,
+def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, eF, gt,
                gG, gW, lanes):
     """Target ``a`` against its far partners, by lanes (see above); ``S`` scratch for the
-    lanes' sums; ``gs[ch]`` the piece's source rows, written first where ``seen[ch]`` (one
-    bit per node) has no bit yet (:func:`_cc_far`). The piece's rows are indexed in place, not
-    taken as views: a view per partner counted its reference up and down, atomically
-    (docs/benchmarks.md, session 19)."""
+    lanes' sums; ``gs[fslot[p]]`` the source row of pair ``p`` (:func:`_cc_slots`). Rows are
+    indexed in place, not taken as views: a view per partner counted its reference up and
+    down, atomically (docs/benchmarks.md, session 19)."""
     la = L[a]
     cax, cay, caz = C[a, 0], C[a, 1], C[a, 2]
     # G and W are symmetric in their first two indices (Σ e eᵀ/l): six of G, 18 of W
@@ -760,18 +781,11 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, seen, ch
                 W[_CW_OUT + 3 * _CL + j] = hz
         if grad:
             for j in range(cnt):
-                b = fpart[p0 + j]
-                if _seen(seen, ch, b):
-                    gs[ch, b, 0] += W[_CW_OUT + j]
-                    gs[ch, b, 1] -= W[_CW_OUT + _CL + j]
-                    gs[ch, b, 2] -= W[_CW_OUT + 2 * _CL + j]
-                    gs[ch, b, 3] -= W[_CW_OUT + 3 * _CL + j]
-                else:  # a zero row plus the first terms, as np.zeros gave them
-                    _mark(seen, ch, b)
-                    gs[ch, b, 0] = 0.0 + W[_CW_OUT + j]
-                    gs[ch, b, 1] = 0.0 - W[_CW_OUT + _CL + j]
-                    gs[ch, b, 2] = 0.0 - W[_CW_OUT + 2 * _CL + j]
-                    gs[ch, b, 3] = 0.0 - W[_CW_OUT + 3 * _CL + j]
+                r = fslot[p0 + j]
+                gs[r, 0] += W[_CW_OUT + j]
+                gs[r, 1] -= W[_CW_OUT + _CL + j]
+                gs[r, 2] -= W[_CW_OUT + 2 * _CL + j]
+                gs[r, 3] -= W[_CW_OUT + 3 * _CL + j]
     e = 0.0
     for j in range(_CL):
         e += W[_CW_SUMS + j]
@@ -817,14 +831,14 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, seen, ch
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad, lanes):
+def _cc_far(L, C, G, Wm, foff, fpart, fslot, rows, beta, kind, grad, lanes):
     """Every node ``A`` against its far partners ``B`` (:func:`_cc_node`'s moments): per node
     the energy of its pairs as target; with ``grad`` the derivatives of the sum in its own
     ``L`` (column 0 of ``gt``), ``c`` (1–3), ``G`` (``gG``) and ``W`` (``gW``) as a target,
     and, per fixed piece of the targets, in every partner's ``L`` and ``c`` as a source
-    (``gs``; rows of partners a piece never met are left unwritten, ``seen`` has a bit per
-    piece and node that is set where a row was written). Each target's sums are its own: the
-    same bits for any thread count. ``lanes``: always :data:`_CL`, passed at run time."""
+    (``gs``, ``rows`` rows of :func:`_cc_slots`, ``fslot`` the row of each pair). Each
+    target's sums are its own: the same bits for any thread count. ``lanes``: always
+    :data:`_CL`, passed at run time."""
     m = L.shape[0]
     nchunks = min(m, _FAR_CHUNKS)
     # every row written below (a target's own, zeros where it has no partner): np.zeros
@@ -833,11 +847,7 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad, lanes):
     gt = np.empty((m if grad else 0, 4))
     gG = np.empty((m if grad else 0, 9))
     gW = np.empty((m if grad else 0, 27))
-    # a piece meets few of the nodes as partners (at 10⁶ edges 526 000 rows of 16 × 500 000):
-    # untouched rows stay unwritten, and their pages are never faulted in (np.zeros wrote all
-    # 256 MB; docs/benchmarks.md, session 16)
-    gs = np.empty((nchunks, m if grad else 0, 4))
-    seen = np.zeros((nchunks, (m + 63) // 64 if grad else 0), np.uint64)
+    gs = np.zeros((rows if grad else 0, 4))
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
         W = np.zeros(_CW_SIZE)
@@ -852,37 +862,38 @@ def _cc_far(L, C, G, Wm, foff, fpart, beta, kind, grad, lanes):
                 continue
             if grad:  # a constant at each call (the branches fold away)
                 _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, True, gs,
-                           seen, ch, eF, gt, gG, gW, lanes)
+                           fslot, eF, gt, gG, gW, lanes)
             else:
                 _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, False, gs,
-                           seen, ch, eF, gt, gG, gW, lanes)
-    return eF, gt, gG, gW, (gs, seen)
+                           fslot, eF, gt, gG, gW, lanes)
+    return eF, gt, gG, gW, gs
 
 
 @nb.njit(cache=True, parallel=True)
-def _cc_node_grad(L, G, gt, gs, seen, gG, gW):
+def _cc_node_grad(L, G, gt, gs, soff, sidx, gG, gW):
     """Per node, the derivatives the edges need: ``∂/∂L`` (target and source parts) and
     ``∂/∂c`` with ``W``'s dependence on ``c`` (``∂W_abk/∂c_k = −G_ab``) folded in."""
     m = L.shape[0]
     out = np.empty((m, 4))  # every row written
-    nchunks = gs.shape[0]
+    nchunks = min(m, _FAR_CHUNKS)
     for bb in nb.prange(m):
         b = np.int64(bb)
         s0 = gt[b, 0]
         s1 = gt[b, 1]
         s2 = gt[b, 2]
         s3 = gt[b, 3]
-        for ch in range(nchunks):  # in piece order: the same bits for any thread count
-            if _seen(seen, ch, b):
-                s0 += gs[ch, b, 0]
-                s1 += gs[ch, b, 1]
-                s2 += gs[ch, b, 2]
-                s3 += gs[ch, b, 3]
-            else:  # the zeros the row stands for (a −0.0 sum becomes +0.0, as before)
-                s0 += 0.0
-                s1 += 0.0
-                s2 += 0.0
-                s3 += 0.0
+        for k in range(soff[b], soff[b + 1]):  # in piece order: the same bits for any thread count
+            r = sidx[k]
+            s0 += gs[r, 0]
+            s1 += gs[r, 1]
+            s2 += gs[r, 2]
+            s3 += gs[r, 3]
+        if soff[b + 1] - soff[b] < nchunks:
+            # the zeros of the pieces that never met b (a −0.0 sum becomes +0.0, as before)
+            s0 += 0.0
+            s1 += 0.0
+            s2 += 0.0
+            s3 += 0.0
         for ab in range(9):
             s1 -= gW[b, 3 * ab] * G[b, ab]
             s2 -= gW[b, 3 * ab + 1] * G[b, ab]
@@ -1016,6 +1027,9 @@ class TangentPointFrame(Frame):
         parent[right[inner]] = inner
         self.parent = parent
         self._cc_own = None
+        m = left.shape[0]
+        self._cc_slots = (_cc_slots(self.foff, self.fpart, m, min(m, _FAR_CHUNKS))
+                          if self.kind != KIND_GENERAL else None)
 
     def _clusters(self, edges):
         tree = self.tree
@@ -1055,12 +1069,13 @@ class TangentPointFrame(Frame):
                 G, Wm = _cc_moments(E, M, ln, tree.lo, tree.hi, tree.left, tree.right, C)
                 if own:
                     self._cc_own = (G, Wm)
-            eF, gt, gG, gW, gs = _cc_far(L, C, G, Wm, self.foff, self.fpart, self.beta,
-                                         self.kind, grad, _CL)
+            fslot, soff, sidx = self._cc_slots
+            eF, gt, gG, gW, gs = _cc_far(L, C, G, Wm, self.foff, self.fpart, fslot,
+                                         sidx.shape[0], self.beta, self.kind, grad, _CL)
             energy = float(np.sum(rows[0])) + float(np.sum(eF))
             if not grad:
                 return energy, None
-            gn = _cc_node_grad(L, G, gt, *gs, gG, gW)
+            gn = _cc_node_grad(L, G, gt, gs, soff, sidx, gG, gW)
             _cc_push(L, C, self.parent, gn, gG, gW)
             # with ∂l/∂e = e/l of every sum (numpy's three temporaries took about 1 ms at 10⁵)
             _cc_to_edges(E, M, ln, C, tree.lo, tree.hi, self.leaves, gn, gG, gW, rows)
