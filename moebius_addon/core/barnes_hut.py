@@ -41,7 +41,7 @@ from . import bvh
 from ._arc_field import ArcField
 from ._far_field import _cluster_data, _far, _far_to_edges, _push_down
 from ._layout import Layout
-from ._near_field import _near, _to_vertices
+from ._near_field import _NEAR_PIECES, _near, _near_schedule, _to_vertices
 
 # Default admissibility: the largest of 0.15, 0.175, 0.2, 0.25 whose relative errors stay, with
 # a margin, below 1e-4 (energy) and 1e-3 (gradient) on 7_2, FHW, a link and a non-equilateral
@@ -399,13 +399,12 @@ def _neighbours(perm, nxt, prv):
 
 
 @nb.njit(cache=True)
-def _near_lists(pairs, m, perm, nxt, prv):
-    """What the near field reads besides the edges: every leaf's near partners (CSR
-    ``(offsets, partners)`` of :func:`_by_target`: both directions of each pair, a self pair
-    once) and :func:`_neighbours`."""
-    noff, npart = _by_target(pairs, m)
+def _near_lists(leaves, pairs, m, perm, nxt, prv):
+    """What the near field reads besides the edges: its schedule of the pairs of near leaves
+    (:func:`._near_field._near_schedule`) and :func:`_neighbours`."""
+    schedule = _near_schedule(leaves, pairs, m, min(leaves.shape[0], _NEAR_PIECES))
     nbr, at = _neighbours(perm, nxt, prv)
-    return noff, npart, nbr, at
+    return *schedule, nbr, at
 
 
 # ------------------------------------------------------------------------------------------------
@@ -481,7 +480,8 @@ class Frame:
     def _near_setup(self, near: np.ndarray, m: int):
         """What the near field reads besides the edges (:func:`_near_lists`)."""
         tree, layout = self.tree, self.layout
-        *self._near_lists, self._at = _near_lists(near, m, tree.perm, layout.nxt, layout.prv)
+        *self._near_lists, self._at = _near_lists(self.leaves, near, m, tree.perm, layout.nxt,
+                                                  layout.prv)
 
     def _edges(self, X: np.ndarray):
         """:func:`_edge_arrays` in tree order, an open component's edges of kind
@@ -502,8 +502,7 @@ class Frame:
         E, M, ln = edges[:3]
         L, C, S, D, Q, T, nc = clusters
         eF, gL, gS, gC, gD, gQ, gT = _far(L, C, S, D, Q, T, nc, self.foff, self.fpart, grad)
-        part = _near(E, M, ln, self._near_cp, tree.lo, tree.hi, self.leaves, *self._near_lists,
-                     grad)
+        part = _near(E, M, ln, self._near_cp, tree.lo, tree.hi, *self._near_lists, grad)
         energy = 4.0 * self._closed_count + float(np.sum(part[0])) + float(np.sum(eF))
         g1 = None
         if self.arc is not None:  # O'Hara's arc-length part: E = (3-D part) − E₁ (+ C)
