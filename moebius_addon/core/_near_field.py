@@ -54,7 +54,7 @@ def _near_lanes(W, rx, ry, rz, bx0, by0, bz0, lj, r, cr, own, grad):
     ``_NW_OUT`` slots. ``own``: ``r`` is of the lanes' leaf (which row of bounds, see above).
     The edge's neighbours count zero, an edge of another component its length part only (both
     edge vectors zero): by selects of loaded values, no branch (a load inside a select is a
-    branch: the near field took 0.71 s instead of 0.26 s at 10⁵ edges)."""
+    branch: the near field took about 0.7 s instead of 0.26 s at 10⁵ edges)."""
     for j in range(_LANES):
         px = W[j]
         py = W[_LANES + j]
