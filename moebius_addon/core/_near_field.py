@@ -83,22 +83,34 @@ def _near_lanes(W, rx, ry, rz, bx0, by0, bz0, lj, r, cr, own, grad):
         bz = bz0 if same else 0.0
         f, fax, fay, faz, fbx, fby, fbz, fdx, fdy, fdz, wi, wj = pair(
             dx, dy, dz, ax, ay, az, bx, by, bz, li, lj, r2, SPLIT)
-        W[_NW_SUMS + j] += f
-        if grad:
-            W[_NW_SUMS + _LANES + j] += fax
-            W[_NW_SUMS + 2 * _LANES + j] += fay
-            W[_NW_SUMS + 3 * _LANES + j] += faz
-            W[_NW_SUMS + 4 * _LANES + j] += fdx
-            W[_NW_SUMS + 5 * _LANES + j] += fdy
-            W[_NW_SUMS + 6 * _LANES + j] += fdz
-            W[_NW_SUMS + 7 * _LANES + j] += wi
-            W[_NW_OUT + j] = fbx
-            W[_NW_OUT + _LANES + j] = fby
-            W[_NW_OUT + 2 * _LANES + j] = fbz
-            W[_NW_OUT + 3 * _LANES + j] = -fdx
-            W[_NW_OUT + 4 * _LANES + j] = -fdy
-            W[_NW_OUT + 5 * _LANES + j] = -fdz
-            W[_NW_OUT + 6 * _LANES + j] = wj
+        _lane_store(W, j, _NW_SUMS, _NW_OUT, _LANES, f, fax, fay, faz, fbx, fby, fbz, fdx, fdy,
+                    fdz, wi, wj, grad)
+
+
+@nb.njit(cache=True, inline="always")
+def _lane_store(W, j, sums, out, lanes, F, eix, eiy, eiz, ejx, ejy, ejz, mx, my, mz, gli, glj,
+                grad):
+    """Lane ``j``'s pair into a near field's work array ``W`` (rows of ``lanes`` from ``sums``
+    and ``out``, constants of the caller's module): ``F`` and, with ``grad``, the lane edge's
+    ``∂/∂e`` (``ei``), ``∂/∂m`` (``m = ∂/∂d``) and ``∂/∂l`` (``gli``) added to its sums, the
+    partner's (``ej``, ``−m``, ``glj``) written to its ``out`` rows. Shared by the Möbius near
+    field and the tangent-point one's (both in the columns of their buffers)."""
+    W[sums + j] += F
+    if grad:
+        W[sums + lanes + j] += eix
+        W[sums + 2 * lanes + j] += eiy
+        W[sums + 3 * lanes + j] += eiz
+        W[sums + 4 * lanes + j] += mx
+        W[sums + 5 * lanes + j] += my
+        W[sums + 6 * lanes + j] += mz
+        W[sums + 7 * lanes + j] += gli
+        W[out + j] = ejx
+        W[out + lanes + j] = ejy
+        W[out + 2 * lanes + j] = ejz
+        W[out + 3 * lanes + j] = -mx
+        W[out + 4 * lanes + j] = -my
+        W[out + 5 * lanes + j] = -mz
+        W[out + 6 * lanes + j] = glj
 
 
 @nb.njit(cache=True, inline="always")

@@ -39,7 +39,7 @@ import numpy as np
 
 from ._far_field import _kind, _levels
 from ._layout import Layout
-from ._near_field import _load_lanes, _to_vertices
+from ._near_field import _lane_store, _load_lanes, _to_vertices
 from .barnes_hut import Frame, _edge_arrays, _neighbours, check_theta
 from .energies.tangent_point import (
     DEFAULT_ALPHA,
@@ -135,29 +135,6 @@ def _near_radial(W, ri, rx, ry, rz, r, lim, beta, kind, lanes):
         _near_radial_k(W, ri, rx, ry, rz, r, lim, beta, KIND_2, lanes)
 
 
-@nb.njit(cache=True, inline="always")
-def _near_store(W, j, F, eix, eiy, eiz, ejx, ejy, ejz, mx, my, mz, gli, glj, grad):
-    """Lane ``j``'s pair of both orders into ``W``: ``F`` and, with ``grad``, the lane edge's
-    ``∂/∂e`` (``ei``), ``∂/∂m`` (``m = ∂/∂d``) and ``∂/∂l`` (``gli``) added to its sums, the
-    partner's (``ej``, ``−m``, ``glj``) written to its ``_NW_OUT`` slots."""
-    W[_NW_SUMS + j] += F
-    if grad:
-        W[_NW_SUMS + _LANES + j] += eix
-        W[_NW_SUMS + 2 * _LANES + j] += eiy
-        W[_NW_SUMS + 3 * _LANES + j] += eiz
-        W[_NW_SUMS + 4 * _LANES + j] += mx
-        W[_NW_SUMS + 5 * _LANES + j] += my
-        W[_NW_SUMS + 6 * _LANES + j] += mz
-        W[_NW_SUMS + 7 * _LANES + j] += gli
-        W[_NW_OUT + j] = ejx
-        W[_NW_OUT + _LANES + j] = ejy
-        W[_NW_OUT + 2 * _LANES + j] = ejz
-        W[_NW_OUT + 3 * _LANES + j] = -mx
-        W[_NW_OUT + 4 * _LANES + j] = -my
-        W[_NW_OUT + 5 * _LANES + j] = -mz
-        W[_NW_OUT + 6 * _LANES + j] = glj
-
-
 @nb.njit(cache=True, error_model="numpy", inline="always")
 def _near_lanes(W, ri, rx, ry, rz, sx, sy, sz, lr, ir, alpha, beta, grad, lanes):
     """Partner edge ``r`` (midpoint, edge vector, length and its inverse) against every lane's
@@ -177,8 +154,8 @@ def _near_lanes(W, ri, rx, ry, rz, sx, sy, sz, lr, ir, alpha, beta, grad, lanes)
             lq, W[_NW_IL + j], lr, inv, rb, alpha, beta, True)
         g, gax, gay, gaz, gdx, gdy, gdz, gl = pair_radial(
             -dx, -dy, -dz, sx, sy, sz, lr, ir, lq, inv, rb, alpha, beta, True)
-        _near_store(W, j, f + g, fax, fay, faz, gax, gay, gaz, fdx - gdx, fdy - gdy, fdz - gdz,
-                    gl, fl, grad)
+        _lane_store(W, j, _NW_SUMS, _NW_OUT, _LANES, f + g, fax, fay, faz, gax, gay, gaz,
+                    fdx - gdx, fdy - gdy, fdz - gdz, gl, fl, grad)
 
 
 @nb.njit(cache=True, error_model="numpy", inline="always")
@@ -191,7 +168,8 @@ def _near_lanes_2(W, ri, rx, ry, rz, sx, sy, sz, lr, ir, beta, grad, lanes):
             W[3 * _LANES + j], W[4 * _LANES + j], W[5 * _LANES + j],
             W[6 * _LANES + j], W[_NW_IL + j], sx, sy, sz, lr, ir,
             W[ri + j], W[ri + _NW_RB + j], beta)
-        _near_store(W, j, F, eix, eiy, eiz, ejx, ejy, ejz, mx, my, mz, gli, glj, grad)
+        _lane_store(W, j, _NW_SUMS, _NW_OUT, _LANES, F, eix, eiy, eiz, ejx, ejy, ejz, mx, my, mz,
+                    gli, glj, grad)
 
 
 @nb.njit(cache=True, inline="always")
