@@ -38,6 +38,7 @@ _NEAR_PIECES = 64
 # near field with "reassoc" and "contract" gave the compiling process and numba's cache
 # different last bits).
 _LANES = 8
+assert _LANES == 8  # _near_out's pairwise sum over the lanes is written out for eight
 _NW_ID = 7 * _LANES
 _NW_LIM = 11 * _LANES
 _NW_SUMS = 13 * _LANES
@@ -133,6 +134,14 @@ def _load_lanes(W, E, M, ln, nbr, q0, count, off_past, lanes):
         W[9 * lanes + j] = nbr[q, 1]
 
 
+@nb.njit(cache=True, inline="always")
+def _task_key(i, j, pieces):
+    """The schedule's key of the task of pieces ``i ≤ j``: its round ``(i + j) mod pieces``
+    times ``pieces``, plus ``i``."""
+    r = i + j
+    return (r - pieces if r >= pieces else r) * pieces + i
+
+
 @nb.njit(cache=True)
 def _near_schedule(leaves, pairs, m, pieces):
     """The near field's schedule (see the module's doc) from the unordered pairs of near leaves
@@ -164,39 +173,31 @@ def _near_schedule(leaves, pairs, m, pieces):
     nk = pieces * pieces
     koff = np.zeros(nk + 1, np.int64)
     for t in range(nl):
-        i = piece[t]
         for k in range(cnt[t], cnt[t + 1]):
-            r = i + piece[other[k]]
-            r = r - pieces if r >= pieces else r
-            koff[r * pieces + i + 1] += 1
+            koff[_task_key(piece[t], piece[other[k]], pieces) + 1] += 1
     for k in range(nk):
         koff[k + 1] += koff[k]
     lane = np.empty(npairs, np.int64)
     part = np.empty(npairs, np.int64)
     kfill = koff[:nk].copy()
     for t in range(nl):
-        i = piece[t]
         for k in range(cnt[t], cnt[t + 1]):
-            r = i + piece[other[k]]
-            key = (r - pieces if r >= pieces else r) * pieces + i
+            key = _task_key(piece[t], piece[other[k]], pieces)
             lane[kfill[key]] = leaves[t]
             part[kfill[key]] = leaves[other[k]]
             kfill[key] += 1
     # the tasks that have pairs, round by round
-    ntask = 0
-    for k in range(nk):
-        ntask += koff[k + 1] > koff[k]
-    toff = np.empty(ntask + 1, np.int64)
     roff = np.zeros(pieces + 1, np.int64)
+    for k in range(nk):
+        roff[k // pieces + 1] += koff[k + 1] > koff[k]
+    roff = np.cumsum(roff)
+    toff = np.empty(roff[pieces] + 1, np.int64)
     t = 0
     for k in range(nk):
         if koff[k + 1] > koff[k]:
             toff[t] = koff[k]
             t += 1
-            roff[k // pieces + 1] = t
-    toff[ntask] = npairs
-    for r in range(pieces):
-        roff[r + 1] = max(roff[r + 1], roff[r])
+    toff[t] = npairs
     return lane, part, toff, roff
 
 

@@ -623,6 +623,7 @@ def _cc_slots(foff, fpart, m, nchunks):
     stamp = np.full(m, -1, np.int64)
     slot = np.empty(m, np.int64)
     count = np.zeros(m + 1, np.int64)
+    node = np.empty(fpart.shape[0], np.int64)  # the partner of each row (at most one per pair)
     ns = 0
     for ch in range(nchunks):
         for a in range(ch * m // nchunks, (ch + 1) * m // nchunks):
@@ -631,13 +632,11 @@ def _cc_slots(foff, fpart, m, nchunks):
                 if stamp[b] != ch:
                     stamp[b] = ch
                     slot[b] = ns
+                    node[ns] = b
                     count[b + 1] += 1
                     ns += 1
                 fslot[p] = slot[b]
     soff = np.cumsum(count)
-    node = np.empty(ns, np.int64)  # the partner of each row
-    for p in range(fpart.shape[0]):
-        node[fslot[p]] = fpart[p]
     sidx = np.empty(ns, np.int32)
     fill = soff[:m].copy()
     for r in range(ns):  # in row order, so in piece order per node
