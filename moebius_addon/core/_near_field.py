@@ -34,9 +34,9 @@ _NEAR_PIECES = 64
 # (f, ∂f/∂e, ∂f/∂m, ∂f/∂l: the columns of :func:`_near`'s buffer) and what its pair gives the
 # partner at W[_NW_OUT + _LANES k + j] (∂f/∂e, ∂f/∂m, ∂f/∂l), added over the lanes. One
 # array, constant offsets plus j: the loop over lanes vectorizes (an index array beside it kept
-# it scalar). No fast-math: a lane's sums are sequential, nothing to reassociate (an earlier
-# near field with "reassoc" and "contract" gave the compiling process and numba's cache
-# different last bits).
+# it scalar). No fast-math: a lane's sums are sequential, nothing to reassociate, and with
+# "contract" alone the compiling process and numba's cache gave different last bits (the
+# tangent-point near field has it: there they agree; docs/benchmarks.md, session 21).
 _LANES = 8
 assert _LANES == 8  # _near_out's pairwise sum over the lanes is written out for eight
 _NW_ID = 7 * _LANES

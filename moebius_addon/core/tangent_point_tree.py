@@ -77,8 +77,12 @@ _FAR_CHUNKS = 16
 # past the leaf's end, then 1 / length), its sums at W[_NW_SUMS + _LANES k + j] (f, ∂/∂e,
 # ∂/∂m, ∂/∂l) and what its pairs give the partner at W[_NW_OUT + _LANES k + j] (∂/∂e, ∂/∂m,
 # ∂/∂l), added over the lanes in lane order. Constant offsets plus j: the lane loop
-# vectorizes. No fast-math (see ``_near_field``). The first ten rows as in ``_near_field``, by
-# its _load_lanes.
+# vectorizes. The first ten rows as in ``_near_field``, by its _load_lanes.
+# Of fast-math only "contract" (fused multiply–adds), here and in the far field's kernels
+# (_cc_moments, _cc_far, _cc_to_edges): about 8 % off the sums. Only while the code compiled in
+# a first process and the code numba's cache loads give the same bits (the thread test in
+# tests/core/test_tangent_point.py compares them in CI); in the Möbius near and far fields
+# they did not (docs/benchmarks.md, session 21).
 # For α = 2 the partner edges go two at a time: the radial parts of both (1 / |d|², |d|^−β,
 # the masks) first, each in its own rows (_NW_INV, and _NW_INV + _LANES for the second;
 # |d|^−β _NW_RB further on), so that their divisions overlap (one at a time, the pairs waited
@@ -228,7 +232,7 @@ def _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width, alpha
                 _near_out(W, acc, r1 + off)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", fastmath={"contract"})
 def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, uoff, upart, uslot, nbr, width, alpha,
                  beta, kind, grad, acc, n, lanes):
     """The leaves ``leaves[t0:t1]`` of :func:`_near` (one piece): the sums of their edges and
@@ -558,7 +562,7 @@ def _cc_node(node, E, M, ln, lo, hi, left, right, C, G, Wm):
             Wm[node, 3 * k + 2] = Wm[a0, 3 * k + 2] + Wm[b0, 3 * k + 2] + ga * u2 + gb * v2
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True, parallel=True, fastmath={"contract"})
 def _cc_moments(E, M, ln, lo, hi, left, right, C):
     """Per node ``G`` and ``W`` (:func:`_cc_node`), bottom-up one depth at a time (each node
     writes its own row)."""
@@ -807,7 +811,7 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, e
                 gW[a, 9 * i + 4 * j] += S[5 + i]
 
 
-@nb.njit(cache=True, parallel=True, error_model="numpy")
+@nb.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
 def _cc_far(L, C, G, Wm, foff, fpart, fslot, rows, beta, kind, grad, lanes):
     """Every node ``A`` against its far partners ``B`` (:func:`_cc_node`'s moments): per node
     the energy of its pairs as target; with ``grad`` the derivatives of the sum in its own
@@ -910,7 +914,7 @@ def _cc_push(L, C, parent, gn, gG, gW):
             gW[b, k] += gW[p, k]
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True, parallel=True, fastmath={"contract"})
 def _cc_to_edges(E, M, ln, C, lo, hi, leaves, gn, gG, gW, rows):
     """The nodes' derivatives, summed to the leaves (:func:`_cc_push`), passed to their edges:
     ``L`` and ``c`` as in :func:`_far_sources`; ``G`` and ``W`` through ``e eᵀ / l`` (edge
