@@ -495,9 +495,9 @@ def _far_sources(M, ln, L, C, lo, hi, leaves, parent, gnode, rows):
 
 @nb.njit(cache=True, inline="always")
 def _cc_node(node, E, M, ln, lo, hi, left, right, C, G, Wm):
-    """``G`` (9, row-major) and ``W`` (27, index 9a + 3b + c) of one node about its centre
-    ``C[node]``: a leaf from its edges (``G`` and ``W`` symmetric in ``a, b``: six and
-    eighteen sums in registers), a parent from its children's moved to its centre
+    """``G`` and ``W`` of one node about its centre ``C[node]``, both symmetric in ``a, b``
+    and stored by the pair ``ab`` (:data:`_SYM_W`): ``G`` six entries, ``W`` eighteen (index
+    3 ab + c). A leaf from its edges, a parent from its children's moved to its centre
     (``W = W_l + W_r + G_l ⊗ (c_l − c) + G_r ⊗ (c_r − c)``), each entry written once."""
     if left[node] < 0:
         c0, c1, c2 = C[node, 0], C[node, 1], C[node, 2]
@@ -534,26 +534,19 @@ def _cc_node(node, E, M, ln, lo, hi, left, right, C, G, Wm):
             w220 += t22 * d0
             w221 += t22 * d1
             w222 += t22 * d2
-        G[node, 0] = g00
-        G[node, 1] = G[node, 3] = g01
-        G[node, 2] = G[node, 6] = g02
-        G[node, 4] = g11
-        G[node, 5] = G[node, 7] = g12
-        G[node, 8] = g22
+        G[node, 0], G[node, 1], G[node, 2] = g00, g01, g02
+        G[node, 3], G[node, 4], G[node, 5] = g11, g12, g22
         Wm[node, 0], Wm[node, 1], Wm[node, 2] = w000, w001, w002
         Wm[node, 3], Wm[node, 4], Wm[node, 5] = w010, w011, w012
-        Wm[node, 9], Wm[node, 10], Wm[node, 11] = w010, w011, w012
         Wm[node, 6], Wm[node, 7], Wm[node, 8] = w020, w021, w022
-        Wm[node, 18], Wm[node, 19], Wm[node, 20] = w020, w021, w022
-        Wm[node, 12], Wm[node, 13], Wm[node, 14] = w110, w111, w112
-        Wm[node, 15], Wm[node, 16], Wm[node, 17] = w120, w121, w122
-        Wm[node, 21], Wm[node, 22], Wm[node, 23] = w120, w121, w122
-        Wm[node, 24], Wm[node, 25], Wm[node, 26] = w220, w221, w222
+        Wm[node, 9], Wm[node, 10], Wm[node, 11] = w110, w111, w112
+        Wm[node, 12], Wm[node, 13], Wm[node, 14] = w120, w121, w122
+        Wm[node, 15], Wm[node, 16], Wm[node, 17] = w220, w221, w222
     else:
         a0, b0 = left[node], right[node]
         u0, u1, u2 = C[a0, 0] - C[node, 0], C[a0, 1] - C[node, 1], C[a0, 2] - C[node, 2]
         v0, v1, v2 = C[b0, 0] - C[node, 0], C[b0, 1] - C[node, 1], C[b0, 2] - C[node, 2]
-        for k in range(9):
+        for k in range(6):
             ga = G[a0, k]
             gb = G[b0, k]
             G[node, k] = ga + gb
@@ -567,8 +560,8 @@ def _cc_moments(E, M, ln, lo, hi, left, right, C):
     """Per node ``G`` and ``W`` (:func:`_cc_node`), bottom-up one depth at a time (each node
     writes its own row)."""
     m = lo.shape[0]
-    G = np.empty((m, 9))
-    Wm = np.empty((m, 27))
+    G = np.empty((m, 6))
+    Wm = np.empty((m, 18))
     order, offsets = _levels(left, right)
     for d in range(offsets.shape[0] - 2, -1, -1):
         if offsets[d + 1] - offsets[d] >= 256:
@@ -591,6 +584,11 @@ _CW_RHO = 4 * _CL
 _CW_SUMS = 5 * _CL
 _CW_OUT = 29 * _CL
 _CW_SIZE = 33 * _CL
+# G, W and their derivatives are symmetric in their first two indices (Σ e eᵀ/l): stored by
+# the pair ab in the order 00, 01, 02, 11, 12, 22 (six of nine entries, 18 of 27: the far
+# field's per-node arrays a third smaller); a sum over a, b takes the pairs off the diagonal
+# twice (_SYM_W)
+_SYM_W = np.array([1.0, 2.0, 2.0, 1.0, 2.0, 1.0])
 
 
 @nb.njit(cache=True, inline="always")
@@ -659,14 +657,13 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, e
     down, atomically (docs/benchmarks.md, session 19)."""
     la = L[a]
     cax, cay, caz = C[a, 0], C[a, 1], C[a, 2]
-    # G and W are symmetric in their first two indices (Σ e eᵀ/l): six of G, 18 of W
-    g00, g01, g02, g11, g12, g22 = G[a, 0], G[a, 1], G[a, 2], G[a, 4], G[a, 5], G[a, 8]
+    g00, g01, g02, g11, g12, g22 = G[a, 0], G[a, 1], G[a, 2], G[a, 3], G[a, 4], G[a, 5]
     a000, a001, a002 = Wm[a, 0], Wm[a, 1], Wm[a, 2]
     a010, a011, a012 = Wm[a, 3], Wm[a, 4], Wm[a, 5]
     a020, a021, a022 = Wm[a, 6], Wm[a, 7], Wm[a, 8]
-    a110, a111, a112 = Wm[a, 12], Wm[a, 13], Wm[a, 14]
-    a120, a121, a122 = Wm[a, 15], Wm[a, 16], Wm[a, 17]
-    a220, a221, a222 = Wm[a, 24], Wm[a, 25], Wm[a, 26]
+    a110, a111, a112 = Wm[a, 9], Wm[a, 10], Wm[a, 11]
+    a120, a121, a122 = Wm[a, 12], Wm[a, 13], Wm[a, 14]
+    a220, a221, a222 = Wm[a, 15], Wm[a, 16], Wm[a, 17]
     v0 = a000 + a011 + a022
     v1 = a010 + a111 + a122
     v2 = a020 + a121 + a222
@@ -779,36 +776,18 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, e
             S[k] = t
         for k in range(4):
             gt[a, k] = S[1 + k]
-        o00, o01, o02, o11, o12, o22 = S[8], S[9], S[10], S[11], S[12], S[13]
-        gG[a, 0] = o00
-        gG[a, 1] = o01
-        gG[a, 2] = o02
-        gG[a, 3] = o01
-        gG[a, 4] = o11
-        gG[a, 5] = o12
-        gG[a, 6] = o02
-        gG[a, 7] = o12
-        gG[a, 8] = o22
-        for i in range(3):
-            for j in range(3):
-                for k in range(3):
-                    # the entry of the sorted index triple: txxx … tzzz at S[14 …]
-                    nx = (i == 0) + (j == 0) + (k == 0)
-                    ny = (i == 1) + (j == 1) + (k == 1)
-                    if nx == 3:
-                        tv = S[14]
-                    elif nx == 2:
-                        tv = S[15] if ny == 1 else S[16]
-                    elif nx == 1:
-                        tv = S[17] if ny == 2 else (S[18] if ny == 1 else S[19])
-                    else:
-                        tv = S[20] if ny == 3 else (S[21] if ny == 2 else (
-                            S[22] if ny == 1 else S[23]))
-                    gW[a, 9 * i + 3 * j + k] = tv
-        # ∂/∂W_abc of −2ρ<v, d> is −2ρ d_a δ_bc
-        for i in range(3):
-            for j in range(3):
-                gW[a, 9 * i + 4 * j] += S[5 + i]
+        for k in range(6):  # ∂/∂G_ab (= ∂/∂G_ba), by the pair ab
+            gG[a, k] = S[8 + k]
+        # ∂/∂W_abc, symmetric in a, b, by (ab, c): the entry of the sorted index triple (xxx …
+        # zzz at S[14 …]), and of −2ρ<v, d> (v_a = Σ_b W_abb) −2ρ d_a δ_bc made symmetric,
+        # ½ (d_a δ_bc + d_b δ_ac)
+        h5, h6, h7 = 0.5 * S[5], 0.5 * S[6], 0.5 * S[7]
+        gW[a, 0], gW[a, 1], gW[a, 2] = S[14] + S[5], S[15], S[16]
+        gW[a, 3], gW[a, 4], gW[a, 5] = S[15] + h6, S[17] + h5, S[18]
+        gW[a, 6], gW[a, 7], gW[a, 8] = S[16] + h7, S[18], S[19] + h5
+        gW[a, 9], gW[a, 10], gW[a, 11] = S[17], S[20] + S[6], S[21]
+        gW[a, 12], gW[a, 13], gW[a, 14] = S[18], S[21] + h7, S[22] + h6
+        gW[a, 15], gW[a, 16], gW[a, 17] = S[19], S[22], S[23] + S[7]
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
@@ -826,8 +805,8 @@ def _cc_far(L, C, G, Wm, foff, fpart, fslot, rows, beta, kind, grad, lanes):
     # cleared the 16 MB of these at 10⁵ edges once more (docs/benchmarks.md, session 19)
     eF = np.empty(m)
     gt = np.empty((m if grad else 0, 4))
-    gG = np.empty((m if grad else 0, 9))
-    gW = np.empty((m if grad else 0, 27))
+    gG = np.empty((m if grad else 0, 6))
+    gW = np.empty((m if grad else 0, 18))
     gs = np.zeros((rows if grad else 0, 4))
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
@@ -875,10 +854,11 @@ def _cc_node_grad(L, G, gt, gs, soff, sidx, gG, gW):
             s1 += 0.0
             s2 += 0.0
             s3 += 0.0
-        for ab in range(9):
-            s1 -= gW[b, 3 * ab] * G[b, ab]
-            s2 -= gW[b, 3 * ab + 1] * G[b, ab]
-            s3 -= gW[b, 3 * ab + 2] * G[b, ab]
+        for ab in range(6):  # Σ over a, b: the pairs off the diagonal twice
+            w = G[b, ab] * _SYM_W[ab]
+            s1 -= gW[b, 3 * ab] * w
+            s2 -= gW[b, 3 * ab + 1] * w
+            s3 -= gW[b, 3 * ab + 2] * w
         out[b, 0] = s0
         out[b, 1] = s1
         out[b, 2] = s2
@@ -907,10 +887,10 @@ def _cc_push(L, C, parent, gn, gG, gW):
         gn[b, 0] += gn[p, 0] + gn[p, 1] * h0 + gn[p, 2] * h1 + gn[p, 3] * h2
         for k in range(1, 4):
             gn[b, k] += gn[p, k]
-        for ab in range(9):
+        for ab in range(6):
             gG[b, ab] += (gG[p, ab] + gW[p, 3 * ab] * h0 + gW[p, 3 * ab + 1] * h1
                           + gW[p, 3 * ab + 2] * h2)
-        for k in range(27):
+        for k in range(18):
             gW[b, k] += gW[p, k]
 
 
@@ -933,33 +913,33 @@ def _cc_to_edges(E, M, ln, C, lo, hi, leaves, gn, gG, gW, rows):
             gm0 = gn[b, 1] * ln[q]
             gm1 = gn[b, 2] * ln[q]
             gm2 = gn[b, 3] * ln[q]
-            ga0 = ga1 = ga2 = 0.0
-            # H = gG + gW·δ; ∂(eᵀHe/l)/∂e = (H + Hᵀ) e / l, ∂/∂l = −eᵀHe/l²
-            ehe = 0.0
-            for i in range(3):
-                ei = e0 if i == 0 else (e1 if i == 1 else e2)
-                hr = hc = 0.0  # (H e)_i, (Hᵀ e)_i
-                for j in range(3):
-                    ej = e0 if j == 0 else (e1 if j == 1 else e2)
-                    hij = (gG[b, 3 * i + j] + gW[b, 9 * i + 3 * j] * x0
-                           + gW[b, 9 * i + 3 * j + 1] * x1 + gW[b, 9 * i + 3 * j + 2] * x2)
-                    hji = (gG[b, 3 * j + i] + gW[b, 9 * j + 3 * i] * x0
-                           + gW[b, 9 * j + 3 * i + 1] * x1 + gW[b, 9 * j + 3 * i + 2] * x2)
-                    hr += hij * ej
-                    hc += hji * ej
-                    # ∂/∂m_c of Σ gW_ijc e_i e_j / l
-                    eij = ei * ej * il
-                    gm0 += gW[b, 9 * i + 3 * j] * eij
-                    gm1 += gW[b, 9 * i + 3 * j + 1] * eij
-                    gm2 += gW[b, 9 * i + 3 * j + 2] * eij
-                ehe += ei * hr
-                g = (hr + hc) * il
-                if i == 0:
-                    ga0 += g
-                elif i == 1:
-                    ga1 += g
-                else:
-                    ga2 += g
+            # H = gG + gW·δ (symmetric, by the pair ab): ∂(eᵀHe/l)/∂e = 2 H e / l,
+            # ∂/∂l = −eᵀHe/l², ∂/∂m_c = Σ_ab gW_abc e_a e_b / l
+            h0 = gG[b, 0] + gW[b, 0] * x0 + gW[b, 1] * x1 + gW[b, 2] * x2
+            h1 = gG[b, 1] + gW[b, 3] * x0 + gW[b, 4] * x1 + gW[b, 5] * x2
+            h2 = gG[b, 2] + gW[b, 6] * x0 + gW[b, 7] * x1 + gW[b, 8] * x2
+            h3 = gG[b, 3] + gW[b, 9] * x0 + gW[b, 10] * x1 + gW[b, 11] * x2
+            h4 = gG[b, 4] + gW[b, 12] * x0 + gW[b, 13] * x1 + gW[b, 14] * x2
+            h5 = gG[b, 5] + gW[b, 15] * x0 + gW[b, 16] * x1 + gW[b, 17] * x2
+            he0 = h0 * e0 + h1 * e1 + h2 * e2
+            he1 = h1 * e0 + h3 * e1 + h4 * e2
+            he2 = h2 * e0 + h4 * e1 + h5 * e2
+            ehe = e0 * he0 + e1 * he1 + e2 * he2
+            ga0 = 2.0 * he0 * il
+            ga1 = 2.0 * he1 * il
+            ga2 = 2.0 * he2 * il
+            t00 = e0 * e0 * il
+            t01 = 2.0 * e0 * e1 * il
+            t02 = 2.0 * e0 * e2 * il
+            t11 = e1 * e1 * il
+            t12 = 2.0 * e1 * e2 * il
+            t22 = e2 * e2 * il
+            gm0 += (gW[b, 0] * t00 + gW[b, 3] * t01 + gW[b, 6] * t02 + gW[b, 9] * t11
+                    + gW[b, 12] * t12 + gW[b, 15] * t22)
+            gm1 += (gW[b, 1] * t00 + gW[b, 4] * t01 + gW[b, 7] * t02 + gW[b, 10] * t11
+                    + gW[b, 13] * t12 + gW[b, 16] * t22)
+            gm2 += (gW[b, 2] * t00 + gW[b, 5] * t01 + gW[b, 8] * t02 + gW[b, 11] * t11
+                    + gW[b, 14] * t12 + gW[b, 17] * t22)
             gl -= ehe * il * il
             rows[4, q] += gm0
             rows[5, q] += gm1
