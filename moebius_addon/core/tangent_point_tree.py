@@ -80,9 +80,9 @@ _FAR_CHUNKS = 16
 # vectorizes. The first ten rows as in ``_near_field``, by its _load_lanes.
 # Of fast-math only "contract" (fused multiply–adds), here and in the far field's kernels
 # (_cc_moments, _cc_far, _cc_to_edges): about 8 % off the sums. Only while the code compiled in
-# a first process and the code numba's cache loads give the same bits (the thread test in
-# tests/core/test_tangent_point.py compares them in CI); in the Möbius near and far fields
-# they did not (docs/benchmarks.md, session 21).
+# a first process and the code numba's cache loads give the same bits
+# (tests/core/test_tangent_point.py); in the Möbius near and far fields they did not
+# (docs/benchmarks.md, session 21).
 # For α = 2 the partner edges go two at a time: the radial parts of both (1 / |d|², |d|^−β,
 # the masks) first, each in its own rows (_NW_INV, and _NW_INV + _LANES for the second;
 # |d|^−β _NW_RB further on), so that their divisions overlap (one at a time, the pairs waited
