@@ -229,6 +229,11 @@ class DenseEngine:
         """``G⁻¹Cᵀ(CG⁻¹Cᵀ)⁻¹ φ`` with the stored factorization (modified Newton, step 4)."""
         return self.solver.pseudo_inverse(phi)
 
+    def newton_steps(self, n: int) -> int:
+        """The back-projection's budget of modified Newton steps for a run's
+        ``backproject_iter`` ``n``: ``n``, its steps being the metric's own."""
+        return n
+
     def metric_product(self, V: np.ndarray) -> np.ndarray:
         """``A V`` for an (N, 3) field ``V``: the metric ``G`` applied to it."""
         return self.solver.A @ V
@@ -324,6 +329,11 @@ LEAN_SHARE = 0.5
 #: (``HsOperator(single=True)``): 0.42 GB less at 10⁶ vertices and faster products; the
 #: iterates change at rounding level (docs/benchmarks.md, "Memory at 10⁶ edges").
 SINGLE_WEIGHTS_FROM = 200_000
+#: The tree's budget of back-projection steps for hs, as a fraction of the run's
+#: ``backproject_iter`` (rounded up): its steps are in the preconditioner's banded metric,
+#: which contracts more slowly than hs's own, so the same budget rejected trials that hs
+#: accepts (docs/benchmarks.md, "Session 22").
+BANDED_NEWTON = (6, 5)
 
 
 def lean_run(n: int) -> bool:
@@ -474,6 +484,13 @@ class TreeEngine(DenseEngine):
         if self._saddle is None:
             return super().pseudo_inverse(phi)
         return self._saddle.pseudo_inverse(phi)
+
+    def newton_steps(self, n: int) -> int:
+        """``n``, or a fifth more (:data:`BANDED_NEWTON`) where hs's back-projection steps
+        in the preconditioner's banded metric, which contracts more slowly than hs's own."""
+        if isinstance(self._saddle, hs_solve.HsSaddle) and not self.exact_backprojection:
+            return (BANDED_NEWTON[0] * n + BANDED_NEWTON[1] - 1) // BANDED_NEWTON[1]
+        return n
 
     def metric_product(self, V: np.ndarray) -> np.ndarray:
         if self._saddle is None:

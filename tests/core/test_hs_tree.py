@@ -545,3 +545,36 @@ def test_preconditioner_band_from_edges_is_the_band_from_triplets(name, rng):
         assert np.abs(ub - ua).max() <= 1e-11 * np.abs(ua).max()  # measured 2e-14-5e-14
     with pytest.raises(ValueError, match="product=False"):
         BandedSaddle(edges, jac)
+
+
+def test_banded_back_projection_takes_a_fifth_more_steps():
+    # the tree's hs back-projects in the preconditioner's banded metric, which contracts more
+    # slowly than hs's own: its budget is backproject_iter plus a fifth (5 → 6 steps here), so
+    # a trial needing 6 modified Newton steps passes and one needing 7 does not
+    run = core.Relaxation(CURVES["trefoil"](), engine="tree", backproject_iter=5)
+    assert run.engine.newton_steps(5) == 6 and run.engine.newton_steps(10) == 12
+
+    def steps(Q):  # the modified Newton steps to the tolerance, each at least halving |Φ|
+        prev = np.inf
+        for i in range(40):
+            size = float(np.abs(residual(Q, run.con)).max())
+            if size <= run.backproject_tol:
+                return i
+            if not size < 0.5 * prev:
+                return None
+            prev = size
+            Q = Q - run.engine.pseudo_inverse(residual(Q, run.con))
+        return None
+
+    trials = {}
+    for tau in np.geomspace(0.5, 5.0, 60):
+        trials.setdefault(steps(run.X - tau * run.u), tau)
+    assert 6 in trials and 7 in trials
+    assert run._backproject(run.X - trials[6] * run.u)[1]
+    assert not run._backproject(run.X - trials[7] * run.u)[1]
+    # the metric's own steps keep the run's budget: the exact engine, exact_backprojection,
+    # and the banded metrics solved directly
+    for engine, options in (("exact", {}), ("tree", {"exact_backprojection": True}),
+                            ("tree", {"metric": "h2"})):
+        other = core.Relaxation(CURVES["trefoil"](), engine=engine, **options)
+        assert other.engine.newton_steps(10) == 10

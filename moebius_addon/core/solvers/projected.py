@@ -85,7 +85,9 @@ class Relaxation(Run):
         alone; a cap of 8 keeps the contact search bounded and measured fewer iterations
         than 1.5 or 4 on the FHW unknot (docs/benchmarks.md).
     backproject_iter, backproject_tol : int, float
-        Modified Newton iterations and tolerance on ``max |Φ|`` (dimensionless).
+        Modified Newton iterations and tolerance on ``max |Φ|`` (dimensionless). The tree
+        engine's hs allows a fifth more iterations (``engine.BANDED_NEWTON``): its steps are
+        in a banded metric, which contracts more slowly.
     edge_lengths, barycenter : bool
         Which constraints to keep.
     target_lengths : {"equal", "keep"}
@@ -268,7 +270,7 @@ class Relaxation(Run):
         if not resume:
             self._bp_prev = np.inf  # residual before the last step
             self._bp_step = 0.0  # Euclidean norm of the last step
-            self._bp_left = self.backproject_iter + 1
+            self._bp_left = self.engine.newton_steps(self.backproject_iter) + 1
         while self._bp_left > 0:
             phi = residual(Q, self.con)
             size = float(np.abs(phi).max()) if phi.size else 0.0
