@@ -30,6 +30,9 @@ This module is the one place for engines by name: their names (:data:`ENGINE_NAM
 
 from __future__ import annotations
 
+import math
+from fractions import Fraction
+
 import numpy as np
 
 from . import barnes_hut, energy_choice, hs_solve, hs_tree
@@ -329,11 +332,11 @@ LEAN_SHARE = 0.5
 #: (``HsOperator(single=True)``): 0.42 GB less at 10⁶ vertices and faster products; the
 #: iterates change at rounding level (docs/benchmarks.md, "Memory at 10⁶ edges").
 SINGLE_WEIGHTS_FROM = 200_000
-#: The tree's budget of back-projection steps for hs, as a fraction of the run's
-#: ``backproject_iter`` (rounded up): its steps are in the preconditioner's banded metric,
-#: which contracts more slowly than hs's own, so the same budget rejected trials that hs
-#: accepts (docs/benchmarks.md, "Session 22").
-BANDED_NEWTON = (6, 5)
+#: The tree's budget of back-projection steps for hs, times the run's ``backproject_iter``
+#: (rounded up): its steps are in the preconditioner's banded metric, which contracts more
+#: slowly than hs's own, so the same budget rejected trials that hs accepts
+#: (docs/benchmarks.md, "Session 22").
+BANDED_NEWTON = Fraction(6, 5)
 
 
 def lean_run(n: int) -> bool:
@@ -489,7 +492,7 @@ class TreeEngine(DenseEngine):
         """``n``, or a fifth more (:data:`BANDED_NEWTON`) where hs's back-projection steps
         in the preconditioner's banded metric, which contracts more slowly than hs's own."""
         if isinstance(self._saddle, hs_solve.HsSaddle) and not self.exact_backprojection:
-            return (BANDED_NEWTON[0] * n + BANDED_NEWTON[1] - 1) // BANDED_NEWTON[1]
+            return math.ceil(BANDED_NEWTON * n)
         return n
 
     def metric_product(self, V: np.ndarray) -> np.ndarray:
