@@ -19,8 +19,9 @@ $(STAMP): pyproject.toml
 
 include mk/lines.mk
 
-# CI runs this (via .ci/run): the whole suite except runs marked slow on Blender 5.0 (.venv),
-# the Blender tests marked `lines` on Blender 4.2, 4.5 and 5.2 (mk/lines.mk) and the add-on in a
+# CI runs this (via .ci/run): the whole suite except runs marked slow: the core suite in .venv,
+# every Blender test on Blender 5.0 and those marked `lines` on Blender 4.2, 4.5 and 5.2, each in
+# a venv with what Blender's Python has and no more (mk/lines.mk), and the add-on in a
 # real Blender window (mk/ui.mk: Debian's Blender 3.4 under Xvfb, the packages installed with
 # apt-get when missing), in two streams side by side (mk/run_tests.py: most parts use one core).
 # Every part runs even when one before it failed; the status is the worst.

@@ -167,8 +167,11 @@ def build_kernel_cache(stage_dir: Path, pythons: dict[str, str]) -> None:
         env = dict(os.environ, NUMBA_CACHE_DIR=str(work), NUMBA_CPU_NAME=GENERIC_CPU,
                    NUMBA_CPU_FEATURES="", PYTHONPATH=os.pathsep.join(
                        [str(paths[version]), str(stage_dir.parent)]))
+        # scipy hidden (an import of it fails), as in Blender's Python: a kernel that would
+        # reach LAPACK through it fails to compile here instead of aborting a user's Blender
         code = (f"import sys; assert sys.version_info[:2] == {tuple(map(int, version.split('.')))}"
-                f", sys.version; from {stage_dir.name}.core import warmup; sys.exit(warmup.main())")
+                f", sys.version; sys.modules['scipy'] = None; "
+                f"from {stage_dir.name}.core import warmup; sys.exit(warmup.main())")
         print(f"kernel cache: compiling for {GENERIC_CPU} with Python {version} ({exe})",
               flush=True)
         procs.append((version, subprocess.Popen([exe, "-c", code], env=env)))
@@ -188,11 +191,28 @@ def ship_kernel_cache(work: Path, stage_dir: Path) -> None:
         if (work / name).is_dir():
             shutil.copytree(work / name, shipped / source.relative_to(stage_dir),
                             dirs_exist_ok=True)
+    scipy_kernels = [p.relative_to(shipped) for p in sorted(shipped.rglob("*.nbc"))
+                     if _shipped_cache().calls_scipy(p.read_bytes())]
+    if scipy_kernels:
+        sys.exit("kernel cache: these kernels call LAPACK or BLAS through scipy, which "
+                 "Blender's Python does not have: " + ", ".join(map(str, scipy_kernels)))
     # the name the kernels' modules had here, which the loader renames (core/_shipped_cache.py)
     (shipped / "package.txt").write_text(stage_dir.name + "\n")
     size = sum(f.stat().st_size for f in shipped.rglob("*") if f.is_file())
     print(f"kernel cache: {len(list(shipped.rglob('*.nbc')))} kernels, {size / 1e6:.1f} MB",
           flush=True)
+
+
+def _shipped_cache():
+    """``moebius_addon.core._shipped_cache`` of this checkout, loaded by path (importing the
+    package would need numba in the build's Python)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "_moebius_shipped_cache", ROOT / "moebius_addon" / "core" / "_shipped_cache.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def blender_ext() -> Path:

@@ -9,7 +9,8 @@ parts in this order, each the next one it can run:
 2. the UI test in a real Blender window (``make ui-test``), beside the repository's build;
 3. the core suite (everything outside ``tests/blender``), once the repository is built: it
    loads the kernels the zip ships (``$MOEBIUS_KERNEL_CACHE``) rather than compiling them;
-4. the Blender tests on 5.0 (``tests/blender`` in .venv), once the repository is built;
+4. the Blender tests on 5.0 (``tests/blender`` in .venv-blender-5.0: bpy, numpy and pytest,
+   no scipy, as in Blender), once the repository is built;
 5. the ``lines`` tests on 4.2, 4.5 and 5.2, once the repository is built.
 
 Every part runs even when one before it failed (a part that needs the repository is failed
@@ -110,7 +111,8 @@ def plan(args) -> list[tuple[str, list[str], dict | None, bool]]:
                [args.python, *pytest, "-m", "not slow", "tests", "--ignore=tests/blender"],
                core_env, True),
               ("Blender 5.0 (tests/blender)",
-               [args.python, *pytest, "-m", "not slow", "tests/blender"], repo_env, True)]
+               [".venv-blender-5.0/bin/python", *pytest, "-m", "not slow", "tests/blender"],
+               repo_env, True)]
     for line in args.lines:
         parts.append((f"Blender {line} (lines)",
                       [f".venv-blender-{line}/bin/python", *pytest, "-m", "lines and not slow",

@@ -78,6 +78,29 @@ class _Renaming(pickle.Unpickler):
         return found
 
 
+#: the prefixes of numba's helpers that call BLAS and LAPACK (numba's ``_helperlib``): they
+#: take those routines from scipy when first called, and without scipy abort the process
+_SCIPY_HELPERS = (b"numba_xx", b"numba_ez_", b"numba_raw_")
+
+
+def calls_scipy(data: bytes) -> bool:
+    """Whether a cached kernel (the bytes of its ``.nbc`` file) calls BLAS or LAPACK through
+    numba's helpers, which need scipy at run time."""
+    return any(marker in data for marker in _SCIPY_HELPERS)
+
+
+def _scipy_present() -> bool:
+    try:
+        import scipy.linalg.cython_lapack  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _say(text: str) -> None:
+    print(f"moebius_addon: {text}", file=sys.stderr, flush=True)
+
+
 class _ShippedFile(caching.IndexDataCacheFile):
     """The shipped index and data files of one kernel, read only, the package renamed."""
 
@@ -88,7 +111,13 @@ class _ShippedFile(caching.IndexDataCacheFile):
 
     def _load_data(self, name):
         with open(self._data_path(name), "rb") as f:
-            return _Renaming(f.read(), self._old, self._new).load()
+            data = f.read()
+        if calls_scipy(data) and not _scipy_present():
+            # run, such a kernel aborts the process: compiled here, it fails with an ImportError
+            _say(f"the shipped kernel {name} needs scipy, which this Python does not have; "
+                 "compiling it instead")
+            return None
+        return _Renaming(data, self._old, self._new).load()
 
 
 class ShippedFunctionCache(caching.FunctionCache):
@@ -106,10 +135,13 @@ class ShippedFunctionCache(caching.FunctionCache):
         codegen = target_context.codegen()
         triple = codegen.magic_tuple()[0]
         key = self._index_key(sig, codegen)
-        data = self._shipped.load((key[0], (triple, GENERIC_CPU, ""), key[2]))
-        if data is None:
+        try:
+            data = self._shipped.load((key[0], (triple, GENERIC_CPU, ""), key[2]))
+            return None if data is None else self._impl.rebuild(target_context, data)
+        except Exception as err:  # a damaged or foreign entry: compile as without the cache
+            _say(f"the shipped kernel {self._py_func.__qualname__} could not be loaded "
+                 f"({type(err).__name__}: {err}); compiling it instead")
             return None
-        return self._impl.rebuild(target_context, data)
 
 
 def use_shipped_cache(package: str) -> int:

@@ -300,6 +300,50 @@ def _edge_terms(X, nxt, T, area, grad):
 
 
 @nb.njit(cache=True)
+def _principal_axis(N, out):
+    """Write into ``out`` a unit eigenvector of the largest eigenvalue of the symmetric 3×3
+    ``N``, by cyclic Jacobi rotations (Golub & Van Loan, §8.5): written out because numba's
+    ``np.linalg`` calls scipy's LAPACK, which Blender's Python does not have. Any unit vector
+    is a valid cone axis (the cone's angle is measured about it); the eigenvector keeps it
+    narrow."""
+    a = N.copy()
+    v = np.eye(3)
+    scale = abs(a[0, 0]) + abs(a[1, 1]) + abs(a[2, 2]) + abs(a[0, 1]) + abs(a[0, 2]) \
+        + abs(a[1, 2])
+    for _ in range(50):
+        off = abs(a[0, 1]) + abs(a[0, 2]) + abs(a[1, 2])
+        if off <= 1e-17 * scale:
+            break
+        for p in range(2):
+            for q in range(p + 1, 3):
+                apq = a[p, q]
+                if apq == 0.0:
+                    continue
+                # the rotation that zeroes a[p, q]: t = tan of its angle, the smaller root
+                theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+                t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
+                if theta < 0.0:
+                    t = -t
+                c = 1.0 / np.sqrt(t * t + 1.0)
+                s = t * c
+                for k in range(3):  # columns p, q of a, then rows p, q
+                    akp, akq = a[k, p], a[k, q]
+                    a[k, p], a[k, q] = c * akp - s * akq, s * akp + c * akq
+                for k in range(3):
+                    apk, aqk = a[p, k], a[q, k]
+                    a[p, k], a[q, k] = c * apk - s * aqk, s * apk + c * aqk
+                for k in range(3):
+                    vkp, vkq = v[k, p], v[k, q]
+                    v[k, p], v[k, q] = c * vkp - s * vkq, s * vkp + c * vkq
+    best = 2
+    for j in (1, 0):  # ties go to the later column, as LAPACK's ascending order gives
+        if a[j, j] > a[best, best]:
+            best = j
+    for d in range(3):
+        out[d] = v[d, best]
+
+
+@nb.njit(cache=True)
 def _node_moments(T, area, centre, radius, lo, hi):
     """Per node of the hierarchy, what :func:`_box_bounds` needs: its area ``A``; the
     area-weighted centre ``c`` of its triangles' centroids ``c_k``; ``Q`` (xx, yy, zz, xy, xz,
@@ -340,9 +384,7 @@ def _node_moments(T, area, centre, radius, lo, hi):
         hbar[node] /= A[node]
         for d in range(3):
             c[node, d] /= A[node]
-        _, vec = np.linalg.eigh(N)  # the axis: the normal lines' principal direction
-        for d in range(3):
-            nrm[node, d] = vec[d, 2]
+        _principal_axis(N, nrm[node])  # the axis: the normal lines' principal direction
         for k in range(lo[node], hi[node]):
             dx = centre[k, 0] - c[node, 0]
             dy = centre[k, 1] - c[node, 1]

@@ -106,6 +106,88 @@ def _cables() -> None:
     _relax(P, "projected_gradient", closed=False, pinned=[[0, 170]] * 6)
 
 
+def _box(lo, hi) -> tuple[np.ndarray, np.ndarray]:
+    """A closed box mesh ``(V, F)`` from corner ``lo`` to corner ``hi``, faces outward."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    V = np.array([[(hi if (v >> d) & 1 else lo)[d] for d in range(3)] for v in range(8)])
+    F = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                  [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
+    return V, F
+
+
+def _torus(R: float, r: float, nu: int, nv: int, z: float = 0.0):
+    """A closed torus mesh ``(V, F)`` about the z axis at height ``z``."""
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, nu, endpoint=False),
+                       np.linspace(0, 2 * np.pi, nv, endpoint=False), indexing="ij")
+    V = np.c_[((R + r * np.cos(v)) * np.cos(u)).ravel(), ((R + r * np.cos(v)) * np.sin(u)).ravel(),
+              (z + r * np.sin(v)).ravel()]
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    a, b = i * nv + j, ((i + 1) % nu) * nv + j
+    c, d = ((i + 1) % nu) * nv + (j + 1) % nv, i * nv + (j + 1) % nv
+    F = np.r_[np.c_[a.ravel(), b.ravel(), c.ravel()], np.c_[a.ravel(), c.ravel(), d.ravel()]]
+    return V, F
+
+
+def _sphere(radius: float, n: int = 12):
+    """A closed UV sphere ``(V, F)`` about the origin: ``n`` rings of ``2 n`` vertices and
+    the two poles, faces outward."""
+    m = 2 * n
+    lat = np.pi * (np.arange(1, n + 1) / (n + 1) - 0.5)
+    lon = 2 * np.pi * np.arange(m) / m
+    V = np.r_[[[0.0, 0.0, -radius]],
+              radius * np.c_[(np.cos(lat)[:, None] * np.cos(lon)).ravel(),
+                             (np.cos(lat)[:, None] * np.sin(lon)).ravel(),
+                             np.repeat(np.sin(lat), m)],
+              [[0.0, 0.0, radius]]]
+    ring = lambda k, j: 1 + k * m + j % m  # noqa: E731
+    F = [[0, ring(0, j + 1), ring(0, j)] for j in range(m)]
+    for k in range(n - 1):
+        for j in range(m):
+            F += [[ring(k, j), ring(k, j + 1), ring(k + 1, j + 1)],
+                  [ring(k, j), ring(k + 1, j + 1), ring(k + 1, j)]]
+    F += [[len(V) - 1, ring(n - 1, j), ring(n - 1, j + 1)] for j in range(m)]
+    return V, np.array(F)
+
+
+def _obstacles() -> None:
+    # Advanced ▸ Obstacles on a knot, both methods Automatic takes; the obstacle's hierarchy
+    # from obstacles.OBSTACLE_TREE_FROM edge–triangle pairs on
+    P = knots.named("3_1", 100)
+    box = _box([1.3, -0.3, -0.3], [1.9, 0.3, 0.3])
+    for method in ("projected_gradient_implicit", "projected_gradient"):
+        _relax(P, method, obstacles=[box])
+    _relax(knots.named("3_1", 1000), "projected_gradient", obstacles=[_torus(3.0, 0.5, 40, 25)])
+
+
+def _untangle_cables() -> None:
+    # Presets ▸ Untangle Cables: open cables between two plates around a torus, the ends
+    # pinned (with and without their tangents), the tree from engine.AUTO_TREE_FROM vertices
+    # on, θ 0.3
+    t = np.linspace(0.0, 1.0, 171)
+    parts = [np.c_[0.3 * np.cos(2 * np.pi * c / 6) + 0.02 * np.sin(3 * t + c),
+                   0.3 * np.sin(2 * np.pi * c / 6) + 0.02 * np.cos(2 * t + c), t]
+             for c in range(6)]
+    plates = [_box([-1.0, -1.0, -0.06], [1.0, 1.0, -0.02]), _box([-1.0, -1.0, 1.02],
+                                                                  [1.0, 1.0, 1.06])]
+    ring = _torus(0.6, 0.08, 24, 12, z=0.5)
+    for tangents in (False, True):
+        _relax(parts, "projected_gradient", closed=False, pinned=[[0, 170]] * 6,
+               pin_tangents=tangents, obstacles=[*plates, ring], theta=0.3)
+    small = [resample(p, 30, closed=False) for p in parts[:2]]
+    _relax(small, "projected_gradient", closed=False, pinned=[[0, 29]] * 2,
+           obstacles=plates)
+
+
+def _pack_in_volume() -> None:
+    # Presets ▸ Pack in Volume: a loop growing inside a container, exact and tree engines
+    for n in (60, 1000):
+        t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+        P = resample(np.c_[0.6 * np.cos(t), 0.6 * np.sin(t), 0.2 * np.sin(5 * t)], n)
+        length = n * float(np.linalg.norm(P[1] - P[0]))
+        _relax(P, "projected_gradient", container=_sphere(0.9), length_target=3.0 * length,
+               length_growth=0.01)
+
+
 #: The paths, in the order a first session meets them.
 PATHS: dict[str, Callable[[], None]] = {
     "exact": _exact,
@@ -115,6 +197,9 @@ PATHS: dict[str, Callable[[], None]] = {
     "tree": _tree,
     "tangent_point": _tangent_point,
     "cables": _cables,
+    "obstacles": _obstacles,
+    "untangle_cables": _untangle_cables,
+    "pack_in_volume": _pack_in_volume,
 }
 
 

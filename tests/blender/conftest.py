@@ -12,7 +12,6 @@ installed copy (``bl_ext.user_default.moebius_addon``) through ``bpy.ops``.
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import os
 import shutil
 import sys
@@ -29,12 +28,8 @@ os.environ["BLENDER_USER_RESOURCES"] = str(USER_DIR)
 
 bpy = pytest.importorskip("bpy")
 
-# The venv of a Blender line (mk/lines.mk) holds bpy and pytest only: numba comes with the
-# extension, as in a user's Blender. Modules that import the repository's core at collection
-# (it needs numba in the venv) or run its scripts are for the main venv.
-if importlib.util.find_spec("numba") is None:
-    collect_ignore = ["test_methods.py", "test_scripts.py"]
-
+# The venv of a Blender line (mk/lines.mk) holds bpy, numpy and pytest only: numba comes with
+# the extension, as in a user's Blender, so every test here drives the installed zip.
 from bpy_helpers import (  # noqa: E402 - after BLENDER_USER_RESOURCES is set
     EXT_MODULE,
     PYTHON,

@@ -136,3 +136,43 @@ def test_a_first_session_loads_the_kernels_the_zip_ships(extension_zip, tmp_path
     if not found["generic"]:
         pytest.skip("this CPU cannot run the shipped x86-64-v3 code: the kernels compiled")
     assert found["kernels"] == 0
+
+
+@pytest.mark.lines
+def test_a_blender_venv_has_what_blenders_python_has():
+    # Blender's own Python has numpy and no scipy: the Blender venvs (mk/lines.mk) are the same,
+    # so that a path needing scipy fails here as it would in a user's Blender
+    if not Path(sys.prefix).name.startswith(".venv-blender-"):
+        pytest.skip(f"not a Blender venv of mk/lines.mk: {sys.prefix}")
+    with pytest.raises(ImportError):
+        import scipy  # noqa: F401
+    site = Path(importlib.util.find_spec("numpy").origin).parents[1]
+    assert not list(site.glob("numba*")) and not list(site.glob("scipy*")), site
+
+
+@pytest.mark.lines
+def test_every_preset_runs_from_the_kernels_the_zip_ships(extension_zip, tmp_path):
+    # a first session in a new user directory: each preset and feature path through the panel's
+    # operators (tests/blender/first_session.py); with the linux-x64 zip's kernel cache none of
+    # them compiles a kernel, and in a Blender venv none needs scipy
+    tag = f".py{PYTHON.replace('.', '')}."
+    with zipfile.ZipFile(extension_zip) as z:
+        cached = any(n.startswith("core/kernel_cache/") and tag in n for n in z.namelist())
+    env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path))
+    env.pop("NUMBA_CACHE_DIR", None)  # set in this process by the extension installed here
+    proc = subprocess.run([sys.executable, str(Path(__file__).parent / "first_session.py"),
+                           str(extension_zip)], env=env, capture_output=True, text=True,
+                          timeout=1500)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    found = json.loads(proc.stdout.strip().splitlines()[-1])
+    scipy, generic = found.pop("scipy"), found.pop("generic")
+    assert set(found) == {"relax_knot", "untangle_cables", "untangle_cables, end tangents",
+                          "pack_in_volume", "tree", "tangent_point", "identify"}
+    for name, path in found.items():
+        assert path["iterations"] == (0 if name == "identify" else 2), (name, path)
+    if not cached:
+        pytest.skip(f"the zip carries no kernel cache for Python {PYTHON} (`make test` builds "
+                    "one); every path ran" + (" without scipy" if not scipy else ""))
+    if not generic:
+        pytest.skip("this CPU cannot run the shipped x86-64-v3 code: the kernels compiled")
+    assert {name: path["kernels"] for name, path in found.items()} == dict.fromkeys(found, 0)

@@ -166,7 +166,8 @@ def test_the_flow_never_crosses_the_obstacle(weight, fhw_raw):
     iterates = [P]
     r = core.relax(P, max_iter=30, obstacles=[(V, F)], obstacle_weight=weight,
                    engine="exact", callback=lambda s: iterates.append(s.x.copy()))
-    assert r.nit >= 20 and np.all(np.diff(r.history["energy"]) <= 0)
+    E = np.asarray(r.history["energy"])  # non-increasing up to the rounding of a sum of E
+    assert r.nit >= 20 and np.all(np.diff(E) <= 1e-14 * E[:-1])
     assert not crossed_on_the_way(iterates, V, F)
 
 
@@ -415,3 +416,24 @@ OUT = [float(E).hex(), G.tobytes().hex()]
 def test_the_hierarchy_energy_is_bitwise_the_same_for_any_thread_count():
     here, there = out_here_and_in_one_thread(HIERARCHY_CODE)
     assert there == here
+
+
+def test_the_cone_axis_is_the_principal_eigenvector():
+    # written out in the kernel (numba's eigh needs scipy): against numpy's, sums of rank-one
+    # normal-line matrices of every scale, and the matrices a degenerate node gives
+    from moebius_addon.core.obstacles import _principal_axis
+
+    rng = np.random.default_rng(3)
+    out = np.empty(3)
+    for _ in range(2000):
+        n = rng.normal(size=(rng.integers(1, 6), 3))
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        w = rng.uniform(0.0, 1.0, len(n)) * 10.0 ** rng.uniform(-150, 150)
+        N = np.einsum("k,ki,kj->ij", w, n, n)
+        _principal_axis(N, out)
+        lam = np.linalg.eigvalsh(N)
+        assert np.linalg.norm(out) == pytest.approx(1.0, abs=1e-14)
+        assert out @ N @ out == pytest.approx(lam[2], rel=1e-13)
+    for N in (np.zeros((3, 3)), np.eye(3), np.diag([0.0, 2.0, 1.0])):
+        _principal_axis(N, out)
+        assert out @ N @ out == pytest.approx(np.linalg.eigvalsh(N)[2], abs=1e-15)

@@ -1,10 +1,12 @@
-"""The documented headless example and the demo run as separate processes (repository checkout)."""
+"""The documented headless example and the demo run as separate processes (repository checkout,
+the main venv: bpy with the repository's core)."""
 
 import os
 import subprocess
 import sys
+from pathlib import Path
 
-from bpy_helpers import ROOT
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _run(args, tmp_path):

@@ -1,0 +1,94 @@
+"""What the user's Blender runs: no kernel of the package needs scipy (Blender's Python has none,
+and numba reaches BLAS and LAPACK through it), and a shipped kernel that would is compiled
+instead of run (``core/_shipped_cache.py``)."""
+
+import ast
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from moebius_addon.core import _shipped_cache
+
+ROOT = Path(__file__).resolve().parents[2]
+#: what numba implements with BLAS or LAPACK, so through scipy
+_THROUGH_SCIPY = ("np.linalg", "numpy.linalg", "np.dot", "np.vdot", "np.inner", "np.kron")
+
+
+def _needs_scipy(function: ast.FunctionDef) -> list[str]:
+    found = []
+    for node in ast.walk(function):
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult):
+            found.append(f"line {node.lineno}: @")
+        elif isinstance(node, ast.Attribute) and ast.unparse(node).startswith(_THROUGH_SCIPY):
+            found.append(f"line {node.lineno}: {ast.unparse(node)}")
+    return found
+
+
+def test_no_kernel_calls_blas_or_lapack_through_numba():
+    kernels, offending = 0, {}
+    for path in sorted((ROOT / "moebius_addon").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef) and any(
+                    "jit" in ast.unparse(d) for d in node.decorator_list):
+                kernels += 1
+                if found := _needs_scipy(node):
+                    offending[f"{path.relative_to(ROOT)}:{node.name}"] = found
+    assert kernels > 150  # the scan sees the kernels
+    assert offending == {}
+
+
+def test_the_scan_finds_what_needs_scipy():
+    tree = ast.parse(textwrap.dedent("""
+        @nb.njit(cache=True)
+        def f(A, x):
+            w, v = np.linalg.eigh(A)
+            return A @ x + np.dot(x, x)
+    """))
+    assert len(_needs_scipy(tree.body[0])) == 4
+
+
+def test_a_shipped_kernel_that_needs_scipy_is_compiled_instead_never_run(tmp_path):
+    pytest.importorskip("scipy")  # to build a kernel that calls LAPACK through it
+    if not _shipped_cache.host_runs_generic():
+        pytest.skip("this CPU cannot run code compiled for the generic CPU")
+    (tmp_path / "lapack_kernel.py").write_text(textwrap.dedent("""
+        import numba as nb
+        import numpy as np
+
+        @nb.njit(cache=True)
+        def top(N):
+            return np.linalg.eigh(N)[0][2]
+    """))
+    shipped = tmp_path / "shipped"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(shipped), NUMBA_CPU_NAME="x86-64-v3",
+               NUMBA_CPU_FEATURES="", PYTHONPATH=os.pathsep.join([str(tmp_path), str(ROOT)]))
+    subprocess.run([sys.executable, "-c", "import numpy as np, lapack_kernel as k; "
+                    "k.top(np.eye(3))"], env=env, check=True, timeout=300)
+    (data,) = shipped.rglob("*.nbc")
+    assert _shipped_cache.calls_scipy(data.read_bytes())
+    # where scipy is missing (Blender's Python), as the package's kernels get the shipped cache
+    code = textwrap.dedent("""
+        import sys
+        sys.modules["scipy"] = None
+        from pathlib import Path
+        import numpy as np
+        import lapack_kernel as k
+        from moebius_addon.core import _shipped_cache as sc
+        (where,) = Path(sys.argv[1]).iterdir()
+        k.top._cache = sc.ShippedFunctionCache(k.top.py_func, where, "lapack_kernel",
+                                               "lapack_kernel")
+        try:
+            k.top(np.eye(3))
+        except Exception as err:
+            print("raised", type(err).__name__, err)
+    """)
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "user")
+    proc = subprocess.run([sys.executable, "-c", code, str(shipped)], env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]  # an abort is 134
+    assert "needs scipy, which this Python does not have; compiling it instead" in proc.stderr
+    assert proc.stdout.startswith("raised") and "scipy" in proc.stdout, proc.stdout
