@@ -136,7 +136,7 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         how = f" ({run.method}: {run.why})" if run.why else f" ({run.method})"
         how += " continued" if run.append else ""
         how += f", {run.engine} engine"
-        hint = api.method_hint(run.method, result, run.start, not run.open)
+        hint = api.method_hint(run.method, result, run.start, not run.open, run.grows)
         self.report({kind}, f"'{run.obj.name}'{how}: {run.nit} iterations, energy "
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "

@@ -86,13 +86,15 @@ def choose_method(method: str, polygons: Sequence[np.ndarray]) -> tuple[str, str
 
 
 def method_hint(method: str, result, polygons: Sequence[np.ndarray],
-                closed: bool = True) -> str:
+                closed: bool = True, grows: bool = False) -> str:
     """Advice appended to the report of an explicit run that hit its iteration limit on a
     knotted curve (``polygons``: its start): the explicit flow's last stretch on a knot is
     slow (docs/benchmarks.md, "Knots of the table"). Decided by ``result.status``, never by
     the words of the message; unknots and links get none (the explicit method is the faster
-    one on unknots; Automatic gives links the implicit one)."""
-    if method != EXPLICIT_METHOD or result.status != core.Status.MAX_ITER or not closed:
+    one on unknots; Automatic gives links the implicit one), nor a run that grows the curve
+    (``grows``: the implicit method cannot)."""
+    if (method != EXPLICIT_METHOD or result.status != core.Status.MAX_ITER or not closed
+            or (grows and KNOT_METHOD not in core.solvers.GROWING)):
         return ""
     try:
         if len(polygons) != 1 or not core.is_knotted(polygons[0]):
@@ -339,6 +341,13 @@ class ObjectRelaxation:
             else (EXPLICIT_METHOD, "length growth") if (
                 method == AUTO_METHOD and options.get("length_target") is not None)
             else choose_method(method, polygons))
+        #: whether the run grows the curve's length (Length Target)
+        self.grows = options.get("length_target") is not None
+        if self.grows and self.method not in core.solvers.GROWING:
+            raise ValueError(
+                f"Advanced ▸ Method: {method_label(self.method)} cannot grow the curve's length "
+                f"(Length Target): choose "
+                f"{' or '.join(method_label(m) for m in core.solvers.GROWING)}, or Automatic")
         if method == AUTO_METHOD and self.method != EXPLICIT_METHOD:
             # the panel's Armijo constant and step growth are the explicit method's; the
             # implicit one keeps its own (core.solvers), but bad values are refused all the same

@@ -16,9 +16,10 @@ import numpy as np
 
 
 def obstacle_meshes(source, curve: bpy.types.Object,
-                    depsgraph: bpy.types.Depsgraph | None = None) -> list[tuple]:
+                    depsgraph: bpy.types.Depsgraph | None = None) -> dict[str, tuple]:
     """``(V, F)`` of every mesh object of ``source`` (a collection, its child collections
-    included, or a list of objects), triangulated, in ``curve``'s object coordinates.
+    included, or a list of objects), triangulated, in ``curve``'s object coordinates, by
+    object name (the core's messages name them so).
 
     Raises
     ------
@@ -36,7 +37,7 @@ def obstacle_meshes(source, curve: bpy.types.Object,
         raise ValueError(f"{what} holds no mesh object to use as an obstacle{has}")
     if depsgraph is None:
         depsgraph = bpy.context.evaluated_depsgraph_get()
-    return [_triangles(o, curve, depsgraph, "obstacle") for o in meshes]
+    return {o.name: _triangles(o, curve, depsgraph, "obstacle") for o in meshes}
 
 
 def _triangles(o: bpy.types.Object, curve: bpy.types.Object, depsgraph, role: str) -> tuple:
@@ -104,8 +105,9 @@ def resolve(obj: bpy.types.Object, options: dict) -> dict:
         ``pin_selected`` with no point selected; obstacles or a container that are not meshes.
     """
     options = dict(options)
-    if isinstance(options.get("container"), bpy.types.Object):
-        options["container"] = container_mesh(options["container"], obj)
+    if isinstance(options.get("container"), bpy.types.Object):  # named in the core's messages
+        container = options["container"]
+        options["container"] = {container.name: container_mesh(container, obj)}
     source = options.get("obstacles")
     if source is not None and (isinstance(source, bpy.types.Collection) or (
             isinstance(source, (list, tuple)) and source

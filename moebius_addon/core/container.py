@@ -100,9 +100,11 @@ def inside(V: np.ndarray, F: np.ndarray, P: np.ndarray) -> np.ndarray:
     return _winding(np.ascontiguousarray(P, dtype=np.float64), T) > 0.5
 
 
-def check_inside(V: np.ndarray, F: np.ndarray, X: np.ndarray, layout) -> None:
+def check_inside(V: np.ndarray, F: np.ndarray, X: np.ndarray, layout,
+                 label: str = "the container") -> None:
     """Refuse a curve ``X`` (the run's vertices; ``V`` in the same coordinates) that is not
-    inside the container, saying how much of it is out and which vertex first."""
+    inside the container (called ``label``), saying how much of it is out and which vertex
+    first."""
     out = np.flatnonzero(~inside(V, F, X))
     if out.size == 0:
         return
@@ -111,9 +113,9 @@ def check_inside(V: np.ndarray, F: np.ndarray, X: np.ndarray, layout) -> None:
     where = (f"vertex {v - int(layout.starts[c])} of component {c}" if layout.is_link
              else f"vertex {v}")
     if out.size == len(X):
-        raise ValueError("the curve is outside the container: a container keeps the curve "
+        raise ValueError(f"the curve is outside {label}: a container keeps the curve "
                          "inside it, so the curve must start inside; move the curve into the "
                          "container (or give it as an obstacle instead)")
-    raise ValueError(f"the curve is partly outside the container: {out.size} of its {len(X)} "
+    raise ValueError(f"the curve is partly outside {label}: {out.size} of its {len(X)} "
                      f"vertices are outside (the first: {where}); move the curve wholly "
                      "inside the container")

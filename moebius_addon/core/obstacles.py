@@ -866,7 +866,7 @@ class ObstacleField:
         where = f"edge {edge} of component {c}" if layout.is_link else f"edge {edge}"
         label = self.labels[int(self.owner[k])]
         tri = f"triangle {int(self.local[k])} of {label}"
-        what = "the container's wall" if label == "the container" else "an obstacle"
+        what = "the container's wall" if label.startswith("the container") else "an obstacle"
         if d == 0.0:
             raise ValueError(f"the curve crosses {what}: {where} passes through {tri}; "
                              f"move the curve or {label} so that they do not meet")

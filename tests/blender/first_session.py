@@ -24,6 +24,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bpy_helpers import EXT_MODULE, poly_curve  # noqa: E402
 
 
+def _core():
+    return importlib.import_module(EXT_MODULE + ".core")
+
+
 def _mesh_in(collection, obj):
     for c in obj.users_collection:
         c.objects.unlink(obj)
@@ -40,17 +44,18 @@ def _cables_between_plates() -> None:
         _mesh_in(obstacles, bpy.context.active_object)
     bpy.ops.mesh.primitive_torus_add(major_radius=0.6, minor_radius=0.08, location=(0, 0, 0.5))
     _mesh_in(obstacles, bpy.context.active_object)
-    t = np.linspace(0.0, 1.0, 171)
+    t = np.linspace(0.0, 1.0, 400)
     cables = [np.c_[0.3 * np.cos(np.pi * c / 3) + 0.02 * np.sin(3 * t + c),
                     0.3 * np.sin(np.pi * c / 3) + 0.02 * np.cos(2 * t + c), t] for c in range(6)]
-    poly_curve("Cables", cables, cyclic=False)
+    poly_curve("Cables", _core().resample(cables, [171] * 6, closed=False), cyclic=False)
 
 
 def _loop_in_sphere() -> None:
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.9, segments=24, ring_count=12)
     sphere = bpy.context.active_object
-    t = np.linspace(0.0, 2 * np.pi, 60, endpoint=False)
-    poly_curve("Loop", [np.c_[0.6 * np.cos(t), 0.6 * np.sin(t), 0.2 * np.sin(5 * t)]])
+    t = np.linspace(0.0, 2 * np.pi, 300, endpoint=False)
+    poly_curve("Loop", [_core().resample(np.c_[0.6 * np.cos(t), 0.6 * np.sin(t),
+                                               0.2 * np.sin(5 * t)], 60)])
     bpy.context.scene.moebius.container = sphere
 
 

@@ -117,12 +117,14 @@ def test_obstacles_as_objects_and_bad_obstacles(scene, mb, ring_and_torus):
     before = scene_state()
     with pytest.raises(ValueError, match="collection 'Empty' holds no mesh object"):
         mb.relax_object(ring, max_iterations=2, obstacles=empty)
-    # a torus moved onto the ring: the start crosses it, refused naming where
+    # a torus moved onto the ring: the start crosses it, refused naming where, the obstacle
+    # by its object's name
     torus.location = (1.7, 0.0, 0.0)
     torus.scale = (0.65, 0.65, 2.0)
     bpy.context.view_layer.update()
     with pytest.raises(ValueError, match=r"crosses an obstacle: edge \d+ passes through "
-                                         r"triangle \d+ of obstacle 0"):
+                                         rf"triangle \d+ of obstacle '{torus.name}'; move the "
+                                         rf"curve or obstacle '{torus.name}'"):
         mb.relax_object(ring, max_iterations=2, obstacles=coll)
     after = scene_state()
     assert after["curves"] == before["curves"] and after["Ring/0"] == before["Ring/0"]

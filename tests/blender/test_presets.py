@@ -171,10 +171,13 @@ def test_bad_growth_input_is_refused_with_the_scene_unchanged(scene, mb, loop_in
         bpy.ops.moebius.relax()
     assert scene_state() == before
     s.length_target = 2 * L0
-    s.method = "trust_region"
-    with pytest.raises(RuntimeError, match="cannot grow the curve's length"):
-        bpy.ops.moebius.relax()
-    assert scene_state() == before
+    for method, label in (("trust_region", "Trust Region"),
+                          ("projected_gradient_implicit", "Implicit Gradient")):
+        s.method = method  # refused by the panel's names, not the core's
+        with pytest.raises(RuntimeError, match=f"Method: {label} cannot grow the curve's "
+                           r"length \(Length Target\): choose Projected Gradient"):
+            bpy.ops.moebius.relax()
+        assert scene_state() == before
     s.method = "projected_gradient"
     bm = bmesh.new()  # a hole in the container
     bm.from_mesh(sphere.data)

@@ -238,6 +238,9 @@ def test_method_hint_follows_the_status_not_the_words(mb, core):
         return mb.api.method_hint(method, result, [core.knots.named("5_2")])
 
     assert "Implicit Gradient" in hint("projected_gradient", result(core.Status.MAX_ITER, ""))
+    # a growing run (Pack in Volume) is not sent to a method that refuses growth
+    assert mb.api.method_hint("projected_gradient", result(core.Status.MAX_ITER, ""),
+                              [core.knots.named("5_2")], grows=True) == ""
     # the words alone decide nothing: a time budget that mentions an iteration limit
     assert hint("projected_gradient", result(core.Status.TIME, "maximum number of")) == ""
     assert hint("projected_gradient_implicit", result(core.Status.MAX_ITER, "")) == ""

@@ -91,7 +91,8 @@ def test_the_flow_never_leaves_the_container(weight, rng):
     r = core.relax(P, max_iter=40, container=(V, F), obstacle_weight=weight, engine="exact",
                    callback=lambda s: iterates.append(s.x.copy()))
     # with weight 0 the loop jams against the wall (the run stalls there, in 14 iterations)
-    assert r.nit >= (20 if weight else 10) and np.all(np.diff(r.history["energy"]) <= 0)
+    E = np.asarray(r.history["energy"])  # non-increasing up to the rounding of a sum of E
+    assert r.nit >= (20 if weight else 10) and np.all(np.diff(E) <= 1e-14 * E[:-1])
     assert not left_on_the_way(iterates, V, F, rng)
     if weight == 0.0:  # pressed against the wall, which it reaches within a few eps
         assert wall_distance(r.x, V, F) < 0.02

@@ -216,6 +216,15 @@ def test_a_start_through_an_obstacle_is_refused_saying_where():
     with pytest.raises(ValueError, match=r"crosses an obstacle: edge \d+ passes through "
                                          r"triangle \d+ of obstacle 0"):
         core.relax(P, obstacles=[(V, F)], max_iter=1)
+    # given by name (as the Blender layer gives them: object names), named so
+    plate = (np.array([[5.0, 5, 5], [6, 5, 5], [5, 6, 5]]), np.array([[0, 1, 2]]))
+    with pytest.raises(ValueError, match=r"passes through triangle \d+ of obstacle 'Torus'; "
+                                         r"move the curve or obstacle 'Torus' so"):
+        core.relax(P, obstacles={"Plate": plate, "Torus": (V, F)}, max_iter=1)
+    with pytest.raises(ValueError, match=r"the curve is partly outside the container 'Box': "):
+        core.relax(P, container={"Box": (V, F)}, max_iter=1)
+    with pytest.raises(ValueError, match="container given as a mapping must name one mesh"):
+        core.relax(P, container={"A": (V, F), "B": (V, F)}, max_iter=1)
 
 
 @pytest.mark.parametrize("mesh, message", [

@@ -41,6 +41,8 @@ METHODS = tuple(METHOD_CLASSES)
 FEASIBLE = tuple(m for m, cls in METHOD_CLASSES.items() if issubclass(cls, Relaxation))
 #: Methods that hold the edge lengths by a penalty.
 INFEASIBLE = tuple(m for m in METHODS if m not in FEASIBLE)
+#: Methods that can grow the curve's length (``length_target=``).
+GROWING = tuple(m for m, cls in METHOD_CLASSES.items() if cls._LENGTH_GROWTH)
 
 
 def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float = 1e-6, *,

@@ -27,6 +27,7 @@ from __future__ import annotations
 import enum
 import os
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -179,6 +180,27 @@ class _OutOfTime(Exception):
     """Raised inside a step when ``max_seconds`` runs out (one step may take many trials)."""
 
 
+def _mesh_labels(obstacles, container):
+    """What messages call each obstacle and the container: ``(obstacle labels, obstacles as a
+    list, container label, container)``. Given as a mapping (name → ``(V, F)``, one entry for
+    the container), they are called by their names (a Blender object's), else by position."""
+    if isinstance(obstacles, Mapping):
+        labels = [f"obstacle '{name}'" for name in obstacles]
+        obstacles = list(obstacles.values())
+    else:
+        count = 1 if isinstance(obstacles, tuple) and len(obstacles) == 2 and not isinstance(
+            obstacles[0], tuple) else len(obstacles) if isinstance(obstacles, Sequence) else 0
+        labels = [f"obstacle {m}" for m in range(count)]
+    label = "the container"
+    if isinstance(container, Mapping):
+        if len(container) != 1:
+            raise ValueError(f"container given as a mapping must name one mesh, got "
+                             f"{len(container)}")
+        ((name, container),) = container.items()
+        label = f"the container '{name}'"
+    return labels, obstacles, label, container
+
+
 class Run:
     """Set-up and stopping rules shared by every method (:mod:`.projected`,
     :mod:`.second_order`, :mod:`.penalty`).
@@ -205,6 +227,8 @@ class Run:
     #: Whether the method grows the length to ``length_target`` (the explicit method: the
     #: growth rides on its accepted steps, :meth:`.projected.Relaxation._grow`).
     _LENGTH_GROWTH = False
+    #: the method's name in ``METHODS`` (what messages call it)
+    NAME = ""
 
     def __init__(self, P, metric: str, max_iter: int, tol: float, *,
                  energy_target: float | None, ftol: float, max_seconds: float | None,
@@ -232,6 +256,8 @@ class Run:
                 raise ValueError(f"obstacle_tol must be below 1 (a relative error bound of the "
                                  f"obstacle energy; 0: every pair exactly; None: chosen by "
                                  f"size), got {obstacle_tol!r}")
+        obstacle_labels, obstacles, container_label, container = _mesh_labels(obstacles,
+                                                                              container)
         meshes = None if obstacles is None else check_obstacles(obstacles)
         container = None if container is None else check_container(container)
         X, layout, e2 = as_unit_layout(P, closed)  # exact scaling of curves far from size 1
@@ -278,12 +304,13 @@ class Run:
             # a container is one more obstacle (its wall repels, the contact bound stops every
             # step short of it) that the curve starts inside (.container)
             meshes = list(meshes or [])
-            labels = [f"obstacle {m}" for m in range(len(meshes))]
+            labels = list(obstacle_labels)
             if container is not None:
                 V, F = container
-                check_inside((V - self._shift) / self._scale, F, self.X, layout)
+                check_inside((V - self._shift) / self._scale, F, self.X, layout,
+                             container_label)
                 meshes.append(container)
-                labels.append("the container")
+                labels.append(container_label)
             field = ObstacleField(meshes, self._shift, self._scale, obstacle_weight, labels,
                                   auto_obstacle_tol(obstacle_tol, layout, meshes))
             field.check_clear(self.X, layout, self.eps)
@@ -304,7 +331,7 @@ class Run:
                                  "to (growth stops there)")
             return None
         if not self._LENGTH_GROWTH:
-            name = getattr(self, "NAME", type(self).__name__)
+            name = self.NAME
             raise ValueError(f"method {name!r} cannot grow the curve's length (length_target=): "
                              f"use method='projected_gradient'")
         if not fixed_lengths:
@@ -334,7 +361,7 @@ class Run:
     def _check_open(self, engine: str) -> None:
         """Refuse open polylines where the method or the engine cannot run them."""
         if not self._OPEN_CURVES:
-            name = getattr(self, "NAME", type(self).__name__)
+            name = self.NAME
             raise ValueError(
                 f"method {name!r} cannot relax open curves (closed=False): use a "
                 f"feasible method, projected_gradient, projected_gradient_implicit or "

@@ -145,6 +145,7 @@ class Relaxation(Run):
 
     _OPEN_CURVES = True
     _LENGTH_GROWTH = True
+    NAME = "projected_gradient"
 
     def __init__(
         self,

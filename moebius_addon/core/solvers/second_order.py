@@ -157,6 +157,8 @@ class ImplicitProjectedGradient(_Feasible):
     [1e-4 here: a Newton step on a quadratic decreases E by exactly ½<∇E, δ> as τ → ∞].
     """
 
+    NAME = "projected_gradient_implicit"
+
     def __init__(self, P, metric="hs", max_iter=200, tol=1e-6, *, newton_iter: int = 2,
                  cg_iter: int = 10, cg_rtol: float = 0.1, armijo: float = 1e-4, **options):
         self.newton_iter = check_number("newton_iter", newton_iter, 1, integer=True)
@@ -266,6 +268,8 @@ class TrustRegion(_Feasible):
     Extra options: ``newton_rtol`` [1e-2], ``cg_iter`` [20], ``cg_rtol`` [1e-2],
     ``eta`` [0.1] acceptance ratio.
     """
+
+    NAME = "trust_region"
 
     def __init__(self, P, metric="hs", max_iter=200, tol=1e-6, *, newton_rtol: float = 1e-2,
                  cg_iter: int = 20, cg_rtol: float = 1e-2, eta: float = 0.1, **options):
