@@ -544,7 +544,12 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
                            "error": f"{type(e).__name__}: {e}"}
                 _record(row, writer, report, bar)
     except KeyboardInterrupt:
-        quiet.start()  # the closing cluster's complaints about lost connections
+        quiet.start()  # the closing cluster's complaints about lost connections and tasks
+        if client is not None:
+            try:
+                client.run(_quiet_worker)
+            except Exception:  # noqa: BLE001 - a worker already gone says nothing either
+                pass
         left = len(todo) - len(report["done"]) - len(report["failed"])
         say(f"interrupted: {len(report['done'])} done now, {len(report['failed'])} failed, "
             f"{left} not run, {len(skipped)} done before; the results are in {out}; run the "
@@ -598,23 +603,32 @@ def _changed(task: Task, row: dict) -> dict[str, tuple]:
 
 
 class _Quiet:
-    """Silences Dask's loggers while an interrupted run closes its cluster."""
+    """Silences Dask's loggers (and tornado's, under them) while an interrupted run closes its
+    cluster: lost connections and cancelled tasks are expected then."""
+
+    names = ("distributed", "tornado")
 
     def __init__(self):
-        import logging
-
-        self.logger, self.level = logging.getLogger("distributed"), None
+        self.levels = {}
 
     def start(self) -> None:
         import logging
 
-        self.level = self.logger.level
-        self.logger.setLevel(logging.CRITICAL + 1)
+        for name in self.names:
+            logger = logging.getLogger(name)
+            self.levels[name] = logger.level
+            logger.setLevel(logging.CRITICAL + 1)
 
     def stop(self) -> None:
-        if self.level is not None:
-            self.logger.setLevel(self.level)
-            self.level = None
+        import logging
+
+        for name, level in self.levels.items():
+            logging.getLogger(name).setLevel(level)
+        self.levels = {}
+
+
+def _quiet_worker() -> None:
+    _Quiet().start()
 
 
 def _warm_paths(todo: list[Task]) -> tuple[str, ...]:

@@ -347,20 +347,27 @@ def test_finished_folder_is_only_read(tmp_path):
     assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == before
 
 
-def test_ctrl_c_says_what_finished_and_how_to_resume(tmp_path):
+@pytest.mark.parametrize("workers", ["0", "2"])
+def test_ctrl_c_says_what_finished_and_how_to_resume(tmp_path, workers):
+    """Ctrl-C in a terminal reaches the whole process group: the command and, with workers,
+    the Dask workers too."""
+    if workers != "0":
+        pytest.importorskip("distributed")
+        if (os.cpu_count() or 1) < 2:
+            pytest.skip("two workers need two cores")
     out = tmp_path / "out"
     args = [sys.executable, "-m", "moebius_addon.core.batch", "--crossings", "3-8", "--edges",
-            "60", "--max-iter", "200", "--tol", "1e-12", "--no-identify", "--workers", "0",
-            "--out", str(out)]
+            "60", "--max-iter", "200", "--tol", "1e-12", "--no-identify", "--workers", workers,
+            "--dashboard", "", "--out", str(out)]
     env = {**os.environ,
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     proc = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+                            text=True, start_new_session=True)
     lines = []
     for line in proc.stdout:  # interrupt once the first task has finished
         lines.append(line)
         if re.match(r"\[[#.]+\] 1/", line):
-            proc.send_signal(signal.SIGINT)
+            os.killpg(proc.pid, signal.SIGINT)
             break
     rest, err = proc.communicate(timeout=120)
     said = "".join(lines) + rest
