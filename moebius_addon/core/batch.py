@@ -426,7 +426,9 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
         Address of a running Dask scheduler (``tcp://host:8786``); its workers must have
         moebius_addon importable. Refused after ``timeout`` seconds without answer.
     resume : bool
-        Skip the tasks finished in ``out`` before (``done_ids``); False: run them again.
+        Skip the tasks finished in ``out`` before (``done_ids``); a task finished there with
+        other settings is refused (a FolderError naming the difference), not reported as
+        done. False: run them again.
     limit : int, optional
         Stop after this many tasks (the rest are cancelled): a slice of a long run.
     dashboard : str or None
@@ -437,6 +439,15 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
     dict
         ``done`` (ids finished now), ``failed`` (id → message), ``skipped`` (finished
         before), ``seconds`` (wall time), ``dashboard`` (its address, if any).
+
+    Raises
+    ------
+    FolderError
+        A ValueError naming the file and the fix, before any work, if ``out`` cannot be
+        used (a file, a table of something else, a damaged ``run.json``, no permission),
+        and during the run if a result cannot be written.
+    KeyboardInterrupt
+        On Ctrl-C, after saying what finished; the same call again resumes.
     """
     out = Path(out)
     cores = os.cpu_count() or 1
@@ -543,7 +554,7 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
                     row = {**t.settings(), "runs": [], "identified": "", "worker": "",
                            "error": f"{type(e).__name__}: {e}"}
                 _record(row, writer, report, bar)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, FolderError) as e:
         quiet.start()  # the closing cluster's complaints about lost connections and tasks
         if client is not None:
             try:
@@ -551,7 +562,8 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
             except Exception:  # noqa: BLE001 - a worker already gone says nothing either
                 pass
         left = len(todo) - len(report["done"]) - len(report["failed"])
-        say(f"interrupted: {len(report['done'])} done now, {len(report['failed'])} failed, "
+        how = "interrupted" if isinstance(e, KeyboardInterrupt) else "stopped"
+        say(f"{how}: {len(report['done'])} done now, {len(report['failed'])} failed, "
             f"{left} not run, {len(skipped)} done before; the results are in {out}; run the "
             f"same command again to resume (finished tasks are skipped)")
         raise

@@ -18,6 +18,7 @@ names the file and the fix.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -212,6 +213,12 @@ def read_log(out) -> list:
 # Writing
 
 
+def _remove(path: Path) -> None:
+    """Remove a temporary file if it is there (the error that stopped it is the one to tell)."""
+    with contextlib.suppress(OSError):
+        path.unlink(missing_ok=True)
+
+
 def _replace(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` whole or not at all: a temporary file renamed over it."""
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
@@ -220,7 +227,7 @@ def _replace(path: Path, text: str) -> None:
             f.write(text)
         os.replace(tmp, path)
     finally:
-        tmp.unlink(missing_ok=True)
+        _remove(tmp)
 
 
 def log_run(out: Path, record: dict) -> None:
@@ -281,7 +288,7 @@ class Writer:
                     np.savez(tmp, **{f"x{k}": p for k, p in enumerate(parts)})
                     os.replace(tmp, target)
                 finally:
-                    tmp.unlink(missing_ok=True)
+                    _remove(tmp)
                 target = self.path
             flat = {k: v for k, v in row.items() if k != "runs"}
             for k, s in enumerate(row.get("runs", []), 1):

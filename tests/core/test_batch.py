@@ -8,6 +8,7 @@ import json
 import os
 import re
 import shlex
+import shutil
 import signal
 import socket
 import subprocess
@@ -380,3 +381,23 @@ def test_ctrl_c_says_what_finished_and_how_to_resume(tmp_path, workers):
         "interrupted; to resume: python -m moebius_addon.core.batch " +
         " ".join(shlex.quote(a) for a in args[3:]))
     assert batch.done_ids(out) == finished
+
+
+def test_write_fault_mid_run_stops_with_the_file_and_what_finished(tmp_path):
+    """``curves`` turns into a file after the first task (a disk unmounted, a folder
+    replaced): the next polygon cannot be written."""
+    out = tmp_path / "out"
+    said = []
+
+    def say(line):
+        said.append(line)
+        if line.startswith("[") and (out / "curves").is_dir():
+            shutil.rmtree(out / "curves")
+            (out / "curves").write_text("")
+
+    todo = small("3_1", "4_1", "5_1")
+    with pytest.raises(ValueError, match=r"cannot write .*curves/\w+\.npz \(Not a directory\); "
+                       r"free space on its disk or make .* writable, then run the same "
+                       r"command again to resume"):
+        batch.run(todo, out, workers=0, say=say)
+    assert said[-1].startswith("stopped: 1 done now, 0 failed, 2 not run")
