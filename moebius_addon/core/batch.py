@@ -247,8 +247,9 @@ def tasks(inputs=(), *, crossings: str | None = None, edges=None, stages=(1,),
     """The tasks for ``inputs`` (table names or aliases, patterns such as ``"10_*"``, notation
     files, OBJ files, folders of OBJ files) and the knots of ``crossings`` (``"11"``,
     ``"6-7"``), each at every edge count of ``edges`` (None: the entry's default, a file's own
-    count) and every seed of ``seeds``. Raises ValueError naming the first bad input before
-    anything runs."""
+    count) and every seed of ``seeds``. The same input twice is one task. Raises ValueError
+    naming the first bad input before anything runs, and both inputs if two different ones
+    have one name (one task would replace the other)."""
     check_energy(energy)
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
