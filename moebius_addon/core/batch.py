@@ -1,19 +1,21 @@
-"""Batch runs: many relaxations, in this process or on a Dask cluster (issue 29).
+"""Batch runs: many relaxations, in this process or on a Dask cluster.
 
 A :class:`Task` is one relaxation: a curve (a knot or link of the table by name, a typed
 braid word or PD code, or the polylines of an OBJ file), its edge count, the energy, the
 settings and, for a tangled start, a seed. :func:`tasks` builds them from what a user types
 (names, patterns like ``10_*``, crossing ranges, files, folders of OBJ files) and refuses bad
-input before any work; :func:`run` runs them, largest first, and writes to one folder:
+input before any work, two inputs of one name among it (one would replace the other);
+:func:`run` runs them, largest first, and writes to one folder (:mod:`.batch_folder`):
 
 * ``results.csv`` — one row per task (its settings, per stage the edge count, energy,
   iterations, seconds and status, the identified type, the worker, the error if it failed);
 * ``curves/<id>.npz`` — the relaxed polygon (``x0``, ``x1``, … one array per component);
 * ``run.json`` — the settings and the versions of each run into the folder.
 
-A task whose row has no error and whose polygon exists is skipped when the run starts again,
-so a run can be stopped at any point; a task that raises is recorded with its message and
-the others go on (it is tried again on the next run).
+A task whose row is whole and has no error and whose polygon loads is skipped when the run
+starts again, so a run can be stopped at any point (Ctrl-C says what finished); one that
+finished with other settings is refused, not reported as done. A task that raises is recorded
+with its message and the others go on (it is tried again on the next run).
 
 Dask (``pip install moebius_addon[batch]``) is imported only by :func:`run` with workers: the
 core, and the Blender extension that ships it without Dask, never need it. ``workers=0``
@@ -23,13 +25,16 @@ runs the tasks here, one after the other, through the same :func:`run_task`.
 from __future__ import annotations
 
 import argparse
-import csv
 import fnmatch
+import hashlib
 import json
 import os
 import platform
+import shlex
+import signal
 import socket
 import sys
+import threading
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -37,6 +42,20 @@ from pathlib import Path
 import numpy as np
 
 from . import knots, table
+from .batch_folder import SETTINGS_FIELDS as _SETTINGS
+from .batch_folder import (  # noqa: F401 - the folder's public names, read as batch.<name>
+    STAGE_FIELDS,
+    FolderError,
+    Writer,
+    column_type,
+    done_ids,
+    load_curve,
+    read_results,
+)
+from .batch_folder import check as _check_folder
+from .batch_folder import finished as _finished
+from .batch_folder import log_run as _log_run
+from .batch_folder import read_log as _read_log
 from .energy_choice import check_energy
 from .solvers import METHODS
 
@@ -45,9 +64,23 @@ from .solvers import METHODS
 DEFAULT_METHOD = "projected_gradient_implicit"
 MISSING_DASK = ("Dask is not installed; batch runs on workers need it: "
                 "pip install moebius_addon[batch]  (or: pip install 'dask[distributed]')")
-#: per stage; ``cpu``: CPU seconds of the worker process (all its threads) over the stage,
-#: which on a shared machine says more about the cost than the wall ``seconds``
-STAGE_FIELDS = ("n", "energy", "iterations", "seconds", "cpu", "status")
+
+
+#: the longest task id: ``curves/<id>.npz`` and its temporary name stay far below the 255
+#: bytes a file name may have on common file systems
+MAX_ID = 120
+_SAFE = frozenset("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-.")
+
+
+def safe_name(text: str, limit: int = 80) -> str:
+    """``text`` itself if it has at most ``limit`` characters, all ASCII letters, digits or
+    ``_-.``; else those characters kept (any other ``-``), cut to ``limit`` and followed by
+    ``-`` and 10 hex digits of the text's SHA-256. Distinct names stay distinct (``a b`` and
+    ``a-b``, two long names with the same start), and every name fits in a file name."""
+    if len(text) <= limit and set(text) <= _SAFE:
+        return text
+    digest = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:10]
+    return "".join(c if c in _SAFE else "-" for c in text[:limit]) + "-" + digest
 
 
 @dataclass(frozen=True)
@@ -77,12 +110,13 @@ class Task:
 
     @property
     def id(self) -> str:
-        """A file-name-safe key, unique for the curve, energy, edges, stages and start."""
-        safe = "".join(c if c.isalnum() or c in "_-." else "-" for c in self.name)
+        """A key for the curve, energy, edges, stages and start, safe as a file name on any
+        file system (:func:`safe_name`): it names the task's row and ``curves/<id>.npz``."""
         tag = "" if self.energy == "moebius" else f"_{self.energy}"
         stages = "" if self.stages == (1,) else "_x" + "-".join(f"{s:g}" for s in self.stages)
         seed = "" if self.seed is None else f"_{self.how}{self.seed}"
-        return f"{safe}_{self.edges}{tag}{stages}{seed}"
+        key = f"{safe_name(self.name)}_{self.edges}{tag}{stages}{seed}"
+        return key if len(key) <= MAX_ID else safe_name(key, MAX_ID - 11)
 
     @property
     def cost(self) -> float:
@@ -113,10 +147,10 @@ class Task:
 
     def settings(self) -> dict:
         """The row's description of the task (everything but the curve)."""
-        d = {k: v for k, v in asdict(self).items() if k != "curve"}
-        d["stages"] = " ".join(f"{s:g}" for s in self.stages)
-        d["seed"] = "" if self.seed is None else self.seed
-        return {"id": self.id, **d}
+        d = asdict(self)
+        d.update(id=self.id, stages=" ".join(f"{s:g}" for s in self.stages),
+                 seed="" if self.seed is None else self.seed)
+        return {k: d[k] for k in _SETTINGS}
 
 
 # --------------------------------------------------------------------------------------------
@@ -144,8 +178,9 @@ def default_edges(name: str) -> int:
     return sum(len(c) for c in P) if isinstance(P, list) else len(P)
 
 
-def _expand(item: str, names: list[str]) -> list[tuple[str, str, str, tuple]]:
-    """(name, kind, ref, curve) for one input: a path, a pattern or a name."""
+def _expand(item: str, names: list[str]) -> list[tuple[str, str, str, tuple, str]]:
+    """(name, kind, ref, curve, origin) for one input: a path, a pattern or a name;
+    ``origin`` says where it came from, for messages."""
     path = Path(item)
     if path.is_dir():
         files = sorted(path.glob("*.obj"))
@@ -162,22 +197,23 @@ def _expand(item: str, names: list[str]) -> list[tuple[str, str, str, tuple]]:
                 parts = read_obj(path)
             except (OSError, ValueError) as e:
                 raise ValueError(f"cannot read {item!r}: {e}") from None
-            return [(path.stem, "file", str(path), tuple(np.asarray(p) for p in parts))]
+            return [(path.stem, "file", str(path), tuple(np.asarray(p) for p in parts),
+                     f"the file {str(path)!r}")]
         return _notation_file(path)
     if any(c in item for c in "*?["):
         found = [n for n in names if fnmatch.fnmatchcase(n, item)]
         if not found:
             raise ValueError(f"pattern {item!r} matches no knot or link of the table")
-        return [(n, "knot", n, ()) for n in found]
+        return [(n, "knot", n, (), f"the table's {n}") for n in found]
     found = table.lookup(item)
     if found is None:
         near = table.close_matches(item)
         hint = f"; did you mean {', '.join(near)}?" if near else ""
         raise ValueError(f"unknown knot or link {item!r}{hint}")
-    return [(found, "knot", found, ())]
+    return [(found, "knot", found, (), f"the table's {found}")]
 
 
-def _notation_file(path: Path) -> list[tuple[str, str, str, tuple]]:
+def _notation_file(path: Path) -> list[tuple[str, str, str, tuple, str]]:
     """One braid word or PD code per line (``name: notation``, or the notation alone, named
     by file and line); ``#`` comments and blank lines skipped."""
     from .notation import parse_notation
@@ -198,7 +234,7 @@ def _notation_file(path: Path) -> list[tuple[str, str, str, tuple]]:
             parse_notation(text.strip())
         except ValueError as e:
             raise ValueError(f"{path}:{k}: {e}") from None
-        out.append((name.strip(), "notation", text.strip(), ()))
+        out.append((name.strip(), "notation", text.strip(), (), f"{path}:{k} ({line!r})"))
     if not out:
         raise ValueError(f"{str(path)!r} holds no braid word or PD code")
     return out
@@ -211,8 +247,9 @@ def tasks(inputs=(), *, crossings: str | None = None, edges=None, stages=(1,),
     """The tasks for ``inputs`` (table names or aliases, patterns such as ``"10_*"``, notation
     files, OBJ files, folders of OBJ files) and the knots of ``crossings`` (``"11"``,
     ``"6-7"``), each at every edge count of ``edges`` (None: the entry's default, a file's own
-    count) and every seed of ``seeds``. Raises ValueError naming the first bad input before
-    anything runs."""
+    count) and every seed of ``seeds``. The same input twice is one task. Raises ValueError
+    naming the first bad input before anything runs, and both inputs if two different ones
+    have one name (one task would replace the other)."""
     check_energy(energy)
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
@@ -231,11 +268,20 @@ def tasks(inputs=(), *, crossings: str | None = None, edges=None, stages=(1,),
         hit = [n for n in knots.names("knot") if lo <= table.entry(n).crossings <= hi]
         if not hit:
             raise ValueError(f"the table has no knot of {crossings} crossings")
-        found += [(n, "knot", n, ()) for n in hit]
+        found += [(n, "knot", n, (), f"the table's {n}") for n in hit]
     if not found:
         raise ValueError("nothing to run: give knot names, patterns, files or --crossings")
-    out, seen = [], set()
-    for name, kind, ref, curve in found:
+    out, seen, named = [], {}, {}
+    for k, (name, kind, ref, curve, origin) in enumerate(found):
+        # the same input twice (a name and a pattern, a file and its folder) is one task;
+        # two inputs of one name are refused: one task would replace the other, or two rows
+        # of one name would hold different curves
+        same = (kind, str(Path(ref).resolve()) if kind == "file" else ref)
+        first = named.setdefault(name, (same, origin))
+        if first[0] != same:
+            raise ValueError(f"{first[1]} and {origin} are both named {name!r}; give one "
+                             f"another name (a notation line: 'new name: notation'; a file: "
+                             f"rename it)")
         for n in counts:
             if n is None:
                 n = default_edges(ref) if kind == "knot" else (
@@ -244,10 +290,26 @@ def tasks(inputs=(), *, crossings: str | None = None, edges=None, stages=(1,),
             for seed in seeds:
                 t = Task(name, kind, ref, int(n), tuple(float(s) for s in stages), energy,
                          method, tol, max_iter, max_seconds, seed, how, identify, curve)
-                if t.id not in seen:
-                    seen.add(t.id)
+                first = seen.setdefault(t.id, (same, origin, k))
+                if first[0] != same:
+                    raise ValueError(
+                        f"{first[1]} and {origin} would both be task {t.id!r} (one row of "
+                        f"results.csv, one curves/{t.id}.npz); give one another name (a "
+                        f"notation line: 'new name: notation'; a file: rename it)")
+                if first[2] == k:
                     out.append(t)
     return out
+
+
+def _interrupted(e: BaseException) -> bool:
+    """Whether ``e`` arose from a KeyboardInterrupt (numba may turn one into a SystemError)."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
 
 
 def _count(P) -> int:
@@ -296,81 +358,12 @@ def run_task(task: Task, threads: int | None = None) -> dict:
             row["identified"] = " | ".join(identify(P).names)
         row["x"] = P
     except Exception as e:  # noqa: BLE001 - recorded in the row; the other tasks go on
+        if _interrupted(e):  # Ctrl-C inside a compiled kernel: stop, do not record
+            raise KeyboardInterrupt from e
         row["error"] = f"{type(e).__name__}: {e}"
     finally:
         numba.set_num_threads(before)
     return row
-
-
-# --------------------------------------------------------------------------------------------
-# The output folder
-
-
-def _fields(n_stages: int) -> list[str]:
-    base = list(Task("", "", "", 0).settings())
-    per = [f"{f}{k}" for k in range(1, n_stages + 1) for f in STAGE_FIELDS]
-    return base + per + ["identified", "worker", "error"]
-
-
-def read_results(out) -> dict[str, dict]:
-    """The rows of ``out/results.csv`` by task id (the last row of an id wins)."""
-    path = Path(out) / "results.csv"
-    if not path.exists():
-        return {}
-    with path.open(newline="") as f:
-        return {r["id"]: r for r in csv.DictReader(f)}
-
-
-def done_ids(out) -> set[str]:
-    """Ids of the tasks finished without error whose polygon is in ``out/curves``."""
-    curves = Path(out) / "curves"
-    return {i for i, r in read_results(out).items()
-            if not r["error"] and (curves / f"{i}.npz").exists()}
-
-
-def load_curve(out, task_id: str):
-    """The relaxed polygon of a finished task (a list for a link)."""
-    with np.load(Path(out) / "curves" / f"{task_id}.npz") as z:
-        parts = [z[f"x{k}"] for k in range(len(z.files))]
-    return parts[0] if len(parts) == 1 else parts
-
-
-class _Writer:
-    """Appends rows to ``results.csv`` and writes polygons, as results arrive."""
-
-    def __init__(self, out: Path, n_stages: int):
-        self.out = out
-        (out / "curves").mkdir(parents=True, exist_ok=True)
-        path = out / "results.csv"
-        if path.exists():
-            with path.open(newline="") as f:
-                self.fields = next(csv.reader(f), None) or _fields(n_stages)
-            old = sum(f.startswith("status") for f in self.fields)
-            if old < n_stages:  # these tasks have more stages: widen the header
-                rows = list(read_results(out).values())
-                self.fields = _fields(n_stages)
-                with path.open("w", newline="") as f:
-                    w = csv.DictWriter(f, fieldnames=self.fields)
-                    w.writeheader()
-                    w.writerows(rows)
-        else:
-            self.fields = _fields(n_stages)
-            with path.open("w", newline="") as f:
-                csv.writer(f).writerow(self.fields)
-        self.path = path
-
-    def write(self, row: dict) -> None:
-        x = row.pop("x", None)
-        if x is not None:
-            parts = x if isinstance(x, list) else [x]
-            np.savez(self.out / "curves" / f"{row['id']}.npz",
-                     **{f"x{k}": p for k, p in enumerate(parts)})
-        flat = {k: v for k, v in row.items() if k != "runs"}
-        for k, s in enumerate(row.get("runs", []), 1):
-            flat.update({f"{f}{k}": s[f] for f in STAGE_FIELDS})
-        flat["error"] = " ".join(str(flat.get("error", "")).split())  # one line per row
-        with self.path.open("a", newline="") as f:
-            csv.DictWriter(f, fieldnames=self.fields, extrasaction="ignore").writerow(flat)
 
 
 def versions() -> dict:
@@ -434,7 +427,9 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
         Address of a running Dask scheduler (``tcp://host:8786``); its workers must have
         moebius_addon importable. Refused after ``timeout`` seconds without answer.
     resume : bool
-        Skip the tasks finished in ``out`` before (``done_ids``); False: run them again.
+        Skip the tasks finished in ``out`` before (``done_ids``); a task finished there with
+        other settings is refused (a FolderError naming the difference), not reported as
+        done. False: run them again.
     limit : int, optional
         Stop after this many tasks (the rest are cancelled): a slice of a long run.
     dashboard : str or None
@@ -445,6 +440,15 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
     dict
         ``done`` (ids finished now), ``failed`` (id → message), ``skipped`` (finished
         before), ``seconds`` (wall time), ``dashboard`` (its address, if any).
+
+    Raises
+    ------
+    FolderError
+        A ValueError naming the file and the fix, before any work, if ``out`` cannot be
+        used (a file, a table of something else, a damaged ``run.json``, no permission),
+        and during the run if a result cannot be written.
+    KeyboardInterrupt
+        On Ctrl-C, after saying what finished; the same call again resumes.
     """
     out = Path(out)
     cores = os.cpu_count() or 1
@@ -459,11 +463,41 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
                              f"of this machine; use fewer workers or threads")
     ids = [t.id for t in task_list]
     if len(set(ids)) != len(ids):
-        raise ValueError("two tasks have the same id")
-    skipped = done_ids(out) if resume else set()
+        first = {}
+        for t in task_list:
+            other = first.setdefault(t.id, t)
+            if other is not t:
+                raise ValueError(f"two tasks have the id {t.id!r} ({other.kind} {other.ref!r} "
+                                 f"and {t.kind} {t.ref!r}); give one another name")
+    # the folder is read before any work: a table, log or polygon it cannot use is refused
+    _check_folder(out)
+    rows = read_results(out)
+    _read_log(out)
+    skipped, changed = set(), {}
+    for t in task_list if resume else ():
+        row = rows.get(t.id)
+        if row is not None and _finished(out, t.id, row):
+            diff = _changed(t, row)
+            if diff:
+                changed[t.id] = diff
+            else:
+                skipped.add(t.id)
+    if changed:
+        i, diff = next(iter(changed.items()))
+        more = f" and {len(changed) - 1} more" if len(changed) > 1 else ""
+        what = "; ".join(f"{k} {a or '(none)'} there, {b if b != '' else '(none)'} now"
+                         for k, (a, b) in diff.items())
+        raise FolderError(f"{out / 'results.csv'}: task {i!r}{more} finished with other "
+                          f"settings ({what}); choose another output folder (--out) to keep "
+                          f"both, or run them again here with --no-resume (resume=False)")
     todo = sorted((t for t in task_list if t.id not in skipped), key=lambda t: -t.cost)
     if limit is not None:
         todo = todo[:limit] if limit >= 0 else todo
+    report = {"done": [], "failed": {}, "skipped": sorted(skipped), "seconds": 0.0,
+              "dashboard": None}
+    say(f"{len(task_list)} tasks: {len(skipped)} done before, {len(todo)} to run -> {out}")
+    if not todo:  # a finished folder is only read: it may be read-only
+        return report
     client = cluster = None
     if scheduler is not None or workers > 0:
         distributed = _dask()
@@ -474,28 +508,20 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
                 raise ValueError(f"no Dask scheduler answers at {scheduler!r} within "
                                  f"{timeout:g} s ({type(e).__name__}); start one "
                                  f"('dask scheduler') or check the address") from None
-    writer = _Writer(out, max((len(t.stages) for t in task_list), default=1))
-    report = {"done": [], "failed": {}, "skipped": sorted(skipped & set(ids)), "seconds": 0.0,
-              "dashboard": None}
-    settings = {"started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-                "tasks": len(task_list), "to_run": len(todo), "skipped": len(report["skipped"]),
-                "workers": workers if scheduler is None else None, "threads": threads,
-                "scheduler": scheduler, "versions": versions(),
-                "settings": sorted({json.dumps({k: v for k, v in t.settings().items()
-                                                if k not in ("id", "name", "ref", "edges",
-                                                             "seed")}, sort_keys=True)
-                                    for t in task_list})}
-    log = out / "run.json"
-    runs = json.loads(log.read_text()) if log.exists() else []
-    log.write_text(json.dumps(runs + [settings], indent=1) + "\n")
-    say(f"{len(task_list)} tasks: {len(report['skipped'])} done before, {len(todo)} to run "
-        f"-> {out}")
+    try:
+        writer = Writer(out, max((len(t.stages) for t in task_list), default=1))
+        _log_run(out, _run_record(task_list, todo, report, workers, threads, scheduler))
+    except FolderError:
+        if client is not None:
+            client.close()
+        raise
     t0 = time.perf_counter()
     bar = _Progress(len(todo), say)
     # a LocalCluster's nannies write their workers' settings (OMP_NUM_THREADS=1 and others)
     # into this process's os.environ and leave them: every process started from here later
     # ran its BLAS on one thread (the last bits of its products changed)
     environ = dict(os.environ)
+    quiet = _Quiet()
     try:
         if client is None and workers == 0:
             for t in todo:
@@ -529,11 +555,25 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
                     row = {**t.settings(), "runs": [], "identified": "", "worker": "",
                            "error": f"{type(e).__name__}: {e}"}
                 _record(row, writer, report, bar)
+    except (KeyboardInterrupt, FolderError) as e:
+        quiet.start()  # the closing cluster's complaints about lost connections and tasks
+        if client is not None:
+            try:
+                client.run(_quiet_worker)
+            except Exception:  # noqa: BLE001 - a worker already gone says nothing either
+                pass
+        left = len(todo) - len(report["done"]) - len(report["failed"])
+        how = "interrupted" if isinstance(e, KeyboardInterrupt) else "stopped"
+        say(f"{how}: {len(report['done'])} done now, {len(report['failed'])} failed, "
+            f"{left} not run, {len(skipped)} done before; the results are in {out}; run the "
+            f"same command again to resume (finished tasks are skipped)")
+        raise
     finally:
         if client is not None:
             client.close()
         if cluster is not None:
             cluster.close()
+        quiet.stop()
         if os.environ != environ:
             os.environ.clear()
             os.environ.update(environ)
@@ -541,6 +581,67 @@ def run(task_list: list[Task], out, *, workers: int | None = None, threads: int 
     say(f"{len(report['done'])} done, {len(report['failed'])} failed in "
         f"{report['seconds']:.1f} s")
     return report
+
+
+def _run_record(task_list, todo, report, workers, threads, scheduler) -> dict:
+    """The entry of ``run.json`` for this run."""
+    return {"started": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "tasks": len(task_list), "to_run": len(todo), "skipped": len(report["skipped"]),
+            "workers": workers if scheduler is None else None, "threads": threads,
+            "scheduler": scheduler, "versions": versions(),
+            "settings": sorted({json.dumps({k: v for k, v in t.settings().items()
+                                            if k not in ("id", "name", "ref", "edges", "seed")},
+                                           sort_keys=True) for t in task_list})}
+
+
+def _changed(task: Task, row: dict) -> dict[str, tuple]:
+    """The settings in which ``row`` (a finished task of the same id) differs from ``task``:
+    column → (the row's text, the task's value). A file's path and an unseeded task's
+    ``how`` are not compared: they do not change the result."""
+    want = task.settings()
+    diff = {}
+    for k, b in want.items():
+        if k in ("id", "name") or (k == "ref" and task.kind == "file") or (
+                k == "how" and task.seed is None):
+            continue
+        a, kind = row.get(k, ""), column_type(k)
+        try:
+            same = kind(a) == kind(b) if kind is not None and a != "" and b != "" else (
+                a == str(b))
+        except ValueError:
+            same = False
+        if not same:
+            diff[k] = (a, b)
+    return diff
+
+
+class _Quiet:
+    """Silences Dask's loggers (and tornado's, under them) while an interrupted run closes its
+    cluster: lost connections and cancelled tasks are expected then."""
+
+    names = ("distributed", "tornado")
+
+    def __init__(self):
+        self.levels = {}
+
+    def start(self) -> None:
+        import logging
+
+        for name in self.names:
+            logger = logging.getLogger(name)
+            self.levels[name] = logger.level
+            logger.setLevel(logging.CRITICAL + 1)
+
+    def stop(self) -> None:
+        import logging
+
+        for name, level in self.levels.items():
+            logging.getLogger(name).setLevel(level)
+        self.levels = {}
+
+
+def _quiet_worker() -> None:
+    _Quiet().start()
 
 
 def _warm_paths(todo: list[Task]) -> tuple[str, ...]:
@@ -555,6 +656,9 @@ def _warm_worker(paths: tuple[str, ...], threads: int) -> None:
 
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
     warm(paths, say=None)
+    # Ctrl-C in a terminal reaches the workers too: the client stops the run and closes them
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def thread_env(threads: int) -> dict[str, str]:
@@ -579,7 +683,7 @@ def _dashboard(client) -> str | None:
         return None
 
 
-def _record(row: dict, writer: _Writer, report: dict, bar) -> None:
+def _record(row: dict, writer: Writer, report: dict, bar) -> None:
     writer.write(row)
     if row["error"]:
         report["failed"][row["id"]] = row["error"]
@@ -657,6 +761,7 @@ def parser(prog: str = "moebius batch") -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None, prog: str = "moebius batch") -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = parser(prog).parse_args(argv)
     try:
         todo = tasks(args.inputs, crossings=args.crossings, edges=args.edges,
@@ -676,6 +781,10 @@ def main(argv: list[str] | None = None, prog: str = "moebius batch") -> int:
     except (ValueError, ImportError) as e:
         print(f"{prog}: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        again = " ".join(shlex.quote(a) for a in [*prog.split(), *argv] if a != "--no-resume")
+        print(f"{prog}: interrupted; to resume: {again}", file=sys.stderr)
+        return 130
     return 1 if report["failed"] else 0
 
 

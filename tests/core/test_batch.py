@@ -6,6 +6,10 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
+import shlex
+import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -206,3 +210,194 @@ def test_command_line(tmp_path, capsys):
     assert batch.console(["batch", "nope_9", "--out", str(out)]) == 2
     assert "unknown knot or link 'nope_9'" in capsys.readouterr().err
     assert batch.console(["relax"]) == 2
+
+
+# --------------------------------------------------------------------------------------------
+# Nothing lost, nothing misread
+
+
+def test_every_input_is_its_own_task_or_the_clash_is_refused(tmp_path):
+    notes = tmp_path / "notes.txt"
+    notes.write_text("a b: 1 1 1\na-b: 1 1 1 1 1\n3_1: 1 1 1 1 1\n")
+    got = small(str(notes))
+    assert [t.name for t in got] == ["a b", "a-b", "3_1"]
+    assert len({t.id for t in got}) == 3
+    assert len(small("3_1", "trefoil", "3_*")) == 1  # one input three times: one task
+    with pytest.raises(ValueError, match=re.escape(
+            f"{notes}:3 ('3_1: 1 1 1 1 1') and the table's 3_1 are both named '3_1'")):
+        small(str(notes), "3_1")
+    for d in ("x", "y"):
+        (tmp_path / d).mkdir()
+        lemniscate_obj(tmp_path / d / "knot.obj")
+    with pytest.raises(ValueError, match=re.escape(
+            f"the file '{tmp_path / 'x' / 'knot.obj'}' and the file "
+            f"'{tmp_path / 'y' / 'knot.obj'}' are both named 'knot'")):
+        small(str(tmp_path / "x" / "knot.obj"), str(tmp_path / "y" / "knot.obj"))
+    # the same file twice (itself and its folder) is one task
+    assert len(small(str(tmp_path / "x" / "knot.obj"), str(tmp_path / "x"))) == 1
+
+
+def test_cut_row_and_cut_polygon_are_not_done(tmp_path):
+    out = tmp_path / "out"
+    todo = small("3_1", "4_1", "5_1")
+    batch.run(todo, out, workers=0, say=quiet)
+    table = out / "results.csv"
+    cut = rows(out)[-1]["id"]  # a kill in the middle of the last row
+    table.write_bytes(table.read_bytes()[:-15])
+    damaged = next(t.id for t in todo if t.id != cut)  # a kill in the middle of np.savez
+    npz = out / "curves" / f"{damaged}.npz"
+    npz.write_bytes(npz.read_bytes()[: npz.stat().st_size // 2])
+    assert batch.done_ids(out) == {t.id for t in todo} - {cut, damaged}
+    with pytest.raises(ValueError, match=re.escape(f"{npz} is damaged")):
+        batch.load_curve(out, damaged)
+    again = batch.run(todo, out, workers=0, say=quiet)
+    assert sorted(again["done"]) == sorted([cut, damaged]) and again["failed"] == {}
+    # the cut line is gone, no row is glued to it, every line has the header's fields
+    lines = list(csv.reader(table.open(newline="")))
+    assert {len(r) for r in lines} == {len(lines[0])}
+    assert [r[0] for r in lines[1:]] == [t.id for t in todo if t.id != cut] + again["done"]
+    assert batch.load_curve(out, damaged).shape == (40, 3)
+    assert batch.done_ids(out) == {t.id for t in todo}
+
+
+def test_changed_settings_are_refused_with_the_difference(tmp_path):
+    out = tmp_path / "out"
+    batch.run(small("3_1"), out, workers=0, say=quiet)
+    with pytest.raises(ValueError, match=re.escape(
+            "task '3_1_40' finished with other settings (tol 0.0001 there, 1e-06 now)")):
+        batch.run(small("3_1", tol=1e-6), out, workers=0, say=quiet)
+    with pytest.raises(ValueError, match=re.escape(
+            "(method projected_gradient_implicit there, projected_gradient now; max_iter 4 "
+            "there, 5 now)")):
+        batch.run(small("3_1", method="projected_gradient", max_iter=5), out, workers=0,
+                  say=quiet)
+    assert len(rows(out)) == 1
+    # the same settings are done; asked to, the changed ones run again
+    assert batch.run(small("3_1"), out, workers=0, say=quiet)["skipped"] == ["3_1_40"]
+    again = batch.run(small("3_1", tol=1e-6), out, workers=0, resume=False, say=quiet)
+    assert again["done"] == ["3_1_40"]
+    assert rows(out)[-1]["tol"] == "1e-06"
+
+
+def test_long_names_are_safe_file_names(tmp_path):
+    notes = tmp_path / "long.txt"
+    long = "k" * 300
+    notes.write_text(f"{long}: 1 1 1\n{long}x: 1 1 1\n")
+    todo = small(str(notes))
+    report = batch.run(todo, tmp_path / "out", workers=0, say=quiet)
+    assert sorted(report["done"]) == sorted(t.id for t in todo) and report["failed"] == {}
+    assert len({t.id for t in todo}) == 2
+    assert all(len(f"{t.id}.npz") < 255 for t in todo)  # a file name's limit on common systems
+    assert sorted(r["name"] for r in rows(tmp_path / "out")) == [long, long + "x"]
+    for t in todo:
+        assert batch.load_curve(tmp_path / "out", t.id).shape == (40, 3)
+
+
+def _foreign_table(out: Path) -> str:
+    out.mkdir()
+    (out / "results.csv").write_text("name,energy\n3_1,75.1\n")
+    return f"{out / 'results.csv'} is not the results table of a batch run (no column 'id'"
+
+
+def _a_file(out: Path) -> str:
+    out.write_text("")
+    return f"{out} is a file, not a folder; choose another output folder (--out)"
+
+
+def _curves_a_file(out: Path) -> str:
+    out.mkdir()
+    (out / "curves").write_text("")
+    return f"cannot write in {out} (File exists); make it writable"
+
+
+@pytest.mark.parametrize("fault", [_foreign_table, _a_file, _curves_a_file])
+def test_folder_faults_are_one_line_with_the_file_and_fix(tmp_path, capsys, fault):
+    out = tmp_path / "out"
+    words = fault(out)
+    assert batch.console(["batch", "3_1", "--edges", "40", "--max-iter", "2", "--no-identify",
+                          "--workers", "0", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and words in err, err
+
+
+def test_damaged_run_log_is_named(tmp_path):
+    out = tmp_path / "out"
+    batch.run(small("3_1"), out, workers=0, say=quiet)
+    (out / "run.json").write_text('[{"started": ')
+    with pytest.raises(ValueError, match=re.escape(
+            f"{out / 'run.json'} is damaged (Expecting value at line 1); it is only the log "
+            "of the runs (not needed to resume): repair it or move it away")):
+        batch.run(small("3_1", "4_1"), out, workers=0, say=quiet)
+    (out / "run.json").unlink()
+    assert batch.run(small("3_1", "4_1"), out, workers=0, say=quiet)["done"] == ["4_1_40"]
+
+
+def test_finished_folder_is_only_read(tmp_path):
+    """A finished folder may be read-only (an archive): a run finds nothing to do and
+    rewrites nothing."""
+    out = tmp_path / "out"
+    batch.run(small("3_1"), out, workers=0, say=quiet)
+    before = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
+    if os.geteuid() != 0:  # root writes anywhere
+        out.chmod(0o555)
+    try:
+        report = batch.run(small("3_1"), out, workers=0, say=quiet)
+    finally:
+        out.chmod(0o755)
+    assert report["skipped"] == ["3_1_40"] and report["done"] == []
+    assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == before
+
+
+@pytest.mark.parametrize("workers", ["0", "2"])
+def test_ctrl_c_says_what_finished_and_how_to_resume(tmp_path, workers):
+    """Ctrl-C in a terminal reaches the whole process group: the command and, with workers,
+    the Dask workers too."""
+    if workers != "0":
+        pytest.importorskip("distributed")
+        if (os.cpu_count() or 1) < 2:
+            pytest.skip("two workers need two cores")
+    out = tmp_path / "out"
+    args = [sys.executable, "-m", "moebius_addon.core.batch", "--crossings", "3-8", "--edges",
+            "60", "--max-iter", "200", "--tol", "1e-12", "--no-identify", "--workers", workers,
+            "--dashboard", "", "--out", str(out)]
+    env = {**os.environ,
+           "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    lines = []
+    for line in proc.stdout:  # interrupt once the first task has finished
+        lines.append(line)
+        if re.match(r"\[[#.]+\] 1/", line):
+            os.killpg(proc.pid, signal.SIGINT)
+            break
+    rest, err = proc.communicate(timeout=120)
+    said = "".join(lines) + rest
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    finished = {r["id"] for r in rows(out)}
+    assert re.search(rf"interrupted: {len(finished)} done now, 0 failed, \d+ not run", said)
+    assert "run the same command again to resume" in said
+    assert err.strip().endswith(
+        "interrupted; to resume: python -m moebius_addon.core.batch " +
+        " ".join(shlex.quote(a) for a in args[3:]))
+    assert batch.done_ids(out) == finished
+
+
+def test_write_fault_mid_run_stops_with_the_file_and_what_finished(tmp_path):
+    """``curves`` turns into a file after the first task (a disk unmounted, a folder
+    replaced): the next polygon cannot be written."""
+    out = tmp_path / "out"
+    said = []
+
+    def say(line):
+        said.append(line)
+        if line.startswith("[") and (out / "curves").is_dir():
+            shutil.rmtree(out / "curves")
+            (out / "curves").write_text("")
+
+    todo = small("3_1", "4_1", "5_1")
+    with pytest.raises(ValueError, match=r"cannot write .*curves/\w+\.npz \(Not a directory\); "
+                       r"free space on its disk or make .* writable, then run the same "
+                       r"command again to resume"):
+        batch.run(todo, out, workers=0, say=say)
+    assert said[-1].startswith("stopped: 1 done now, 0 failed, 2 not run")
