@@ -37,6 +37,7 @@ from .catalogue import (
 from .conversion import apply_conversion, convert_object, make_curve_object, prepare_conversion
 from .export import export_flow, export_suffix
 from .gradients import refresh_gradients, show_gradients
+from .group import group_name
 from .identification import KNOT_TYPE_PROP, identify_object, object_curves, type_kept
 from .keyframes import ENERGY_NAME_PROP, ENERGY_PROP
 from .labels import (
@@ -85,5 +86,5 @@ __all__ = [
     "choose_method", "clear_animation", "convert_object", "edge_limit", "energy", "export_flow",
     "export_suffix", "knot_names", "knot_polygons", "make_curve_object", "method_hint",
     "prepare_conversion", "refresh_gradients", "relax_object", "relax_settings", "show_gradients",
-    "solver_warm", "Preparation", "solver_paths",
+    "solver_warm", "Preparation", "solver_paths", "group_name",
 ]

@@ -20,7 +20,7 @@ def export_suffix(filepath: str | Path) -> str:
     return suffix
 
 
-def export_flow(obj: bpy.types.Object, filepath: str | Path,
+def export_flow(obj, filepath: str | Path,
                 scene: bpy.types.Scene | None = None,
                 frame_range: tuple[int, int] | None = None) -> Path:
     """Export the keyframed curve over its own keyed frames as Alembic or USD.
@@ -33,8 +33,8 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
 
     Parameters
     ----------
-    obj : bpy.types.Object
-        The relaxed curve; only it is exported.
+    obj : bpy.types.Object or sequence of them
+        The relaxed curve, or the curves relaxed together; only they are exported.
     filepath : str or Path
         ``.abc`` for Alembic, ``.usd``/``.usda``/``.usdc``/``.usdz`` for USD.
     scene : bpy.types.Scene, optional
@@ -47,10 +47,11 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
     Path
     """
     scene = scene or bpy.context.scene
+    objs = [obj] if isinstance(obj, bpy.types.Object) else list(obj)
     path = Path(filepath)
     suffix = export_suffix(path)
     if frame_range is None:
-        frames = keyframes.keyed_frames(obj)
+        frames = sorted({f for o in objs for f in keyframes.keyed_frames(o)})
         frame_range = ((min(frames), max(frames)) if frames
                        else (scene.frame_start, scene.frame_end))
     start, end = (int(f) for f in frame_range)
@@ -59,12 +60,15 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
     path.parent.mkdir(parents=True, exist_ok=True)
     selected = [o for o in bpy.context.view_layer.objects if o.select_get()]
     active = bpy.context.view_layer.objects.active
-    select_only(bpy.context, obj)
+    select_only(bpy.context, objs[0])
+    for o in objs[1:]:
+        o.select_set(True)
     frame = scene.frame_current
     scene_range = scene.frame_start, scene.frame_end
-    bevel = obj.data.bevel_depth
-    follow = _points_follow_shape_keys(obj)
-    obj.data.bevel_depth = 0.0
+    bevels = [o.data.bevel_depth for o in objs]
+    follows = [_points_follow_shape_keys(o) for o in objs]
+    for o in objs:
+        o.data.bevel_depth = 0.0
     try:
         if suffix == ".abc":
             bpy.ops.wm.alembic_export(filepath=str(path), start=start, end=end, selected=True)
@@ -73,10 +77,12 @@ def export_flow(obj: bpy.types.Object, filepath: str | Path,
             bpy.ops.wm.usd_export(filepath=str(path), export_animation=True,
                                   selected_objects_only=True)
     finally:
-        follow()
+        for follow in follows:
+            follow()
         scene.frame_start, scene.frame_end = scene_range
-        obj.data.bevel_depth = bevel
-        obj.select_set(False)
+        for o, bevel in zip(objs, bevels, strict=True):
+            o.data.bevel_depth = bevel
+            o.select_set(False)
         for o in selected:
             o.select_set(True)
         bpy.context.view_layer.objects.active = active

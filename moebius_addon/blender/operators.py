@@ -22,6 +22,15 @@ def _active_curve(context):
     return obj if obj is not None and obj.type == "CURVE" else None
 
 
+def _selected_curves(context) -> list:
+    """The active curve object first, then the other selected curve objects by name: what
+    Relax, Clear and Export act on together."""
+    active = _active_curve(context)
+    others = sorted((o for o in context.selected_objects
+                     if o.type == "CURVE" and o != active), key=lambda o: o.name)
+    return [active, *others] if active is not None else others
+
+
 def _poll_active_curve(cls, context) -> bool:
     if _active_curve(context) is None:
         cls.poll_message_set("Select a curve object (convert one with Möbius ▸ Polygon ▸ Convert)")
@@ -90,8 +99,9 @@ PREPARING = "Möbius: preparing the solver (first run only) …"
 
 
 class MOEBIUS_OT_relax(bpy.types.Operator):
-    """Relax the active curve by the Möbius energy flow from its shape at the current frame,
-    replacing its flow keys (Esc stops and keeps the iterates so far)"""
+    """Relax the selected curves (together, as one system) by the Möbius energy flow from
+    their shape at the current frame, replacing their flow keys (Esc stops and keeps the
+    iterates so far)"""
 
     bl_idname = "moebius.relax"
     bl_label = "Relax"
@@ -112,14 +122,14 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
     @classmethod
     def description(cls, context, properties):
         if properties.append:
-            return ("Continue the keyed flow of the active curve: from its last iterate, new "
+            return ("Continue the keyed flow of the selected curves: from its last iterate, new "
                     "keys after its last frame (Esc stops and keeps the iterates so far)")
         return cls.bl_rna.description
 
     def _start(self, context):
         settings = context.scene.moebius
         try:
-            self._run = api.ObjectRelaxation(_active_curve(context), append=self.append,
+            self._run = api.ObjectRelaxation(_selected_curves(context), append=self.append,
                                              **api.relax_settings(settings))
         except ValueError as err:
             self.report({"ERROR"}, str(err))
@@ -137,7 +147,7 @@ class MOEBIUS_OT_relax(bpy.types.Operator):
         how += " continued" if run.append else ""
         how += f", {run.engine} engine"
         hint = api.method_hint(run.method, result, run.start, not run.open, run.grows)
-        self.report({kind}, f"'{run.obj.name}'{how}: {run.nit} iterations, energy "
+        self.report({kind}, f"{run.name}{how}: {run.nit} iterations, energy "
                             f"{run.energies[0]:.6g} → {run.energy:.6g}, frames "
                             f"{run.frame_start}–{run.frame_start + len(run.iterates) - 1} "
                             f"({result.message}{hint})"
@@ -409,7 +419,7 @@ class MOEBIUS_MT_add_knot(bpy.types.Menu):
 
 
 class MOEBIUS_OT_clear_animation(bpy.types.Operator):
-    """Remove the relaxation keyframes of the active curve and restore its start shape"""
+    """Remove the relaxation keyframes of the selected curves and restore their start shape"""
 
     bl_idname = "moebius.clear_animation"
     bl_label = "Clear Flow Animation"
@@ -418,12 +428,14 @@ class MOEBIUS_OT_clear_animation(bpy.types.Operator):
     poll = classmethod(_poll_active_curve)
 
     def execute(self, context):
-        obj = _active_curve(context)
-        if not keyframes.keyed_frames(obj):
-            self.report({"WARNING"}, f"'{obj.name}' has no relaxation keyframes to clear")
+        objs = [o for o in _selected_curves(context) if keyframes.keyed_frames(o)]
+        if not objs:
+            self.report({"WARNING"}, f"'{_active_curve(context).name}' has no relaxation "
+                                     "keyframes to clear")
             return {"CANCELLED"}
-        api.clear_animation(obj)
-        self.report({"INFO"}, f"Cleared the flow animation of '{obj.name}'")
+        for obj in objs:
+            api.clear_animation(obj)
+        self.report({"INFO"}, f"Cleared the flow animation of {api.group_name(objs)}")
         return {"FINISHED"}
 
 
@@ -449,7 +461,7 @@ class MOEBIUS_OT_apply_frame(bpy.types.Operator):
 
 
 class MOEBIUS_OT_export_flow(bpy.types.Operator):
-    """Export the active curve's flow over its keyed frames as Alembic (.abc) or USD
+    """Export the flow of the selected curves over their keyed frames as Alembic (.abc) or USD
     (.usd/.usda/.usdc/.usdz), chosen by the file name"""
 
     bl_idname = "moebius.export_flow"
@@ -477,13 +489,13 @@ class MOEBIUS_OT_export_flow(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def execute(self, context):
-        obj = _active_curve(context)
+        objs = [o for o in _selected_curves(context) if keyframes.keyed_frames(o)]
         try:
-            path = api.export_flow(obj, bpy.path.abspath(self.filepath), scene=context.scene)
+            path = api.export_flow(objs, bpy.path.abspath(self.filepath), scene=context.scene)
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
-        self.report({"INFO"}, f"Exported the flow of '{obj.name}' to {path}")
+        self.report({"INFO"}, f"Exported the flow of {api.group_name(objs)} to {path}")
         return {"FINISHED"}
 
 

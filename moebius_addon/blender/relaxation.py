@@ -14,6 +14,7 @@ from ..core.compiling import compiling
 from ..core.spelling import take_spelling
 from . import geometry, keyframes, scene_constraints
 from .gradients import refresh_gradients
+from .group import group_name, members
 from .identification import type_kept
 from .labels import (
     AUTO_METHOD,
@@ -188,7 +189,8 @@ def at_count(link: Sequence[np.ndarray], sizes: Sequence[int],
 
 
 class ObjectRelaxation:
-    """A relaxation of one curve object, stepped by a caller that may stop it at any time.
+    """A relaxation of a curve object, or of several relaxed together as one system, stepped
+    by a caller that may stop it at any time.
 
     The modal operator steps it on a timer; :func:`relax_object` steps it in a loop. The start
     and every ``keyframe_stride``-th accepted iterate (and always the last) are recorded and
@@ -196,9 +198,12 @@ class ObjectRelaxation:
 
     Parameters
     ----------
-    obj : bpy.types.Object
+    obj : bpy.types.Object or sequence of them
         Curve of cyclic poly splines (see :func:`convert_object`); its shape at the current frame
         is the start. Earlier flow keyframes on it are replaced by this run's when it finishes.
+        Several curve objects (an artist's cables, each its own object) relax together: no
+        strand of one comes nearer another than strands of one object do; each keeps its own
+        data, pins and keys; the run works in the first one's coordinates (:mod:`.group`).
     metric : str
         ``"hs"``, ``"hs_pure"``, ``"h2"``, ``"h1"`` or ``"l2"``.
     max_iterations : int
@@ -287,31 +292,35 @@ class ObjectRelaxation:
             raise ValueError(f"'{obj.name}': {err}") from None
         #: which energy the flow minimizes and keys ("moebius", "tangent_point(2, 4.5)")
         self.energy_label = choice.label
-        polygons = geometry.curve_polygons(obj, allow_open=True)
-        closed = geometry.curve_closed(obj)
+        #: the curve objects of the run (:mod:`.group`), the first one's coordinates the run's
+        self.members = members(obj)
+        obj = self.members[0].obj
+        #: the objects in words, for reports: 'Knot', or 'Cable' and 9 other curves
+        self.name = group_name([m.obj for m in self.members])
+        polygons = [P for m in self.members for P in m.to_run(m.polygons)]
+        closed = [c for m in self.members for c in m.closed]
         self._closed = closed
         #: whether a spline is open (an open curve: the core's closed=False, exact engine)
         self.open = not all(closed)
         if self.open:
             options["closed"] = closed if len(closed) > 1 else closed[0]
-        keyframes.check_flow_target(obj)
+        for m in self.members:
+            keyframes.check_flow_target(m.obj)
+        pin_selected = len(self.members) > 1 and options.pop("pin_selected", False)
         try:  # obstacles as (V, F) arrays, selected points as pins
             options = scene_constraints.resolve(obj, options)
         except ValueError as err:
             raise ValueError(f"'{obj.name}': {err}") from None
+        if pin_selected:
+            if options.get("pinned") is not None:
+                raise ValueError("give pinned= or pin_selected=True, not both")
+            options["pinned"] = self._selected_points()
         self._shown = [p.copy() for p in polygons]  # the shape at the current frame
         self._cuts = np.cumsum([len(p) for p in polygons])[:-1]
         # the earlier flow keys, continued from their last iterate (read by show() otherwise)
-        self._prior = keyframes.read_flow_keyframes(obj) if append else None
-        keyed = obj.get(keyframes.ENERGY_NAME_PROP, "moebius")
-        if self._prior is not None and keyed != self.energy_label:
-            raise ValueError(
-                f"'{obj.name}': its keyed flow minimized the {keyed} energy, not "
-                f"{self.energy_label}: continue with that energy, or Clear Flow first")
-        if self._prior is not None:
-            frames, points, _ = self._prior
-            polygons = np.split(points[-1], self._cuts)
-            frame_start = int(frames[-1])
+        if append:
+            polygons, frame_start = self._read_prior(polygons, frame_start)
+        continued = append and self.members[0].prior is not None
         allow_large = options.pop("allow_large", False)
         try:  # before any work: no size may crash the process
             check_edge_count(sum(len(p) for p in polygons), metric, method, engine,
@@ -321,12 +330,14 @@ class ObjectRelaxation:
                 raise ValueError(f"refine must be True or False, got {refine!r}")
         except ValueError as err:
             raise ValueError(f"'{obj.name}': {err}") from None
-        check_converted(obj, polygons, closed)  # after the size: no work before either
+        for m in self.members:  # after the size: no work before either
+            check_converted(m.obj, m.to_local(polygons[m.span]) if continued else m.polygons,
+                            m.closed)
         try:  # a curve too coarse for its shape is refined by the core when refine is on
             core.check_polygon(as_input(polygons), closed=options.get("closed", True),
                                coarseness=not refine)
         except ValueError as err:
-            raise ValueError(f"'{obj.name}': {err}") from None
+            raise ValueError(f"{self.name}: {err}") from None
         #: the notes of the refinement settings (e.g. why a curve is not refined)
         self.refine_note = ""
         if refine:
@@ -353,7 +364,7 @@ class ObjectRelaxation:
             # implicit one keeps its own (core.solvers), but bad values are refused all the same
             core.solvers.projected.check_line_search(options.pop("armijo", 0.5),
                                                      options.pop("growth", 8.0))
-        self.append = self._prior is not None
+        self.append = continued
         self.frame_start = int(frame_start)
         self.stride = int(keyframe_stride)
         # make_run("projected_gradient", ...) is core.Relaxation itself: the default is the
@@ -386,12 +397,51 @@ class ObjectRelaxation:
         n = sum(len(p) - (0 if c else 1) for p, c in zip(polygons, closed, strict=True))
         asked = core.check_number("max_edges", max_edges or 0, 0, integer=True)
         wanted = asked or core.default_max_edges(n)
-        if obj.data.shape_keys is not None and not keyframes.is_flow_key(obj.data):
-            self.refine_note = "not refined: the curve has shape keys of its own"
-            return n
+        for o in (m.obj for m in self.members):
+            if o.data.shape_keys is not None and not keyframes.is_flow_key(o.data):
+                self.refine_note = ("not refined: the curve has shape keys of its own"
+                                    if len(self.members) == 1 else
+                                    f"not refined: '{o.name}' has shape keys of its own")
+                return n
         if allow_large:
             return wanted
         return min(wanted, max(n, edge_limit(metric, method, engine)))
+
+    def _selected_points(self) -> list[list[int]]:
+        """Pin Selected Points over the run's objects: the selected points of every spline."""
+        per = []
+        for m in self.members:
+            sel = scene_constraints.selected_points(m.obj)
+            per += ([[] for _ in m.polygons] if sel is None
+                    else [sel] if len(m.polygons) == 1 else sel)
+        if not any(per):
+            raise ValueError(f"Pin Selected Points is on, but no point of {self.name} is "
+                             "selected: select the points to pin in Edit Mode (or turn it off)")
+        return per
+
+    def _read_prior(self, polygons, frame_start):
+        """Continue: every object's flow keys (the same frames on each), their last iterate
+        the start in the run's coordinates, and its frame."""
+        for m in self.members:
+            m.prior = keyframes.read_flow_keyframes(m.obj)
+            keyed = m.obj.get(keyframes.ENERGY_NAME_PROP, "moebius")
+            if m.prior is not None and keyed != self.energy_label:
+                raise ValueError(
+                    f"'{m.obj.name}': its keyed flow minimized the {keyed} energy, not "
+                    f"{self.energy_label}: continue with that energy, or Clear Flow first")
+        keyed = [m for m in self.members if m.prior is not None]
+        if not keyed:
+            return polygons, frame_start
+        first = keyed[0]
+        for m in self.members:
+            if m.prior is None or not np.array_equal(m.prior[0], first.prior[0]):
+                raise ValueError(
+                    f"'{m.obj.name}' and '{first.obj.name}' were not keyed by one run (their "
+                    "flow keys differ): Continue relaxes curves keyed together; select those, "
+                    "or Clear Flow and Relax them together")
+        polygons = [P for m in self.members
+                    for P in m.to_run(np.split(m.prior[1][-1], m.cuts))]
+        return polygons, int(first.prior[0][-1])
 
     def step(self) -> bool:
         """Advance by one accepted iterate; False once the run has finished.
@@ -436,29 +486,33 @@ class ObjectRelaxation:
         self.run.stop(message)
 
     def show(self) -> None:
-        """Put the current iterate on the curve (for live display while running; the earlier
-        run's keys are removed at the first call, or they would pull the curve back)."""
+        """Put the current iterate on the curves (for live display while running; the earlier
+        run's keys are removed at the first call, or they would pull the curves back)."""
         if not self._live:
-            if self._prior is None:  # kept to be put back by restore() after a failure
-                try:
-                    self._prior = keyframes.read_flow_keyframes(self.obj)
-                except ValueError:  # keys edited by hand: a new run replaces them anyway
-                    pass
-            keyframes.remove_flow_keyframes(self.obj)
+            for m in self.members:
+                if m.prior is None:  # kept to be put back by restore() after a failure
+                    try:
+                        m.prior = keyframes.read_flow_keyframes(m.obj)
+                    except ValueError:  # keys edited by hand: a new run replaces them anyway
+                        pass
+                keyframes.remove_flow_keyframes(m.obj)
             self._live = True
         # a refined iterate has more points than the curve: every k-th is the same shape to
         # the eye (the curve grows to the refined count when the run is keyed)
         sizes = [len(p) for p in self._shown]
-        geometry.write_polygons(self.obj.data, at_count(self.x, sizes, self._closed))
+        shown = at_count(self.x, sizes, self._closed)
+        for m in self.members:
+            geometry.write_polygons(m.obj.data, m.to_local(shown[m.span]))
 
     def restore(self) -> None:
         """Undo :meth:`show` after a failure: the earlier flow keys (removed for the live
-        display) written back and the curve as it was shown before the run."""
-        if self._live and self._prior is not None:
-            frames, points, energies = self._prior
-            keyframes.write_flow_keyframes(self.obj, [np.split(X, self._cuts) for X in points],
-                                           list(energies), int(frames[0]))
-        geometry.write_polygons(self.obj.data, self._shown)
+        display) written back and the curves as they were shown before the run."""
+        for m in self.members:
+            if self._live and m.prior is not None:
+                frames, points, energies = m.prior
+                keyframes.write_flow_keyframes(m.obj, [np.split(X, m.cuts) for X in points],
+                                               list(energies), int(frames[0]))
+            geometry.write_polygons(m.obj.data, m.polygons)
 
     def refinement_text(self, result) -> str:
         """What the run refined, in a line: "100 → 200 edges at iteration 0 (start too
@@ -490,42 +544,53 @@ class ObjectRelaxation:
         # a refined run ends with more points than it started with: every record, the earlier
         # keys and the rest shape are split the same way (the same curves), the curve grown
         sizes = [len(p) for p in as_link(result.x)]
-        rest_before = rest_shape(self.obj)
         iterates = [at_count(link, sizes, self._closed) for link in self.iterates]
-        energies, first = self.energies, self.frame_start
-        if self.append:  # the earlier keys, then this run's from the last of them on
-            frames0, points, energies0 = self._prior
-            iterates = [at_count(np.split(X, self._cuts), sizes, self._closed)
-                        for X in points[:-1]] + iterates
-            energies = list(energies0[:-1]) + energies
-            first = int(frames0[0])
-        if sizes != [len(s.points) for s in self.obj.data.splines]:
-            geometry.grow_splines(self.obj.data, sizes)
-            if self.append and rest_before is not None:
-                set_rest_shape(self.obj, at_count(rest_before, sizes, self._closed))
-        if not self.append:
-            set_rest_shape(self.obj, at_count(self.start, sizes, self._closed))
-        # the curve's own (unanimated) shape: the rest shape Clear Flow goes back to
-        rest = rest_shape(self.obj)
-        geometry.write_polygons(self.obj.data, iterates[0] if rest is None else rest)
-        frames = keyframes.write_flow_keyframes(self.obj, iterates, energies, first,
-                                                energy_name=self.energy_label)
+        for m in self.members:  # each object keys its own splines, in its own coordinates
+            frames = self._key_member(m, sizes[m.span], [m.to_local(link[m.span])
+                                                         for link in iterates])
         scene.frame_start = min(scene.frame_start, frames.start)
         scene.frame_end = max(scene.frame_end, frames.stop - 1)
         scene.frame_set(frames.stop - 1)
-        refresh_gradients(self.obj)  # drawn at the start, they would show a stale field
+        for m in self.members:  # drawn at the start, they would show a stale field
+            refresh_gradients(m.obj)
         # the flow never passes a strand through another: the same invariants at both ends
         self.type_kept, self.type_message = (None, "an open curve has no knot type") if (
             self.open) else type_kept(self.start, as_link(result.x))
         stats = getattr(scene, "moebius", None)
         if stats is not None:
             # the end as the result reports it (on the tree: its exact energy, core.engine)
-            stats.store_run(self.obj.name, self.nit, self.energies[0], float(result.fun),
+            stats.store_run(self.obj.name if len(self.members) == 1 else self.name, self.nit,
+                            self.energies[0], float(result.fun),
                             time.perf_counter() - self.t0, str(result.message), len(frames),
                             self.method, self.engine, self.type_message,
                             refined=self.refinement_text(result),
                             energy_name=self.energy_label)
         return result
+
+
+    def _key_member(self, m, sizes: list[int], iterates: list[list[np.ndarray]]) -> range:
+        """Key ``iterates`` (this run's, in ``m``'s coordinates, at ``sizes`` points) on
+        ``m``'s object after its earlier keys when continued; returns the keyed frames."""
+        obj, closed = m.obj, m.closed
+        rest_before = rest_shape(obj)
+        energies, first = self.energies, self.frame_start
+        if self.append:  # the earlier keys, then this run's from the last of them on
+            frames0, points, energies0 = m.prior
+            iterates = [at_count(np.split(X, m.cuts), sizes, closed)
+                        for X in points[:-1]] + iterates
+            energies = list(energies0[:-1]) + energies
+            first = int(frames0[0])
+        if sizes != [len(s.points) for s in obj.data.splines]:
+            geometry.grow_splines(obj.data, sizes)
+            if self.append and rest_before is not None:
+                set_rest_shape(obj, at_count(rest_before, sizes, closed))
+        if not self.append:
+            set_rest_shape(obj, at_count(m.to_local(self.start[m.span]), sizes, closed))
+        # the curve's own (unanimated) shape: the rest shape Clear Flow goes back to
+        rest = rest_shape(obj)
+        geometry.write_polygons(obj.data, iterates[0] if rest is None else rest)
+        return keyframes.write_flow_keyframes(obj, iterates, energies, first,
+                                              energy_name=self.energy_label)
 
 
 def _refinement_line(r: dict) -> str:
@@ -547,8 +612,9 @@ def relax_object(obj: bpy.types.Object, *, metric: str = "hs", max_iterations: i
 
     Parameters
     ----------
-    obj : bpy.types.Object
-        Curve of cyclic poly splines (see :func:`convert_object`).
+    obj : bpy.types.Object or sequence of them
+        Curve of cyclic poly splines (see :func:`convert_object`), or several curve objects
+        relaxed together as one system (each keeps its own keys; :class:`ObjectRelaxation`).
     metric, max_iterations, tolerance, frame_start, keyframe_stride, append, **options
         See :class:`ObjectRelaxation`; ``append=True`` continues the flow keyed on ``obj``.
     method : str
@@ -607,7 +673,7 @@ def _relax_object(obj, metric, max_iterations, tolerance, frame_start, keyframe_
             before = run.nit
             more = run.step()
             if run.nit > before and say is not None:
-                say(f"'{obj.name}' iteration {run.nit}/{limit}, energy {run.energy:.6g}, "
+                say(f"{run.name} iteration {run.nit}/{limit}, energy {run.energy:.6g}, "
                     f"{time.perf_counter() - run.t0:.1f} s")
             # every accepted iterate reaches the callback, the last one of the run included (as
             # in core.relax); a True returned for the last one changes nothing
@@ -617,12 +683,12 @@ def _relax_object(obj, metric, max_iterations, tolerance, frame_start, keyframe_
     except BaseException as err:  # Ctrl+C in a script, a failing callback: keep the work
         if run.nit == 0:
             err.add_note(f"moebius: no iterate was computed; the earlier animation of "
-                         f"'{obj.name}' is kept")
+                         f"{run.name} is kept")
         else:
             run.stop(f"interrupted by {type(err).__name__}")
             run.finish(scene)
             err.add_note(f"moebius: the {run.nit} iterates computed before the interruption "
-                         f"are keyed on '{obj.name}' from frame {run.frame_start}")
+                         f"are keyed on {run.name} from frame {run.frame_start}")
         raise
     return run.finish(scene)
 
