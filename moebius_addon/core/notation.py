@@ -38,6 +38,7 @@ def parse_braid(text: str) -> tuple[list[int], int | None]:
         bad = re.search(r"[^\d\s,;+\-\[\]\{\}\(\)]+", body).group(0)
         raise ValueError(f"could not read {bad!r} in the braid word {text!r}: type whole "
                          "numbers, e.g. 1 -2 1 -2")
+    body = _signed(body, text)
     inner = re.search(r"[\[\{\(][^\[\]\{\}\(\)]*[\]\}\)]", body)
     strands = None
     if inner and re.search(r"^\s*[\[\{\(]\s*-?\d+\s*,\s*[\[\{\(]", body):
@@ -46,6 +47,18 @@ def parse_braid(text: str) -> tuple[list[int], int | None]:
     else:
         word = [int(v) for v in re.findall(r"[+-]?\d+", body)]
     return _checked(word, strands, text)
+
+
+def _signed(body: str, text: str) -> str:
+    """``body`` with each sign joined to the number it is typed before: ``- 2`` is σ2⁻¹ as
+    ``-2`` is (reading the number alone turned 4_1's ``1 - 2 1 - 2`` into 3_1's ``1 2 1 2``).
+    A sign before no number (``1 2 -``, ``--2``) is refused: no reading of it is safe."""
+    body = re.sub(r"([+-])\s+(?=\d)", r"\1", body)
+    stray = re.search(r"[+-](?!\d)", body)
+    if stray:
+        raise ValueError(f"a sign {stray.group(0)!r} in the braid word {text!r} stands before "
+                         "no generator: write σi⁻¹ as -i with one sign, e.g. 1 -2 1 -2")
+    return body
 
 
 def _checked(word: list[int], strands: int | None, text: str) -> tuple[list[int], int | None]:
