@@ -15,6 +15,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ._checks import check_flag
+
 __all__ = ["read_obj", "write_obj"]
 
 # A coordinate as OBJ writers print one: decimal, optional exponent. Python's float() also
@@ -55,6 +57,7 @@ def read_obj(
         The file has no ``l`` lines, refers to a missing vertex, has a vertex on three or more
         edges, or (without ``allow_open``) has an open component. The message says which.
     """
+    allow_open = check_flag("allow_open", allow_open)
     name = os.fspath(path)
     verts, edges, where = _parse(name)
     if not edges:

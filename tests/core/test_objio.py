@@ -172,3 +172,10 @@ def test_a_name_that_would_not_read_back_is_refused(tmp_path, name, char):
     with pytest.raises(ValueError, match=f"object name .* holds {char}"):
         write_obj(path, trefoil(5), name=name)
     assert not path.exists()  # refused before the file is opened
+
+
+def test_allow_open_as_text_is_refused(tmp_path):
+    path = _write(tmp_path, _verts(trefoil(4)) + "l 1 2 3 4 1\n")
+    # bool("False") is True: a pair (components, flags) came back instead of the polygons
+    with pytest.raises(ValueError, match=r"allow_open must be True or False, got 'False'"):
+        read_obj(path, allow_open="False")
