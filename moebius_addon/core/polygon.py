@@ -280,10 +280,12 @@ def resample(points, n, closed: bool = True):
     points : (M, 3) array or list of arrays
         Polyline vertices (a link: one array per component).
     n : int or list of int
-        Vertices of the result (per component for a link).
+        Vertices of the result, at least 4 (3 with ``closed=False``); for a link one total,
+        shared by length, or one count per component.
     closed : bool
         The polyline is closed (last point joined to the first). For ``closed=False`` the
-        result starts and ends at the polyline's ends.
+        result starts and ends at the polyline's ends. ``True`` or ``False`` only: text such
+        as ``"False"`` is refused (``bool("False")`` is True).
 
     Returns
     -------
@@ -360,9 +362,7 @@ def subdivide(P, factor: int = 2, closed=True):
     -------
     (factor · N, 3) array (closed) or list of arrays, as ``P``.
     """
-    factor = int(factor)
-    if factor < 1:
-        raise ValueError(f"factor must be a whole number >= 1, got {factor}")
+    factor = check_number("factor", factor, 1, integer=True)  # int("2") and int(2.7) took both
     if isinstance(P, (list, tuple)):
         check_not_points(P, "P")
         flags = ([check_flag("closed", c) for c in closed] if np.ndim(closed)

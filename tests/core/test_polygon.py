@@ -294,3 +294,11 @@ def test_unclear_link_inputs_get_messages_that_say_why():
         with pytest.raises(ValueError, match=r"is a list of 60 points, but a list is read as a "
                                              r"link.*np\.asarray\(P\)"):
             call()
+
+
+@pytest.mark.parametrize("factor, words", [("2", r"factor must be a number, got '2' \(str\)"),
+                                           (2.7, "factor must be a whole number, got 2.7")])
+def test_subdivide_takes_a_whole_number_of_edges(factor, words):
+    # int(factor) took "2" as 2 and 2.7 as 2
+    with pytest.raises(ValueError, match=words):
+        subdivide(trefoil(20), factor)
