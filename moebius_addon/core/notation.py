@@ -15,6 +15,10 @@ from .pd import PlanarDiagram, parse_pd
 
 __all__ = ["parse_braid", "parse_notation"]
 
+# A bracketed word, and LinkInfo's and KnotTheory's strands first: {3, {1, -2, 1, -2}}.
+_LIST = r"[\[\{\(][^\[\]\{\}\(\)]*[\]\}\)]"
+_ONE_LIST = re.compile(rf"\s*{_LIST}\s*")
+_WITH_STRANDS = re.compile(rf"\s*[\[\{{\(]\s*[+-]?\d+\s*,\s*{_LIST}\s*[\]\}}\)]\s*")
 _SIGMA = re.compile(r"[sσ]\s*(\d+)\s*(\^\s*\(?\s*-\s*1\s*\)?|⁻¹|\^-1|')?", re.IGNORECASE)
 
 
@@ -41,6 +45,12 @@ def parse_braid(text: str) -> tuple[list[int], int | None]:
     body = _signed(body, text)
     inner = re.search(r"[\[\{\(][^\[\]\{\}\(\)]*[\]\}\)]", body)
     strands = None
+    # the brackets' forms whole: numbers after a bracketed word were read into it, or skipped
+    if re.search(r"[\[\]\{\}\(\)]", body) and not (_ONE_LIST.fullmatch(body)
+                                                   or _WITH_STRANDS.fullmatch(body)):
+        raise ValueError(f"could not read the brackets of the braid word {text!r}: write "
+                         "1 -2 1 -2, [1, -2, 1, -2], {3, {1, -2, 1, -2}} or "
+                         "BR[3, {1, -2, 1, -2}], with nothing before or after")
     if inner and re.search(r"^\s*[\[\{\(]\s*-?\d+\s*,\s*[\[\{\(]", body):
         strands = int(re.findall(r"-?\d+", body)[0])  # {3, {1, -2, 1, -2}}
         word = [int(v) for v in re.findall(r"-?\d+", inner.group(0))]

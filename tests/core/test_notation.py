@@ -27,6 +27,9 @@ def test_braid_words(text, word, strands):
     ("{2, {1, 2}}", "needs 3 strands, not 2"),
     ("1 2 -", "sign '-' .* stands before no generator"),
     ("1 --2", "sign '-' .* stands before no generator"),
+    # a number after the brackets was skipped, or read into the word
+    ("{3, {1, -2, 1, -2}} 5", "could not read the brackets"),
+    ("[1, -2, 1, -2] 3", "could not read the brackets"),
 ])
 def test_bad_braid_words(text, why):
     with pytest.raises(ValueError, match=why):
