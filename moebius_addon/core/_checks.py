@@ -40,3 +40,13 @@ def check_number(name: str, value, low: float = -np.inf, *, above: bool = False,
             raise ValueError(f"{name} must be a whole number, got {value!r}")
         return int(value) if isinstance(value, numbers.Integral) else int(x)
     return x
+
+
+def check_flag(name: str, value) -> bool:
+    """``value`` as a bool, else ValueError naming the option: only ``True`` and ``False``
+    (numpy's too) count, since ``bool("False")`` is True and a string flag would silently
+    mean the opposite of what it says."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r} "
+                         f"({type(value).__name__})")
+    return bool(value)

@@ -100,6 +100,16 @@ def real_array(a, what: str = "the polygon") -> np.ndarray:
     return arr.astype(np.float64, copy=False)
 
 
+def check_not_points(parts: list, what: str = "the polygon") -> None:
+    """ValueError for a list of points (``[[x, y, z], …]``) where a list means a link, one
+    (N, 3) array per component: numpy's own error for it (a shape or concatenation error)
+    named neither the cause nor the fix."""
+    if parts and np.ndim(parts[0]) == 1 and np.shape(parts[0]) == (3,):
+        raise ValueError(f"{what} is a list of {len(parts)} points, but a list is read as a "
+                         f"link, one (N, 3) array per component: give one curve as an array, "
+                         f"np.asarray(P), or a link as a list of such arrays")
+
+
 def check_closed(closed, k: int, is_link: bool) -> list[bool]:
     """``closed`` as one bool per component, or ValueError: a bool for a knot, a bool or one
     bool per component for a link."""
@@ -126,6 +136,8 @@ def as_layout(P, closed=True) -> tuple[np.ndarray, Layout]:
     parts = list(P) if is_link else [P]
     if not parts:
         raise ValueError("empty link: give at least one closed polygon")
+    if is_link:
+        check_not_points(parts)
     arrays = []
     for c, part in enumerate(parts):
         where = f"component {c}" if is_link else "the polygon"

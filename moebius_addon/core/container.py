@@ -20,6 +20,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ._layout import unit_exponent
 from .obstacles import check_obstacles
 
 
@@ -58,9 +59,12 @@ def check_container(container) -> tuple[np.ndarray, np.ndarray]:
                          f"the edge between vertices {int(e[0])} and {int(e[1])} run along it "
                          "in the same direction; recalculate its normals (in Blender: Mesh > "
                          "Normals > Recalculate Outside)")
-    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    # at the mesh's own size near 1 (exact scaling): the volume of a mesh 1e-150 across
+    # underflows to 0, the cube of one 1e160 across overflows
+    Vu = np.ldexp(V - (V.max(axis=0) / 2 + V.min(axis=0) / 2), -unit_exponent(V))
+    a, b, c = Vu[F[:, 0]], Vu[F[:, 1]], Vu[F[:, 2]]
     volume = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum()) / 6.0
-    size = float(np.ptp(V, axis=0).max())
+    size = float(np.ptp(Vu, axis=0).max())
     if abs(volume) <= 1e-9 * size ** 3:
         raise ValueError("the container encloses no volume (its triangles cancel out); "
                          "give a closed mesh around the region the curve must stay in")

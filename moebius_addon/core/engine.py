@@ -36,6 +36,7 @@ from fractions import Fraction
 import numpy as np
 
 from . import barnes_hut, energy_choice, hs_solve, hs_tree
+from ._checks import check_flag
 from ._layout import Layout, as_checked_layout
 from ._memory import available_memory, check_memory, give_back
 from .banded import BANDED_METRICS, BandedSaddle, OpenBandedSaddle
@@ -128,9 +129,9 @@ class DenseEngine:
         self.theta = energy.default_theta if theta is None else barnes_hut.check_theta(theta)
         self.krylov_rtol = hs_solve.RTOL if krylov_rtol is None else hs_solve.check_rtol(
             krylov_rtol)
-        self.exact_backprojection = bool(exact_backprojection)
+        self.exact_backprojection = check_flag("exact_backprojection", exact_backprojection)
         self.solver = SaddlePointSolver(
-            reuse=bool(reuse_factorization),
+            reuse=check_flag("reuse_factorization", reuse_factorization),
             factor_cost=layout.n / _FACTOR_PER_ITER,
             dtype=np.float32 if precision == "single" else np.float64,
         )

@@ -28,7 +28,7 @@ import numba as nb
 import numpy as np
 
 from . import goeritz, jones
-from ._layout import as_layout, check_distinct
+from ._layout import as_unit_layout, check_distinct
 from .pd import DisjointSets, PlanarDiagram, from_passages, simplify
 
 # Two primes below 2^31: products of residues stay below 2^62 in int64.
@@ -69,8 +69,10 @@ class Diagram:
 def _projections(P, seed: int = 0):
     """Generic projections of ``P`` in a dozen seeded random directions: ``(layout, rows)``
     with the rows of :func:`_sweep` of each direction where no crossing is degenerate.
-    ``seed`` picks another dozen."""
-    X, layout = as_layout(P)
+    ``seed`` picks another dozen. The curve is taken at a size near 1 (exact scaling), as
+    the other checks take it: the check of repeated points measures edges by their squares,
+    which underflow for a curve 1e-200 across."""
+    X, layout, _ = as_unit_layout(P)
     if not np.isfinite(X).all():
         raise ValueError("the curve has NaN or infinite coordinates")
     if (np.diff(layout.starts) < 3).any():

@@ -15,6 +15,10 @@ from .pd import PlanarDiagram, parse_pd
 
 __all__ = ["parse_braid", "parse_notation"]
 
+# A bracketed word, and LinkInfo's and KnotTheory's strands first: {3, {1, -2, 1, -2}}.
+_LIST = r"[\[\{\(][^\[\]\{\}\(\)]*[\]\}\)]"
+_ONE_LIST = re.compile(rf"\s*{_LIST}\s*")
+_WITH_STRANDS = re.compile(rf"\s*[\[\{{\(]\s*[+-]?\d+\s*,\s*{_LIST}\s*[\]\}}\)]\s*")
 _SIGMA = re.compile(r"[sσ]\s*(\d+)\s*(\^\s*\(?\s*-\s*1\s*\)?|⁻¹|\^-1|')?", re.IGNORECASE)
 
 
@@ -38,14 +42,33 @@ def parse_braid(text: str) -> tuple[list[int], int | None]:
         bad = re.search(r"[^\d\s,;+\-\[\]\{\}\(\)]+", body).group(0)
         raise ValueError(f"could not read {bad!r} in the braid word {text!r}: type whole "
                          "numbers, e.g. 1 -2 1 -2")
+    body = _signed(body, text)
     inner = re.search(r"[\[\{\(][^\[\]\{\}\(\)]*[\]\}\)]", body)
     strands = None
+    # the brackets' forms whole: numbers after a bracketed word were read into it, or skipped
+    if re.search(r"[\[\]\{\}\(\)]", body) and not (_ONE_LIST.fullmatch(body)
+                                                   or _WITH_STRANDS.fullmatch(body)):
+        raise ValueError(f"could not read the brackets of the braid word {text!r}: write "
+                         "1 -2 1 -2, [1, -2, 1, -2], {3, {1, -2, 1, -2}} or "
+                         "BR[3, {1, -2, 1, -2}], with nothing before or after")
     if inner and re.search(r"^\s*[\[\{\(]\s*-?\d+\s*,\s*[\[\{\(]", body):
         strands = int(re.findall(r"-?\d+", body)[0])  # {3, {1, -2, 1, -2}}
         word = [int(v) for v in re.findall(r"-?\d+", inner.group(0))]
     else:
         word = [int(v) for v in re.findall(r"[+-]?\d+", body)]
     return _checked(word, strands, text)
+
+
+def _signed(body: str, text: str) -> str:
+    """``body`` with each sign joined to the number it is typed before: ``- 2`` is σ2⁻¹ as
+    ``-2`` is (reading the number alone turned 4_1's ``1 - 2 1 - 2`` into 3_1's ``1 2 1 2``).
+    A sign before no number (``1 2 -``, ``--2``) is refused: no reading of it is safe."""
+    body = re.sub(r"([+-])\s+(?=\d)", r"\1", body)
+    stray = re.search(r"[+-](?!\d)", body)
+    if stray:
+        raise ValueError(f"a sign {stray.group(0)!r} in the braid word {text!r} stands before "
+                         "no generator: write σi⁻¹ as -i with one sign, e.g. 1 -2 1 -2")
+    return body
 
 
 def _checked(word: list[int], strands: int | None, text: str) -> tuple[list[int], int | None]:

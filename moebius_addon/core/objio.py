@@ -10,11 +10,19 @@ error messages precise.
 from __future__ import annotations
 
 import os
+import re
 from collections.abc import Sequence
 
 import numpy as np
 
+from ._checks import check_flag
+
 __all__ = ["read_obj", "write_obj"]
+
+# A coordinate as OBJ writers print one: decimal, optional exponent. Python's float() also
+# takes "nan", "inf" and "1_0" (read as 10), none of which is a point of a curve.
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+_INDEX = re.compile(r"[+-]?\d+")
 
 
 def read_obj(
@@ -49,6 +57,7 @@ def read_obj(
         The file has no ``l`` lines, refers to a missing vertex, has a vertex on three or more
         edges, or (without ``allow_open``) has an open component. The message says which.
     """
+    allow_open = check_flag("allow_open", allow_open)
     name = os.fspath(path)
     verts, edges, where = _parse(name)
     if not edges:
@@ -89,8 +98,12 @@ def write_obj(
     P : (n, 3) array or list of (n_c, 3) arrays
         Vertices of each closed component, ``n_c >= 3``.
     name : str
-        Object name (``o`` line).
+        Object name (``o`` line): one line of printable characters without ``#`` or ``\\``,
+        else ValueError (a line break would start a line of its own, ``#`` a comment, and a
+        ``\\`` at the end would join the next line to it, so the file would read back as
+        something else).
     """
+    _check_name(name)
     comps = [P] if isinstance(P, np.ndarray) else list(P)
     if not comps:
         raise ValueError("nothing to write: the link has no components")
@@ -114,6 +127,18 @@ def write_obj(
         f.write("\n".join(lines) + "\n")
 
 
+def _check_name(name) -> None:
+    """ValueError unless ``name`` is one line of OBJ text that reads back as written."""
+    if not isinstance(name, str):
+        raise ValueError(f"name must be text, got {name!r} ({type(name).__name__})")
+    bad = next((c for c in name if c in "#\\" or not (c.isprintable() or c == " ")), None)
+    if bad is not None:
+        what = "a comment" if bad == "#" else (
+            "a line continuation" if bad == "\\" else "a new line or a lost character")
+        raise ValueError(f"the object name {name!r} holds {bad!r}, which an OBJ file reads as "
+                         f"{what}: give a name of printable characters without '#' or '\\'")
+
+
 def _parse(name: str) -> tuple[np.ndarray, list[tuple[int, int]], dict[tuple[int, int], str]]:
     """Vertices, undirected-deduplicated edges (0-based, file direction) and where each edge
     was read ("object 'Knot', line 12")."""
@@ -130,23 +155,32 @@ def _parse(name: str) -> tuple[np.ndarray, list[tuple[int, int]], dict[tuple[int
             continue
         key = parts[0]
         if key == "v":
-            try:
-                verts.append([float(t) for t in parts[1:4]])
-            except ValueError:
-                raise ValueError(f"{name!r}, line {lineno}: bad vertex {raw.strip()!r}") from None
-            if len(verts[-1]) != 3:
+            coords = parts[1:4]
+            if len(coords) != 3:
                 raise ValueError(f"{name!r}, line {lineno}: vertex needs x y z: {raw.strip()!r}")
+            bad = [t for t in coords if not _NUMBER.fullmatch(t)]
+            if bad:
+                raise ValueError(f"{name!r}, line {lineno}: bad vertex {raw.strip()!r}: "
+                                 f"{bad[0]!r} is not a decimal number; fix the coordinate in "
+                                 "the file or export the curve again")
+            xyz = [float(t) for t in coords]
+            if not all(map(np.isfinite, xyz)):
+                raise ValueError(f"{name!r}, line {lineno}: vertex {raw.strip()!r} has a "
+                                 "coordinate too large for a float; scale the curve down "
+                                 "before exporting")
+            verts.append(xyz)
         elif key in ("o", "g"):
             obj = " ".join(parts[1:]) or None
         elif key == "l":
             idx = []
             for tok in parts[1:]:
-                try:
-                    i = int(tok.split("/", 1)[0])
-                except ValueError:
+                head = tok.split("/", 1)[0]
+                if not _INDEX.fullmatch(head):
                     raise ValueError(
-                        f"{name!r}, line {lineno}: bad index {tok!r} in {raw.strip()!r}"
-                    ) from None
+                        f"{name!r}, line {lineno}: bad index {tok!r} in {raw.strip()!r} "
+                        "(a vertex index is a whole number)"
+                    )
+                i = int(head)
                 i = i - 1 if i > 0 else len(verts) + i  # negative: relative to the end
                 if not 0 <= i < len(verts):
                     raise ValueError(

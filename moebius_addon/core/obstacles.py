@@ -61,6 +61,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ._layout import unit_exponent
 from ._pairs import SLACK, segment_distance2
 
 _MAX_ADVANCE = 100_000
@@ -97,8 +98,13 @@ def check_obstacles(obstacles) -> list[tuple[np.ndarray, np.ndarray]]:
         except (TypeError, ValueError):
             raise ValueError(f"obstacle {m} is not a (V, F) pair of vertices and triangles"
                              ) from None
-        V = np.asarray(V, dtype=np.float64)
-        F_in = np.asarray(F)
+        V_in, F_in = np.asarray(V), np.asarray(F)
+        if V_in.dtype.kind not in "iuf" or F_in.dtype.kind not in "iuf":
+            what, arr = ("V", V_in) if V_in.dtype.kind not in "iuf" else ("F", F_in)
+            raise ValueError(f"obstacle {m}: {what} must hold real numbers, got an array of "
+                             f"{arr.dtype}; convert it (take the real part, .real, if that "
+                             f"is what you mean)")
+        V = V_in.astype(np.float64)
         if V.ndim != 2 or V.shape[1] != 3 or len(V) < 3:
             raise ValueError(f"obstacle {m}: V must be an (M, 3) array of at least 3 vertices, "
                              f"got shape {V.shape}")
@@ -123,9 +129,13 @@ def check_obstacles(obstacles) -> list[tuple[np.ndarray, np.ndarray]]:
         if rep.any():
             k = int(np.flatnonzero(rep)[0])
             raise ValueError(f"obstacle {m}: triangle {k} {F[k].tolist()} repeats a vertex")
-        a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-        area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
-        size = float(np.ptp(V, axis=0).max())
+        # relative to the mesh's own size, taken near 1 (exact scaling): the areas of meshes
+        # 1e-150 or 1e160 across under- or overflow
+        k = unit_exponent(V)
+        ab = np.ldexp(V[F[:, 1]] - V[F[:, 0]], -k)
+        ac = np.ldexp(V[F[:, 2]] - V[F[:, 0]], -k)
+        area = 0.5 * np.linalg.norm(np.cross(ab, ac), axis=1)
+        size = 2.0 * float(np.ldexp(V.max(axis=0) / 2 - V.min(axis=0) / 2, -k).max())
         flat = area <= 1e-12 * size * size
         if flat.any():
             k = int(np.flatnonzero(flat)[0])

@@ -273,13 +273,28 @@ def from_rows(rows, signs=None) -> PlanarDiagram:
 def parse_pd(text: str) -> PlanarDiagram:
     """A PD code from text: KnotInfo's ``[[1,5,2,4],[3,1,4,6],[5,3,6,2]]``, LinkInfo's
     ``{{4, 1, 3, 2}, {2, 3, 1, 4}}``, KnotTheory's ``PD[X[1,5,2,4], X[3,1,4,6], …]`` or rows
-    of 5 numbers with Knoodle's handedness last."""
+    of 5 numbers with Knoodle's handedness last. Anything else in the text (words after the
+    code, letters inside a crossing) is refused, not skipped: skipped text may have been part
+    of the code."""
     groups = re.findall(r"[\[\{\(]([^\[\]\{\}\(\)]*)[\]\}\)]", text)
-    rows = [[int(v) for v in re.findall(r"-?\d+", g)] for g in groups]
-    rows = [r for r in rows if r]
-    if not rows:
+    if not any(re.search(r"\d", g) for g in groups):
         raise ValueError(f"no crossings found in the PD code {text!r}: write it as "
                          "[[1,5,2,4],[3,1,4,6],[5,3,6,2]] or PD[X[1,5,2,4], …]")
+    for g in groups:
+        if g.strip() and not re.fullmatch(r"\s*-?\d+(\s*[,;\s]\s*-?\d+)*\s*,?\s*", g):
+            raise ValueError(f"could not read the crossing {g.strip()!r} in the PD code "
+                             f"{text!r}: a crossing is 4 whole numbers (5 with Knoodle's "
+                             "handedness), e.g. X[1,5,2,4]")
+    # the text around the crossings: brackets, separators, a leading PD and an X before each
+    skeleton = re.sub(r"[\[\{\(][^\[\]\{\}\(\)]*[\]\}\)]", "#", text)
+    skeleton = re.sub(r"X\s*#", "#", re.sub(r"^\s*PD\s*(?=\[)", "", skeleton))
+    stray = re.search(r"[^\s,;#\[\]\{\}\(\)]+", skeleton)
+    if stray:
+        raise ValueError(f"could not read {stray.group(0)!r} in the PD code {text!r}: give the "
+                         "crossings alone, e.g. [[1,5,2,4],[3,1,4,6],[5,3,6,2]] or "
+                         "PD[X[1,5,2,4], X[3,1,4,6], X[5,3,6,2]]")
+    rows = [[int(v) for v in re.findall(r"-?\d+", g)] for g in groups]
+    rows = [r for r in rows if r]
     return from_rows(rows)
 
 

@@ -11,14 +11,16 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ._checks import check_number
+from ._checks import check_flag, check_number
 from ._layout import (
     MIN_CLOSED_VERTICES,
+    MIN_OPEN_VERTICES,
     as_checked_layout,
     as_unit_layout,
     check_counts,
     check_distinct,
     check_finite,
+    check_not_points,
     real_array,
     unit_exponent,
     vertex_name,
@@ -230,6 +232,7 @@ def equalize(P: np.ndarray, tol: float = 1e-13, closed: bool = True) -> np.ndarr
     ``closed=False``: an open chain whose two end vertices stay where they are.
 
     Raises ValueError if the iteration does not converge (degenerate polygons)."""
+    closed = check_flag("closed", closed)
     X = np.array(P, dtype=np.float64)
 
     def edges(X):
@@ -277,10 +280,12 @@ def resample(points, n, closed: bool = True):
     points : (M, 3) array or list of arrays
         Polyline vertices (a link: one array per component).
     n : int or list of int
-        Vertices of the result (per component for a link).
+        Vertices of the result, at least 4 (3 with ``closed=False``); for a link one total,
+        shared by length, or one count per component.
     closed : bool
         The polyline is closed (last point joined to the first). For ``closed=False`` the
-        result starts and ends at the polyline's ends.
+        result starts and ends at the polyline's ends. ``True`` or ``False`` only: text such
+        as ``"False"`` is refused (``bool("False")`` is True).
 
     Returns
     -------
@@ -298,11 +303,17 @@ def resample(points, n, closed: bool = True):
         equal-chord march reaches the far end, the closest one is made equilateral between
         them by :func:`equalize` (``closed=False``) in the same way.
     """
+    closed = check_flag("closed", closed)
     if isinstance(points, (list, tuple)):
         if not points:
             raise ValueError("empty link: give at least one polyline")
+        check_not_points(points, "points")
         if np.ndim(n):
             ns = [check_number("n", k, integer=True) for k in n]
+            if len(ns) != len(points):
+                raise ValueError(f"n has {len(ns)} count{'' if len(ns) == 1 else 's'} for "
+                                 f"{len(points)} components: give one count per component, "
+                                 f"or one total count to share by length")
         else:
             ns = _split_count(points, check_number("n", n, integer=True))
         check_memory(_RESAMPLE_BYTES * sum(ns), f"resampling to {sum(ns)} vertices",
@@ -316,8 +327,10 @@ def resample(points, n, closed: bool = True):
     if not np.all(np.isfinite(P)):
         raise ValueError("points contain NaN or infinite coordinates; remove or fix them first")
     n = check_number("n", n, integer=True)
-    if n < MIN_VERTICES:
-        raise ValueError(f"need at least {MIN_VERTICES} vertices for a closed polygon, got {n}")
+    least = MIN_VERTICES if closed else MIN_OPEN_VERTICES
+    if n < least:
+        what = "a closed polygon" if closed else "an open polyline (closed=False)"
+        raise ValueError(f"need at least {least} vertices for {what}, got {n}")
     check_memory(_RESAMPLE_BYTES * n, f"resampling to {n} vertices", _FEWER_VERTICES)
     k = unit_exponent(P)
     if k:  # a curve far larger or smaller than 1: resampled at a size near 1 (exact scaling)
@@ -349,14 +362,15 @@ def subdivide(P, factor: int = 2, closed=True):
     -------
     (factor · N, 3) array (closed) or list of arrays, as ``P``.
     """
-    factor = int(factor)
-    if factor < 1:
-        raise ValueError(f"factor must be a whole number >= 1, got {factor}")
+    factor = check_number("factor", factor, 1, integer=True)  # int("2") and int(2.7) took both
     if isinstance(P, (list, tuple)):
-        flags = list(closed) if np.ndim(closed) else [bool(closed)] * len(P)
+        check_not_points(P, "P")
+        flags = ([check_flag("closed", c) for c in closed] if np.ndim(closed)
+                 else [check_flag("closed", closed)] * len(P))
         if len(flags) != len(P):
             raise ValueError(f"closed has {len(flags)} flags for {len(P)} components")
         return [subdivide(p, factor, c) for p, c in zip(P, flags, strict=True)]
+    closed = check_flag("closed", closed)
     X = np.asarray(P, dtype=np.float64)
     if X.ndim != 2 or X.shape[1] != 3:
         raise ValueError(f"P must be an (N, 3) array, got shape {X.shape}")
@@ -416,7 +430,7 @@ def suggest_edge_count(P, max_edges: int = 20000, start: int | None = None,
     contact check, searched upward in steps of 10% from ``start`` (default: a guess above
     ``P``'s own count from its contact ratio); None if none up to ``max_edges``.
     ``closed=False``: open polylines (vertex counts, as the result counts them)."""
-    closed = bool(closed)
+    closed = check_flag("closed", closed)
     max_edges = check_number("max_edges", max_edges, MIN_VERTICES, integer=True)
     X, layout, _ = as_checked_layout(P, closed, touching=False)
     parts = layout.split(X) if layout.is_link else X
@@ -446,6 +460,7 @@ def check_polygon(P, *, coarseness: bool = True, name: str = "the curve",
     ``closed=False``: open polylines (a link: one flag per component, or one for all), with at
     least 3 vertices, distances along them not wrapping round the ends.
     """
+    coarseness = check_flag("coarseness", coarseness)
     X, layout, e2 = as_unit_layout(P, closed)
     check_counts(layout, name)
     check_finite(X, layout, name)

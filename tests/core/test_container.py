@@ -137,6 +137,19 @@ def _refused(P, container, message, **options):
         assert np.array_equal(a, b)  # the arguments are left as they were
 
 
+@pytest.mark.parametrize("s", [1e-300, 1e-150, 1e160, 1e300])
+def test_a_container_at_any_size_holds_as_at_size_one(s):
+    # the enclosed volume under- or overflowed: "the container encloses no volume" (at 1e-150
+    # and 1e160 its triangles were refused as having no area first)
+    V, F = uv_sphere(0.8)
+    P = wavy_loop()
+    one = core.relax(P, max_iter=2, container=(V, F), engine="exact")
+    r = core.relax(s * P, max_iter=2, container=(s * V, F), engine="exact")
+    assert r.nit == 2
+    np.testing.assert_allclose(r.history["energy"], one.history["energy"], rtol=1e-12)
+    np.testing.assert_allclose(r.x / s, one.x, atol=1e-12)
+
+
 def test_an_open_mesh_is_refused():
     V, F = uv_sphere(0.8)
     _refused(wavy_loop(), (V, F[1:]), r"the container is not closed: its edge between "

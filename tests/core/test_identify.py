@@ -139,6 +139,15 @@ def test_fine_polygons_of_twelve_crossings_answer_quickly():
     assert time.perf_counter() - t0 < 10.0  # 0.03 s measured (docs/api.md)
 
 
+@pytest.mark.parametrize("s", [1e-300, 1e-200, 1e200, 1e300])
+def test_a_curve_at_any_size_is_identified_as_at_size_one(s):
+    # edges of 1e-201 squared underflow: the trefoil at 1e-200 that check_polygon accepts was
+    # refused as "repeats a point"
+    for P in (knots.named("3_1"), knots.named("4_1"), knots.named("L4a1{1}")):
+        scaled = [s * c for c in P] if isinstance(P, list) else s * P
+        assert identify(scaled).names == identify(P).names != ()
+
+
 @pytest.mark.parametrize("bad, why", [
     ([knots.circle(16), knots.circle(16) + [2.0, 0.0, 0.0]], "intersects itself"),
     (np.full((8, 3), np.nan), "NaN"),

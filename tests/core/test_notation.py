@@ -25,10 +25,31 @@ def test_braid_words(text, word, strands):
 @pytest.mark.parametrize("text, why", [
     ("", "empty"), ("1 0 1", "nonzero"), ("1 x 2", "could not read 'x'"),
     ("{2, {1, 2}}", "needs 3 strands, not 2"),
+    ("1 2 -", "sign '-' .* stands before no generator"),
+    ("1 --2", "sign '-' .* stands before no generator"),
+    # a number after the brackets was skipped, or read into the word
+    ("{3, {1, -2, 1, -2}} 5", "could not read the brackets"),
+    ("[1, -2, 1, -2] 3", "could not read the brackets"),
 ])
 def test_bad_braid_words(text, why):
     with pytest.raises(ValueError, match=why):
         notation.parse_braid(text)
+
+
+@pytest.mark.parametrize("text", ["1 - 2 1 - 2", "{3, {1, - 2, 1, - 2}}", "[1, - 2, 1, - 2]"])
+def test_a_sign_typed_apart_from_its_generator_is_kept(text):
+    # "- 2" is σ2⁻¹: read as 2 it made the figure-eight knot's word a trefoil's
+    assert notation.parse_braid(text)[0] == [1, -2, 1, -2]
+
+
+@pytest.mark.parametrize("text, stray", [
+    ("[[1,5,2,4],[3,1,4,6],[5,3,6,2]] 4_1", "4_1"),
+    ("PD[X[1,5,2,4], X[3,1,4,6], X[5,3,6,2]] and more", "and"),
+    ("[[1,5,2,4],[3,1,4,6],[5,3,6,2x]]", "5,3,6,2x"),
+])
+def test_text_around_a_pd_code_is_refused(text, stray):
+    with pytest.raises(ValueError, match=f"could not read .*{stray}"):
+        notation.parse_notation(text)
 
 
 def test_pd_or_braid():

@@ -148,3 +148,34 @@ def test_write_rejects_bad_input(tmp_path):
         write_obj(tmp_path / "x.obj", [trefoil(5), np.full((5, 3), np.nan)])
     with pytest.raises(ValueError, match="no components"):
         write_obj(tmp_path / "x.obj", [])
+
+
+@pytest.mark.parametrize("coord", ["nan", "inf", "-inf", "1e999", "1_0"])
+def test_a_vertex_that_is_no_decimal_number_is_refused_with_its_line(tmp_path, coord):
+    # float() read "nan" and "inf" as vertices and "1_0" as 10
+    P = trefoil(4)
+    text = _verts(P[:2]) + f"v {coord} 0 0\n" + _verts(P[3:]) + "l 1 2 3 4 1\n"
+    with pytest.raises(ValueError, match=f"line 3: (bad )?vertex 'v {coord} 0 0'"):
+        read_obj(_write(tmp_path, text))
+
+
+def test_an_index_with_an_underscore_is_refused(tmp_path):
+    P = trefoil(12)  # int("1_0") is 10, a vertex that exists here
+    with pytest.raises(ValueError, match="line 13: bad index '1_0'"):
+        read_obj(_write(tmp_path, _verts(P) + "l 1 2 3 4 5 6 7 8 9 1_0 11 12 1\n"))
+
+
+@pytest.mark.parametrize("name, char", [("knot\nl 1 50", r"'\\n'"), ("a # b", "'#'"),
+                                        ("knot\\", r"'\\\\'"), ("a\u2028b", r"'\\u2028'")])
+def test_a_name_that_would_not_read_back_is_refused(tmp_path, name, char):
+    path = tmp_path / "k.obj"
+    with pytest.raises(ValueError, match=f"object name .* holds {char}"):
+        write_obj(path, trefoil(5), name=name)
+    assert not path.exists()  # refused before the file is opened
+
+
+def test_allow_open_as_text_is_refused(tmp_path):
+    path = _write(tmp_path, _verts(trefoil(4)) + "l 1 2 3 4 1\n")
+    # bool("False") is True: a pair (components, flags) came back instead of the polygons
+    with pytest.raises(ValueError, match=r"allow_open must be True or False, got 'False'"):
+        read_obj(path, allow_open="False")

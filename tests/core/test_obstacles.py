@@ -247,6 +247,26 @@ def test_bad_meshes_are_refused_by_name(mesh, message):
         core.relax(P + 10.0, obstacles=[mesh], max_iter=1)
 
 
+def test_a_complex_mesh_is_refused():
+    V, F = torus()  # was cast to its real part with a ComplexWarning
+    with pytest.raises(ValueError, match="obstacle 0: V must hold real numbers, got an array of "
+                                         "complex128"):
+        core.relax(ring_around_tube(60), obstacles=[(V + 0j, F)], max_iter=1)
+
+
+@pytest.mark.parametrize("s", [1e-300, 1e-150, 1e160, 1e300])
+def test_a_scene_at_any_size_relaxes_as_at_size_one(s):
+    # the triangles' areas under- or overflowed: from 1e-150 and 1e160 the torus was refused
+    # as "triangle 0 [0, 10, 11] has no area"
+    V, F = torus()
+    P = ring_around_tube(60)
+    one = core.relax(P, max_iter=2, obstacles=[(V, F)], engine="exact")
+    r = core.relax(s * P, max_iter=2, obstacles=[(s * V, F)], engine="exact")
+    assert r.nit == 2
+    np.testing.assert_allclose(r.history["energy"], one.history["energy"], rtol=1e-12)
+    np.testing.assert_allclose(r.x / s, one.x, atol=1e-12)
+
+
 def test_other_bad_obstacle_arguments():
     P = ring_around_tube(60)
     V, F = torus()

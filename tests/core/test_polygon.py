@@ -5,7 +5,13 @@ import re
 import numpy as np
 import pytest
 
-from moebius_addon.core import check_polygon, contact_ratio, resample, suggest_edge_count
+from moebius_addon.core import (
+    check_polygon,
+    contact_ratio,
+    resample,
+    subdivide,
+    suggest_edge_count,
+)
 from moebius_addon.core._tridiagonal import cyclic_tridiagonal_solve
 from moebius_addon.core.polygon import equalize
 from tests.conftest import ngon, trefoil
@@ -248,3 +254,51 @@ def test_link_counts_add_up_to_the_total_with_tiny_components():
         assert min(counts) >= 4
     with pytest.raises(ValueError, match="at least 12"):
         resample(link, 11)
+
+
+@pytest.mark.parametrize("call, option", [
+    (lambda: resample(trefoil(60), 30, closed="False"), "closed"),
+    (lambda: resample([trefoil(60), trefoil(60) + 9.0], 60, closed="False"), "closed"),
+    (lambda: subdivide(trefoil(20), 2, closed="False"), "closed"),
+    (lambda: subdivide([trefoil(20)], 2, closed=["False"]), "closed"),
+    (lambda: suggest_edge_count(trefoil(60), closed="False"), "closed"),
+    (lambda: equalize(trefoil(20), closed="False"), "closed"),
+    (lambda: check_polygon(trefoil(60), coarseness="False"), "coarseness"),
+])
+def test_a_flag_given_as_text_is_refused(call, option):
+    # bool("False") is True: the curve was taken as closed
+    with pytest.raises(ValueError, match=rf"{option} must be True or False, got 'False' \(str\)"):
+        call()
+
+
+def test_resampling_an_open_polyline_takes_its_own_least_count():
+    raw = trefoil(333)[:100]
+    Q = resample(raw, 3, closed=False)  # was refused as "... for a closed polygon"
+    np.testing.assert_array_equal(Q[[0, -1]], raw[[0, -1]])
+    ln = np.linalg.norm(np.diff(Q, axis=0), axis=1)
+    assert len(Q) == 3 and ln.max() / ln.min() - 1 < 1e-10
+    with pytest.raises(ValueError, match=r"at least 3 vertices for an open polyline "
+                                         r"\(closed=False\), got 2"):
+        resample(raw, 2, closed=False)
+
+
+def test_unclear_link_inputs_get_messages_that_say_why():
+    P = trefoil(60)
+    # numpy's "zip() argument 2 is shorter than argument 1"
+    with pytest.raises(ValueError, match="n has 1 count for 2 components: give one count per "
+                                         "component, or one total"):
+        resample([P, P + 9.0], [30])
+    # numpy's "all the input array dimensions except for the concatenation axis must match"
+    for call in (lambda: resample(P.tolist(), 30), lambda: check_polygon(P.tolist()),
+                 lambda: subdivide(P.tolist())):
+        with pytest.raises(ValueError, match=r"is a list of 60 points, but a list is read as a "
+                                             r"link.*np\.asarray\(P\)"):
+            call()
+
+
+@pytest.mark.parametrize("factor, words", [("2", r"factor must be a number, got '2' \(str\)"),
+                                           (2.7, "factor must be a whole number, got 2.7")])
+def test_subdivide_takes_a_whole_number_of_edges(factor, words):
+    # int(factor) took "2" as 2 and 2.7 as 2
+    with pytest.raises(ValueError, match=words):
+        subdivide(trefoil(20), factor)

@@ -31,6 +31,12 @@ def _walk(n: int, seed: int = 0) -> np.ndarray:
     return np.cumsum(steps - steps.mean(axis=0), axis=0)
 
 
+def _lemniscate(n: int) -> np.ndarray:
+    """A figure eight in the plane of ``n`` vertices: it crosses itself at the origin."""
+    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    return np.c_[np.sin(t), np.sin(2.0 * t), np.zeros(n)]
+
+
 # (label, call, exception, words of the message)
 CASES = [
     # NaN and inf: NaN results, or "no contact" (10.0) from the step bound
@@ -150,6 +156,25 @@ CASES = [
      "must hold real numbers"),
     ("min_gap 2.5", lambda: core.contact_ratio(T, min_gap=2.5), ValueError,
      "min_gap must be a whole number"),
+    # text and flags as text: the exponents were converted, bool("False") is True
+    ("alpha '2'", lambda: core.check_energy("tangent_point", "2"), ValueError,
+     r"alpha must be a number, got '2' \(str\)"),
+    ("beta b'4.5'", lambda: core.check_energy("tangent_point", 2, b"4.5"), ValueError,
+     r"beta must be a number, got b'4.5' \(bytes\)"),
+    ("edge_lengths 'False'", lambda: core.relax(T, max_iter=1, edge_lengths="False"),
+     ValueError, r"edge_lengths must be True or False, got 'False' \(str\)"),
+    ("check 'False'", lambda: core.relax(T, max_iter=1, check="False", refine=False),
+     ValueError, r"check must be True or False, got 'False' \(str\)"),
+    ("reuse_factorization 'no'",
+     lambda: core.relax(T, max_iter=1, refine=False, reuse_factorization="no"), ValueError,
+     r"reuse_factorization must be True or False, got 'no'"),
+    # the size first: these were refused by the start check's search for crossings (5 000 000
+    # vertices took 14 s to be refused for their size, more than 60 on a loaded machine)
+    ("5 000 000 vertices that cross", lambda: core.relax(_lemniscate(5_000_000), max_iter=1),
+     ValueError, "a tree-engine run of 5000000 vertices needs about 40 GB"),
+    ("15 001 vertices that cross, exact",
+     lambda: core.relax(_lemniscate(15_001), max_iter=1, engine="exact"), ValueError,
+     "15001 vertices are more than the dense metric's factorization handles"),
 ]
 
 

@@ -24,6 +24,8 @@ import math
 
 import numba as nb
 
+from .._checks import check_number
+
 #: The name of the energy (``energies.ENERGIES``).
 NAME = "tangent_point"
 #: Open polylines are supported (the same integrand; the first and last edge are disjoint).
@@ -55,17 +57,10 @@ def scaling(alpha: float, beta: float) -> float:
 def check_exponents(alpha, beta) -> tuple[float, float]:
     """``(α, β)`` as floats, or ValueError naming the one at fault: both finite, ``α > 0``
     and ``α + 1 < β < 2α + 1`` (below: the energy does not repel, a curve may pass through
-    itself at finite energy; above: it is infinite on every smooth curve)."""
-    vals = []
-    for name, v in (("alpha", alpha), ("beta", beta)):
-        try:
-            x = float(v)
-        except (TypeError, ValueError):
-            raise ValueError(f"{name} must be a finite number, got {v!r}") from None
-        if isinstance(v, bool) or not math.isfinite(x):
-            raise ValueError(f"{name} must be a finite number, got {v!r}")
-        vals.append(x)
-    a, b = vals
+    itself at finite energy; above: it is infinite on every smooth curve). Text (``"2"``,
+    ``b"4.5"``) and booleans are refused, as by every numeric option (:func:`.._checks.
+    check_number`)."""
+    a, b = check_number("alpha", alpha), check_number("beta", beta)
     if a <= 0.0:
         raise ValueError(f"alpha must be > 0, got {alpha!r} (the default is {DEFAULT_ALPHA:g})")
     if not (a + 1.0 < b < 2.0 * a + 1.0):

@@ -18,6 +18,7 @@ and reaches the numerics only through its engine (:mod:`..engine`).
 
 from __future__ import annotations
 
+from .._checks import check_flag
 from ..engine import engine_class, tree_solves_pins
 from ..metrics import METRICS
 from ..spelling import take_spelling
@@ -97,6 +98,7 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
     if not isinstance(refine, (bool, int)) or refine not in (0, 1):
         raise ValueError(f"refine must be True or False, got {refine!r}")
     restarts = check_number("restarts", restarts, 0, integer=True)
+    _check_start_size(P, method, metric, engine, options)
     if not refine and not restarts:
         return cls(P, metric, max_iter, tol, engine=engine, theta=theta, **options)
     if restarts and method not in FEASIBLE:
@@ -114,6 +116,20 @@ def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float
                        pin_tangents=options.get("pin_tangents", False),
                        check=options.get("check", True), obstacles=options.get("obstacles"),
                        container=options.get("container"))
+
+
+def _check_start_size(P, method: str, metric: str, engine: str, options: dict) -> None:
+    """:func:`check_size` of the start ``P`` before anything else looks at its vertices: the
+    start checks and the refinement of a coarse start take seconds to minutes on millions of
+    vertices (5 000 000 were refused for their size after 14 s, on a loaded machine after more
+    than 60). What the size cannot tell (pins, the vertices themselves) the run checks."""
+    try:
+        n = sum(len(p) for p in P) if isinstance(P, (list, tuple)) else len(P)
+    except TypeError:  # no vertex count: the run's own checks say what is wrong
+        return
+    check_size(n, metric, method, engine,
+               edge_lengths=check_flag("edge_lengths", options.get("edge_lengths", True)),
+               barycenter=check_flag("barycenter", options.get("barycenter", True)))
 
 
 def check_size(n: int, metric: str = "hs", method: str = "projected_gradient",

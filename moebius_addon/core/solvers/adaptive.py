@@ -31,6 +31,7 @@ import time
 
 import numpy as np
 
+from .._checks import check_flag
 from .._layout import as_layout
 from ..pins import check_pins
 from ..polygon import CONTACT_RATIO, check_polygon, contact_ratio, subdivide
@@ -171,6 +172,8 @@ class AdaptiveRun:
         self.max_seconds = None if max_seconds is None else check_number(
             "max_seconds", max_seconds, 0)
         self.closed = closed
+        check = check_flag("check", check)
+        pin_tangents = check_flag("pin_tangents", pin_tangents)
         X, layout = as_layout(P, closed)
         # open components have one edge fewer than vertices
         self._open = 0 if layout.closed is None else int(np.count_nonzero(~layout.closed))

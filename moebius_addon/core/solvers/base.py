@@ -32,7 +32,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._checks import check_number  # noqa: F401 - public as core.check_number
+from .._checks import (
+    check_flag,
+    check_number,  # noqa: F401 - public as core.check_number
+)
 from .._layout import as_unit_layout
 from ..container import check_container, check_inside
 from ..energy_choice import check_energy
@@ -239,6 +242,9 @@ class Run:
                  alpha=None, beta=None, length_target=None, length_growth=None,
                  **engine_options):
         _check_names(metric, target_lengths)
+        check = check_flag("check", check)
+        pin_tangents = check_flag("pin_tangents", pin_tangents)
+        fixed_lengths = check_flag("fixed_lengths", fixed_lengths)
         #: The energy minimized (:mod:`..energy_choice`): ``energy``, ``alpha``, ``beta``.
         self.energy_choice = check_energy(energy, alpha, beta)
         self.t0 = time.perf_counter()
@@ -263,7 +269,7 @@ class Run:
         X, layout, e2 = as_unit_layout(P, closed)  # exact scaling of curves far from size 1
         if layout.has_open:
             self._check_open(engine)
-        self.pinned = check_pins(pinned, layout, X, tangents=bool(pin_tangents),
+        self.pinned = check_pins(pinned, layout, X, tangents=pin_tangents,
                                  edge_lengths=fixed_lengths)
         if self.pinned is not None:
             # the caller's own coordinates there (np.ldexp by an even exponent is exact):

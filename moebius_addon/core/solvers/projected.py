@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from .._checks import check_flag
 from ..constraints import Constraints, jacobian, make_constraints, residual
 from ._interrupts import resumable
 from .base import HISTORY_KEYS, Run, Status, _check_names, check_dense_size, check_number
@@ -187,6 +188,9 @@ class Relaxation(Run):
         length_growth: float | None = None,
     ):
         _check_names(metric, target_lengths)
+        edge_lengths = check_flag("edge_lengths", edge_lengths)
+        barycenter = check_flag("barycenter", barycenter)
+        interpolate = check_flag("interpolate", interpolate)
         armijo, growth = check_line_search(armijo, growth)
         initial_step = check_number("initial_step", initial_step, 0, above=True)
         backproject_iter = check_number("backproject_iter", backproject_iter, 0, integer=True)
@@ -201,7 +205,7 @@ class Relaxation(Run):
                          equilateral=True, engine=engine, theta=theta, precision=precision,
                          reuse_factorization=reuse_factorization, krylov_rtol=krylov_rtol,
                          exact_backprojection=exact_backprojection, pinned=pinned,
-                         pin_tangents=pin_tangents, fixed_lengths=bool(edge_lengths),
+                         pin_tangents=pin_tangents, fixed_lengths=edge_lengths,
                          obstacles=obstacles, obstacle_weight=obstacle_weight, container=container,
                          obstacle_tol=obstacle_tol, closed=closed, energy=energy, alpha=alpha,
                          beta=beta, length_target=length_target, length_growth=length_growth)
@@ -216,7 +220,7 @@ class Relaxation(Run):
         real = self.lengths0[self.layout.real] if self.layout.has_open else self.lengths0
         self.backproject_tol = max(backproject_tol, 4.0 * np.finfo(float).eps * float(
             np.abs(self.X).max()) / float(real.min()))
-        self.interpolate = bool(interpolate)
+        self.interpolate = interpolate
         if not self.engine.dense_metric:  # the tree's solvers need both rows and few pins
             if self.pinned is not None and not self.engine.solves_pins(self.pinned.size):
                 check_dense_size(self.layout.n, "pins")
