@@ -27,7 +27,7 @@ from ..core.compiling import compiling
 from ..core.energy_choice import check_energy
 from ..core.engine import AUTO_TREE_FROM
 from . import api, geometry, keyframes
-from .labels import DEFAULT_MAX_ITERATIONS, DEFAULT_TOLERANCE
+from .labels import DEFAULT_MAX_ITERATIONS, DEFAULT_SETTLE, DEFAULT_TOLERANCE
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -96,6 +96,9 @@ def _parser() -> argparse.ArgumentParser:
                    default=DEFAULT_TOLERANCE, metavar="TOL",
                    help="stop once the gradient norm in the metric is below TOL (default "
                         "%(default)g)")
+    p.add_argument("--settle", type=float, default=100 * DEFAULT_SETTLE, metavar="PERCENT",
+                   help="stop once no point moves more than PERCENT of an edge in each of 5 "
+                        "iterations in a row (default %(default)g; 0: never)")
     p.add_argument("--no-refine", dest="refine", action="store_false",
                    help="do not add edges: refuse a start too coarse for its shape and stop "
                         "where strands jam, as before refinement existed (default: refine)")
@@ -234,7 +237,8 @@ def _run(args, run: dict, notation: str | None):
                                   metric=args.metric, method=method,
                                   penalty=args.penalty, engine=args.engine,
                                   theta=args.theta, max_iterations=args.max_iterations,
-                                  tolerance=args.tolerance, frame_start=args.frame_start,
+                                  tolerance=args.tolerance, settle=args.settle / 100.0,
+                                  frame_start=args.frame_start,
                                   keyframe_stride=args.stride, refine=args.refine,
                                   max_edges=args.max_edges, restarts=args.restarts,
                                   seed=args.seed, progress=_say if args.verbose else False,

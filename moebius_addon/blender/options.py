@@ -57,6 +57,7 @@ def relax_settings(settings) -> dict:
         engine=settings.engine,
         max_iterations=settings.max_iterations,
         tolerance=settings.tolerance,
+        settle=settings.settle / 100.0,
         frame_start=settings.frame_start,
         keyframe_stride=settings.keyframe_stride,
         initial_step=settings.initial_step,

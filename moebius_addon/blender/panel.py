@@ -148,6 +148,7 @@ class VIEW3D_PT_moebius_flow(_MoebiusPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(s, "max_iterations")
         col.prop(s, "tolerance")
+        col.prop(s, "settle")
         row = layout.row(align=True)
         row.prop(s, "use_energy_target", text="")
         sub = row.row(align=True)

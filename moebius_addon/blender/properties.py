@@ -79,6 +79,13 @@ class MoebiusSettings(bpy.types.PropertyGroup):
         description="Stop once the gradient norm in the metric (projected onto the "
                     "constraints for the exact-constraint methods) is smaller than this",
     )
+    settle: FloatProperty(
+        name="Stop When Still", default=100 * labels.DEFAULT_SETTLE, min=0.0, soft_max=5.0,
+        precision=3, subtype="PERCENTAGE",
+        description="Stop once no point moves more than this share of an edge in each of 5 "
+                    "iterations in a row: the shape no longer changes visibly, so the keys end "
+                    "where the motion ends (0: run to Max Iterations or the Tolerance)",
+    )
     refine: BoolProperty(
         name="Refine When Jammed", default=True,
         description="Split every edge in two (the same curve, twice the points) when the curve "

@@ -20,6 +20,7 @@ from .labels import (
     AUTO_METHOD,
     DEFAULT_ENGINE,
     DEFAULT_METHOD,
+    DEFAULT_SETTLE,
     EXPLICIT_METHOD,
     KNOT_METHOD,
     method_label,
@@ -344,6 +345,7 @@ class ObjectRelaxation:
             max_edges = self._max_edges(obj, polygons, closed, max_edges, metric, method,
                                         engine, allow_large)
         options.setdefault("target_lengths", "keep")
+        options.setdefault("settle", DEFAULT_SETTLE)  # the keys end where the motion ends
         self.obj = obj
         #: the method asked for (may be ``"auto"``), the core method run, and why
         self.requested = method

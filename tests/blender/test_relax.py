@@ -1,5 +1,7 @@
 """moebius.relax: keyframes on the splines and the energy, frame range, stride, stop, undo."""
 
+from importlib import import_module
+
 import bpy
 import numpy as np
 import pytest
@@ -374,3 +376,24 @@ def test_the_kernels_are_prepared_in_the_background(scene, mb, trefoil):
     prep = mb.api.Preparation(["exact"])
     assert prep.wait(600) and prep.error is None and prep.done
     assert prep.kernels >= 0 and 0 < prep.seconds == prep.seconds  # stops counting when done
+
+
+def test_the_default_run_ends_when_the_shape_stops_changing(scene, mb):
+    # Stop When Still (0.1 % of an edge, 5 iterations in a row): the keys end where the motion
+    # ends; off, the same run goes on to the tolerance
+    s = scene.moebius
+    assert s.settle == pytest.approx(0.1)
+    bpy.ops.moebius.add_knot(kind="3_1", edges=60)
+    knot = bpy.context.active_object
+    s.max_iterations = 300
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    assert s.last_message.startswith("settled: no vertex moved more than 0.001 of an edge")
+    settled = s.last_iterations
+    frames, points, _ = import_module(mb.__name__ + ".keyframes").read_flow_keyframes(knot)
+    assert len(frames) == settled + 1 < 301
+    edge = np.linalg.norm(np.roll(points[0], -1, 0) - points[0], axis=1).mean()
+    assert np.linalg.norm(points[-1] - points[-6], axis=1).max() <= 5e-3 * edge * 1.001
+    s.settle = 0.0
+    scene.frame_set(1)  # from the same start
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    assert s.last_iterations > settled and not s.last_message.startswith("settled")

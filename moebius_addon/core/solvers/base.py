@@ -49,6 +49,8 @@ from .growth import DEFAULT_LENGTH_GROWTH, LengthGrowth
 
 HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
 
+#: Iterations in a row without visible motion that end a run with ``settle`` set.
+SETTLE_ITERATIONS = 5
 # A run that stops moving with a projected gradient above this many times tol is jammed, not
 # converged (near the minimum Armijo fails on round-off with sqrt(<g,u>) ≈ 1e-8, docs/design.md).
 _STALL_FACTOR = 1e3
@@ -240,6 +242,7 @@ class Run:
                  fixed_lengths: bool = True, obstacles=None, obstacle_weight: float = 1.0,
                  container=None, obstacle_tol: float | None = None, closed=True, energy="moebius",
                  alpha=None, beta=None, length_target=None, length_growth=None,
+                 settle: float = 0.0, settle_iterations: int = SETTLE_ITERATIONS,
                  **engine_options):
         _check_names(metric, target_lengths)
         check = check_flag("check", check)
@@ -255,6 +258,13 @@ class Run:
         self.ftol = check_number("ftol", ftol, 0)
         self.max_seconds = None if max_seconds is None else check_number("max_seconds",
                                                                          max_seconds, 0)
+        #: the shape has settled once no vertex moved more than ``settle`` mean edge lengths in
+        #: each of ``settle_iterations`` iterations in a row (0: never)
+        self.settle = check_number("settle", settle, 0)
+        self.settle_iterations = check_number("settle_iterations", settle_iterations, 1,
+                                              integer=True)
+        self._settle_from: np.ndarray | None = None
+        self._still = 0
         obstacle_weight = check_number("obstacle_weight", obstacle_weight, 0)
         if obstacle_tol is not None:
             obstacle_tol = check_number("obstacle_tol", obstacle_tol, 0)
@@ -468,6 +478,10 @@ class Run:
         elif self.energy_target is not None and self.E <= self.energy_target:
             self._finish(True, f"energy {self.E:.10g} reached the target {self.energy_target:g}",
                          Status.TARGET)
+        elif self._settled():
+            self._finish(True, f"settled: no vertex moved more than {self.settle:.3g} of an "
+                               f"edge in each of the last {self.settle_iterations} iterations",
+                         Status.CONVERGED)
         elif prev is not None and abs(prev - cur) <= self.ftol * abs(cur):
             if gn <= _STALL_FACTOR * self.tol:
                 self._finish(True, f"relative energy change below ftol {self.ftol:g}",
@@ -479,6 +493,23 @@ class Run:
                          Status.MAX_ITER)
         elif self.max_seconds is not None and time.perf_counter() - self.t0 >= self.max_seconds:
             self._time_up()
+
+    def _settled(self) -> bool:
+        """Whether the shape stopped changing (``settle``): counts the iterations in a row
+        whose largest vertex move is at most ``settle`` mean edge lengths; a run's keys end
+        where its motion ends."""
+        if not self.settle:
+            return False
+        X, last = self.X, self._settle_from
+        self._settle_from = X.copy()
+        if last is None or last.shape != X.shape:
+            self._still = 0
+            return False
+        real = self.layout.real if self.layout.has_open else slice(None)
+        edge = float(self.lengths0[real].mean())
+        move = float(np.sqrt(np.max(np.sum((X - last) ** 2, axis=1))))
+        self._still = self._still + 1 if move <= self.settle * edge else 0
+        return self._still >= self.settle_iterations
 
     def _deadline(self) -> None:
         """Raise :class:`_OutOfTime` once the budget is used up (checked inside long steps)."""

@@ -26,7 +26,7 @@ import numpy as np
 from ..constraints import jacobian, make_constraints
 from ..pins import count_pins
 from ._interrupts import resumable
-from .base import HISTORY_KEYS, Run, _check_names, _OutOfTime, check_number
+from .base import HISTORY_KEYS, SETTLE_ITERATIONS, Run, _check_names, _OutOfTime, check_number
 
 #: Default weight α of Hencky's stretch penalty (units where the total length is 1).
 DEFAULT_PENALTY_WEIGHT = 1e4
@@ -81,7 +81,8 @@ class _PenaltyRun(Run):
                  obstacles=None, obstacle_weight: float = 1.0, container=None,
                  obstacle_tol: float | None = None, closed=True,
                  energy="moebius", alpha=None, beta=None, length_target=None,
-                 length_growth=None, **ignored):
+                 length_growth=None, settle: float = 0.0,
+                 settle_iterations: int = SETTLE_ITERATIONS, **ignored):
         unknown = set(ignored) - _FEASIBLE_ONLY
         if unknown:
             raise TypeError(f"unknown option(s) {', '.join(sorted(unknown))}")
@@ -100,7 +101,8 @@ class _PenaltyRun(Run):
                          obstacle_weight=obstacle_weight, container=container,
                          obstacle_tol=obstacle_tol, closed=closed,
                          energy=energy, alpha=alpha, beta=beta, length_target=length_target,
-                         length_growth=length_growth)  # refused there, by name
+                         length_growth=length_growth,  # refused there, by name
+                         settle=settle, settle_iterations=settle_iterations)
         self.alpha = float(weight)  # α of the docs (docs/design.md, the penalty methods)
         self.penalty_in_metric = (metric != "l2") if penalty_metric == "auto" else bool(
             penalty_metric)

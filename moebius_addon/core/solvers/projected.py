@@ -25,7 +25,15 @@ import numpy as np
 from .._checks import check_flag
 from ..constraints import Constraints, jacobian, make_constraints, residual
 from ._interrupts import resumable
-from .base import HISTORY_KEYS, Run, Status, _check_names, check_dense_size, check_number
+from .base import (
+    HISTORY_KEYS,
+    SETTLE_ITERATIONS,
+    Run,
+    Status,
+    _check_names,
+    check_dense_size,
+    check_number,
+)
 
 # The modified Newton back-projection gives up on a trial step once |Φ| shrinks by less than
 # this factor per iteration (it converges linearly; slower means the step left its basin).
@@ -142,6 +150,10 @@ class Relaxation(Run):
     length_growth : float, optional
         Relative growth per iteration, > 0 (default ``growth.DEFAULT_LENGTH_GROWTH``, 1 %);
         needs ``length_target``.
+    settle, settle_iterations : float, int
+        Stop (converged) once no vertex moved more than ``settle`` mean edge lengths in each
+        of ``settle_iterations`` (default 5) iterations in a row: the shape no longer changes
+        visibly. 0 (default): not used.
     """
 
     _OPEN_CURVES = True
@@ -186,6 +198,8 @@ class Relaxation(Run):
         beta: float | None = None,
         length_target=None,
         length_growth: float | None = None,
+        settle: float = 0.0,
+        settle_iterations: int = SETTLE_ITERATIONS,
     ):
         _check_names(metric, target_lengths)
         edge_lengths = check_flag("edge_lengths", edge_lengths)
@@ -208,7 +222,8 @@ class Relaxation(Run):
                          pin_tangents=pin_tangents, fixed_lengths=edge_lengths,
                          obstacles=obstacles, obstacle_weight=obstacle_weight, container=container,
                          obstacle_tol=obstacle_tol, closed=closed, energy=energy, alpha=alpha,
-                         beta=beta, length_target=length_target, length_growth=length_growth)
+                         beta=beta, length_target=length_target, length_growth=length_growth,
+                         settle=settle, settle_iterations=settle_iterations)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter
