@@ -110,7 +110,7 @@ PRESETS = {
         "Open splines kept open, their end points selected and pinned, obstacles from a "
         "collection (Advanced ▸ Obstacles; one named 'Obstacles' is taken if none is set), "
         "the tree's θ 0.3; a thickness set on the curve",
-        {"keep_open": True, "close_open": False, "pin_selected": True, "pin_tangents": False,
+        {"keep_open": True, "close_open": False, "pin_selected": True, "pin_tangents": True,
          "use_length_target": False, "method": EXPLICIT_METHOD, "refine": True,
          "theta": 0.3},
     ),

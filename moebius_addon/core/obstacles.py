@@ -271,14 +271,17 @@ def auto_obstacle_tol(tol, layout, meshes) -> float:
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def _edge_terms(X, nxt, T, area, grad):
+def _edge_terms(X, nxt, T, area, skip, grad):
     """Per edge: its energy ``Σ_T l A / d³`` and, with ``grad``, the derivatives of that sum
-    with respect to the midpoint (``gm``) and to the length (``gl``)."""
+    with respect to the midpoint (``gm``) and to the length (``gl``); 0 for the edges of
+    ``skip`` (fixed by pins: a constant, infinite where a pinned end lies on a mesh)."""
     n = X.shape[0]
     e = np.zeros(n)
     gm = np.zeros((n, 3))
     gl = np.zeros(n)
     for i in nb.prange(n):
+        if skip[i]:
+            continue
         j = nxt[i]
         mx = 0.5 * (X[i, 0] + X[j, 0])
         my = 0.5 * (X[i, 1] + X[j, 1])
@@ -459,8 +462,8 @@ def _box_bounds(rx, ry, rz, node, A, Q, S3, Rc, h, hbar, nrm, cphi, sphi):
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def _edge_terms_tree(X, nxt, T, area, left, right, lo, hi, A, c, Q, S3, Rc, h, hbar, nrm,
-                     cphi, sphi, tol, grad):
+def _edge_terms_tree(X, nxt, T, area, skip, left, right, lo, hi, A, c, Q, S3, Rc, h, hbar,
+                     nrm, cphi, sphi, tol, grad):
     """:func:`_edge_terms` through the triangles' hierarchy, each edge's sum within relative
     ``tol`` of the exact one (module text, "the far field"). Nodes are visited nearer centre
     first; a node whose bounds ``[L, U]`` on its sum are accepted counts the estimate ``G``
@@ -472,6 +475,8 @@ def _edge_terms_tree(X, nxt, T, area, left, right, lo, hi, A, c, Q, S3, Rc, h, h
     gl = np.zeros(n)
     total = A[0]
     for i in nb.prange(n):
+        if skip[i]:
+            continue
         stack = np.empty(256, np.int64)
         j = nxt[i]
         mx = 0.5 * (X[i, 0] + X[j, 0])
@@ -710,12 +715,15 @@ def triangle_tree(T: np.ndarray, leaf: int = 8):
 
 
 @nb.njit(cache=True, parallel=True)
-def _nearest(X, nxt, T):
-    """Per edge: the nearest triangle and the squared distance to it (0 where they meet)."""
+def _nearest(X, nxt, T, skip):
+    """Per edge: the nearest triangle and the squared distance to it (0 where they meet);
+    infinitely far for the edges of ``skip``."""
     n = X.shape[0]
-    which = np.empty(n, np.int64)
-    dist2 = np.empty(n)
+    which = np.full(n, -1, np.int64)
+    dist2 = np.full(n, np.inf)
     for i in nb.prange(n):
+        if skip[i]:
+            continue
         j = nxt[i]
         b = np.inf
         w = -1
@@ -731,15 +739,17 @@ def _nearest(X, nxt, T):
 
 
 @nb.njit(cache=True, parallel=True)
-def _nearest_tree(X, nxt, T, lo, hi, left, right, bmin, bmax):
+def _nearest_tree(X, nxt, T, skip, lo, hi, left, right, bmin, bmax):
     """:func:`_nearest` through the triangles' hierarchy: a node is skipped when the squared
     gap between its box and the edge's box exceeds the best squared distance so far (no
     triangle in it can be nearer, or as near). Ties go to the lower triangle index, as in
     the full scan, so both give the same triangle and the same distance."""
     n = X.shape[0]
-    which = np.empty(n, np.int64)
-    dist2 = np.empty(n)
+    which = np.full(n, -1, np.int64)
+    dist2 = np.full(n, np.inf)
     for i in nb.prange(n):
+        if skip[i]:
+            continue
         stack = np.empty(128, np.int64)
         j = nxt[i]
         b = np.inf
@@ -814,6 +824,20 @@ class ObstacleField:
         self.tol = float(tol)
         lo, hi = self.tree[0], self.tree[1]
         self._moments = _node_moments(self.T, self.area, self.centre, self.radius, lo, hi)
+        #: vertices that never move (pins): an edge between two of them (the first edge of a
+        #: cable whose end and tangent are pinned on the plate it hangs from) is left out of
+        #: the energy and the start check; a step never moves it, so no contact is possible
+        self.fixed: np.ndarray | None = None
+
+    def _skip(self, nxt: np.ndarray) -> np.ndarray:
+        """The edge slots whose two ends are :attr:`fixed` (an open end's dummy slot, whose
+        two ends are its last vertex, too)."""
+        skip = np.zeros(len(nxt), dtype=np.bool_)
+        if self.fixed is not None:
+            pinned = np.zeros(len(nxt), dtype=np.bool_)
+            pinned[self.fixed] = True
+            skip = pinned & pinned[nxt]
+        return skip
 
     @property
     def triangles(self) -> int:
@@ -827,9 +851,9 @@ class ObstacleField:
     def _terms(self, X, nxt, grad):
         if self.tol > 0.0:
             lo, hi, left, right = self.tree[:4]
-            return _edge_terms_tree(X, nxt, self.T, self.area, left, right, lo, hi,
-                                    *self._moments, self.tol, grad)
-        return _edge_terms(X, nxt, self.T, self.area, grad)
+            return _edge_terms_tree(X, nxt, self.T, self.area, self._skip(nxt), left, right, lo,
+                                    hi, *self._moments, self.tol, grad)
+        return _edge_terms(X, nxt, self.T, self.area, self._skip(nxt), grad)
 
     def energy_gradient(self, X: np.ndarray, nxt: np.ndarray, prv: np.ndarray
                         ) -> tuple[float, np.ndarray]:
@@ -858,10 +882,11 @@ class ObstacleField:
         triangles: 0.43 s against 2.7 s for all pairs, docs/benchmarks.md) or "pairs": the
         same value."""
         if search == "pairs":
-            which, dist2 = _nearest(X, nxt, self.T)
+            which, dist2 = _nearest(X, nxt, self.T, self._skip(nxt))
         else:
             lo, hi, left, right, bmin, bmax = self.tree
-            which, dist2 = _nearest_tree(X, nxt, self.T, lo, hi, left, right, bmin, bmax)
+            which, dist2 = _nearest_tree(X, nxt, self.T, self._skip(nxt), lo, hi, left, right,
+                                         bmin, bmax)
         i = int(np.argmin(dist2))
         return i, int(which[i]), float(np.sqrt(dist2[i]))
 
@@ -877,6 +902,16 @@ class ObstacleField:
         label = self.labels[int(self.owner[k])]
         tri = f"triangle {int(self.local[k])} of {label}"
         what = "the container's wall" if label.startswith("the container") else "an obstacle"
+        ends = [] if self.fixed is None else [v for v in (i, int(layout.nxt[i]))
+                                               if v in set(self.fixed.tolist())]
+        if ends:  # a pinned end on the mesh: fixed with its neighbour, its edge never moves
+            v = ends[0]
+            where = (f"vertex {v - int(layout.starts[c])} of component {c}" if layout.is_link
+                     else f"vertex {v}")
+            raise ValueError(f"the pinned {where} touches {what} ({tri}) and the edge beside "
+                             "it can move: pin its tangent too (pin_tangents=True; the panel's "
+                             "Pin Tangents) so that the edge stays where it is, or move the "
+                             f"point more than {eps * self.scale:.3g} off")
         if d == 0.0:
             raise ValueError(f"the curve crosses {what}: {where} passes through {tri}; "
                              f"move the curve or {label} so that they do not meet")

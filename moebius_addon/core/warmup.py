@@ -160,17 +160,17 @@ def _obstacles() -> None:
 
 
 def _untangle_cables() -> None:
-    # Presets ▸ Untangle Cables: open cables between two plates around a torus, the ends
-    # pinned (with and without their tangents), the tree from engine.AUTO_TREE_FROM vertices
-    # on, θ 0.3
+    # Presets ▸ Untangle Cables: open cables hanging from two plates through a torus, the ends
+    # on the plates pinned with their tangents (and, the plates apart, without), the tree from
+    # engine.AUTO_TREE_FROM vertices on, θ 0.3
     t = np.linspace(0.0, 1.0, 171)
     parts = [np.c_[0.3 * np.cos(2 * np.pi * c / 6) + 0.02 * np.sin(3 * t + c),
                    0.3 * np.sin(2 * np.pi * c / 6) + 0.02 * np.cos(2 * t + c), t]
              for c in range(6)]
-    plates = [_box([-1.0, -1.0, -0.06], [1.0, 1.0, -0.02]), _box([-1.0, -1.0, 1.02],
-                                                                  [1.0, 1.0, 1.06])]
     ring = _torus(0.6, 0.08, 24, 12, z=0.5)
-    for tangents in (False, True):
+    for tangents, gap in ((True, 0.0), (False, 0.02)):
+        plates = [_box([-1.0, -1.0, -0.04 - gap], [1.0, 1.0, -gap]),
+                  _box([-1.0, -1.0, 1.0 + gap], [1.0, 1.0, 1.04 + gap])]
         _relax(parts, "projected_gradient", closed=False, pinned=[[0, 170]] * 6,
                pin_tangents=tangents, obstacles=[*plates, ring], theta=0.3)
     small = [resample(p, 30, closed=False) for p in parts[:2]]

@@ -34,12 +34,13 @@ def _mesh_in(collection, obj):
     collection.objects.link(obj)
 
 
-def _cables_between_plates() -> None:
-    """Six open cables between two plates around a torus (Untangle Cables' scene), one object
-    with a spline per cable; the plates and the torus in the collection 'Obstacles'."""
+def _cables_between_plates(gap: float = 0.0) -> None:
+    """Six open cables hanging between two plates (their ends on them, or ``gap`` off) through
+    a torus (Untangle Cables' scene), one object with a spline per cable; the plates and the
+    torus in the collection 'Obstacles'."""
     obstacles = bpy.data.collections.new("Obstacles")
     bpy.context.scene.collection.children.link(obstacles)
-    for z in (-0.04, 1.04):
+    for z in (-0.02 - gap, 1.02 + gap):
         bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, z), scale=(2.0, 2.0, 0.04))
         _mesh_in(obstacles, bpy.context.active_object)
     bpy.ops.mesh.primitive_torus_add(major_radius=0.6, minor_radius=0.08, location=(0, 0, 0.5))
@@ -72,11 +73,12 @@ def main() -> None:
         filepath=zip_path, repo="user_default", enable_on_install=True) == {"FINISHED"}
     compiling = importlib.import_module(EXT_MODULE + ".core.compiling")
 
-    def preset(name: str, scene, pin_tangents: bool = False):
+    def preset(name: str, scene, pin_tangents: bool | None = None):
         def run() -> int:
             scene()
             assert bpy.ops.moebius.apply_preset(preset=name) == {"FINISHED"}
-            bpy.context.scene.moebius.pin_tangents = pin_tangents
+            if pin_tangents is not None:
+                bpy.context.scene.moebius.pin_tangents = pin_tangents
             return _relax()
         return run
 
@@ -97,8 +99,8 @@ def main() -> None:
         "relax_knot": preset("relax_knot", lambda: bpy.ops.moebius.add_knot(kind="3_1",
                                                                             edges=100)),
         "untangle_cables": preset("untangle_cables", _cables_between_plates),
-        "untangle_cables, end tangents": preset("untangle_cables", _cables_between_plates,
-                                                pin_tangents=True),
+        "untangle_cables, free tangents": preset(
+            "untangle_cables", lambda: _cables_between_plates(gap=0.02), pin_tangents=False),
         "pack_in_volume": preset("pack_in_volume", _loop_in_sphere),
         "tree": knot("3_1", 3000),
         "tangent_point": knot("3_1", 100, energy="tangent_point"),

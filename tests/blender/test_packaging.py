@@ -159,7 +159,7 @@ def test_every_preset_runs_from_the_kernels_the_zip_ships(extension_zip, tmp_pat
     assert proc.returncode == 0, proc.stderr[-3000:]
     found = json.loads(proc.stdout.strip().splitlines()[-1])
     scipy, generic = found.pop("scipy"), found.pop("generic")
-    assert set(found) == {"relax_knot", "untangle_cables", "untangle_cables, end tangents",
+    assert set(found) == {"relax_knot", "untangle_cables", "untangle_cables, free tangents",
                           "pack_in_volume", "tree", "tangent_point", "identify"}
     for name, path in found.items():
         assert path["iterations"] == (0 if name == "identify" else 2), (name, path)

@@ -7,7 +7,7 @@ from moebius_addon import core
 from moebius_addon.core import obstacles as ob
 from moebius_addon.core._layout import as_layout
 from tests.conftest import out_here_and_in_one_thread
-from tests.mesh_checks import crossings
+from tests.mesh_checks import crossings, segments_closest
 
 
 def torus(R=1.0, r=0.3, nu=24, nv=10):
@@ -466,3 +466,39 @@ def test_the_cone_axis_is_the_principal_eigenvector():
     for N in (np.zeros((3, 3)), np.eye(3), np.diag([0.0, 2.0, 1.0])):
         _principal_axis(N, out)
         assert out @ N @ out == pytest.approx(np.linalg.eigvalsh(N)[2], abs=1e-15)
+
+
+def _plate(z0, z1):
+    """A closed box from (-2, -2, z0) to (2, 2, z1), faces outward."""
+    from moebius_addon.core.warmup import _box
+
+    return _box([-2.0, -2.0, z0], [2.0, 2.0, z1])
+
+
+def test_cable_ends_may_lie_on_the_plates_they_hang_from_with_their_tangents_pinned():
+    # two cables from the top face of one plate (z = 0) to the bottom face of another (z = 1),
+    # bent towards each other: with their ends and end tangents pinned, the plates are
+    # obstacles like any other; no free point reaches a plate, the fixed ones stay to the bit
+    t = np.linspace(0.0, 1.0, 400)
+    cables = core.resample([np.c_[0.15 * np.sin(np.pi * t), 0 * t, t],
+                            np.c_[0.4 - 0.1 * np.sin(np.pi * t), 0.02 * np.sin(2 * np.pi * t),
+                                  t]], [41, 41], closed=False)
+    plates = {"Floor": _plate(-0.1, 0.0), "Ceiling": _plate(1.0, 1.1)}
+    pins = [[0, 40]] * 2
+    with pytest.raises(ValueError, match=r"the pinned vertex 0 of component 0 touches an "
+                                         r"obstacle \(triangle \d+ of obstacle 'Floor'\) and the "
+                                         r"edge beside it can move: pin its tangent too"):
+        core.relax(cables, closed=False, pinned=pins, obstacles=plates, max_iter=1)
+    xs = [cables]
+    r = core.relax(cables, closed=False, pinned=pins, pin_tangents=True, obstacles=plates,
+                   max_iter=15, tol=0.0, callback=lambda s: xs.append([p.copy() for p in s.x]))
+    assert r.nit == 15 and r.fun < r.history["energy"][0]
+    for k in range(2):
+        fixed = [0, 1, 39, 40]
+        for x in xs:
+            np.testing.assert_array_equal(x[k][fixed], cables[k][fixed])
+            assert np.all((x[k][2:-2, 2] > 0.0) & (x[k][2:-2, 2] < 1.0))
+    # the cables moved, apart from each other (the independent check: segment distances)
+    i, j = (g.ravel() for g in np.meshgrid(np.arange(40), np.arange(40), indexing="ij"))
+    gap = min(segments_closest(a[i], a[i + 1], b[j], b[j + 1]).min() for a, b in xs)
+    assert gap > 0.0 and np.abs(xs[-1][0] - cables[0]).max() > 1e-3

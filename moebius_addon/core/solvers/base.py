@@ -329,6 +329,7 @@ class Run:
                 labels.append(container_label)
             field = ObstacleField(meshes, self._shift, self._scale, obstacle_weight, labels,
                                   auto_obstacle_tol(obstacle_tol, layout, meshes))
+            field.fixed = self.pinned  # a pinned end and tangent may lie on a mesh
             field.check_clear(self.X, layout, self.eps)
             self.engine.obstacles = field
         self.nit = 0
