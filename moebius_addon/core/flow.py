@@ -77,12 +77,19 @@ def relax(
         for a given input.
     """
     run = make_run(method, P, metric, max_iter, tol, engine=engine, theta=theta, **options)
-    while not run.done:
-        before = run.nit
-        run.step()
-        # every accepted iterate reaches the callback, the last one of the run included
-        if run.nit > before and callback is not None and callback(run.state()):
-            run.stop("stopped by callback")
+    try:
+        while not run.done:
+            before = run.nit
+            run.step()
+            # every accepted iterate reaches the callback, the last one of the run included
+            if run.nit > before and callback is not None and callback(run.state()):
+                run.stop("stopped by callback")
+    except KeyboardInterrupt as err:  # the iterates so far stay the caller's
+        run.stop(f"interrupted by KeyboardInterrupt after {run.nit} iterations")
+        err.result = run.result()
+        err.add_note(f"core.relax: interrupted after {run.nit} iterations; the result so far "
+                     "is the exception's .result")
+        raise
     return run.result()
 
 

@@ -370,3 +370,40 @@ def test_a_run_ends_when_its_shape_stops_changing():
     np.testing.assert_array_equal(r0.x, r.x)
     with pytest.raises(ValueError, match="settle"):
         core.relax(P, max_iter=1, settle=-1.0)
+
+
+def test_an_interrupted_relax_raises_with_the_result_so_far():
+    P = core.knots.named("3_1", 60)
+    seen = []
+
+    def callback(state):
+        seen.append(state.x.copy())
+        if state.nit == 3:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt) as caught:
+        core.relax(P, max_iter=50, callback=callback)
+    result = caught.value.result
+    assert result.nit == 3 and result.status == core.Status.STOPPED
+    np.testing.assert_array_equal(result.x, seen[-1])
+    assert len(result.history["energy"]) == 4
+    assert "the result so far is the exception's .result" in caught.value.__notes__[0]
+
+
+def test_ctrl_c_in_a_kernel_outside_a_step_is_a_keyboard_interrupt(monkeypatch):
+    # Ctrl+C as a numba kernel returns reaches Python as a SystemError carrying the interrupt;
+    # the start checks of a run (outside its step) run kernels too
+    from moebius_addon.core.solvers import base as solver_base
+
+    def interrupted(*args, **kwargs):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as err:
+            raise SystemError("CPUDispatcher(...) returned a result with an exception set"
+                              ) from err
+
+    monkeypatch.setattr(solver_base, "check_polygon", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        core.relax(core.knots.named("3_1", 60), max_iter=2, refine=False)
+    with pytest.raises(KeyboardInterrupt):
+        core.make_run("projected_gradient", core.knots.named("3_1", 60), refine=False)

@@ -1,5 +1,7 @@
 """Obstacles (issue 18): meshes the curve is repelled from and never crosses."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -283,6 +285,48 @@ def test_other_bad_obstacle_arguments():
     with pytest.raises(ValueError, match=r"touches an obstacle: edge \d+ is 1e-06 from "
                                          r"triangle 0 of obstacle 0"):
         core.relax(C, obstacles=[plane], max_iter=1)
+
+
+def _trefoil_above_plate(gap):
+    """A trefoil (100 edges) ``gap`` edge lengths above a large plate."""
+    P = core.knots.named("3_1", 100)
+    z0 = P[:, 2].min() - gap * np.linalg.norm(P[1] - P[0])
+    return P, {"Plate": (np.array([[-5, -5, z0], [5, -5, z0], [0, 5, z0]]),
+                         np.array([[0, 1, 2]]))}
+
+
+def test_a_start_too_near_to_move_is_refused_and_a_stall_says_what_holds_it():
+    # 1.2 contact distances above a plate a trefoil passed the start check and stalled at once
+    # (energy 1e9, "strands are probably jammed — use more edges"); now refused, and 1.6
+    # contact distances up it relaxes
+    P, plate = _trefoil_above_plate(1.2e-3)
+    with pytest.raises(ValueError, match=r"touches an obstacle: edge \d+ is [\d.e-]+ from "
+                                         r"triangle 0 of obstacle 'Plate', nearer than the "
+                                         r"[\d.e-]+ the flow needs to move"):
+        core.relax(P, obstacles=plate, max_iter=5, method="projected_gradient")
+    P, plate = _trefoil_above_plate(2.5e-3)
+    r = core.relax(P, obstacles=plate, max_iter=30, method="projected_gradient")
+    assert r.nit == 30 and r.fun < 1e-3 * r.history["energy"][0]
+    # what a stall would say of these states: the plate holds the first, nothing the second;
+    # strands closer than an edge length between pins are held by the pins (a braid between
+    # pinned ends), without pins a finer polygon may let them pass
+    def cause(P, **options):
+        return core.make_run("projected_gradient", P, refine=False, **options)._stall_cause()
+
+    assert cause(P, obstacles=plate).startswith(
+        "the curve is pressed against obstacle 'Plate' (0.0025 edge lengths from it)")
+    assert cause(P).startswith("no strand touches another or an obstacle")
+    t = np.linspace(0.0, 1.0, 400)
+    near = core.resample([np.c_[0.1 * np.sin(np.pi * t), 0 * t, t],
+                          np.c_[0.1 * np.sin(np.pi * t) + 0.02, 0 * t, t]], [41, 41],
+                         closed=False)  # 0.8 edge lengths apart at most
+    held = cause(near, closed=False, pinned=[[0, 40]] * 2, check=False)
+    assert re.fullmatch(r"strands are pressed together \(0\.[5-8]\d* edge lengths apart\) "
+                        r"between the pinned points that hold them: as untangled as the pins "
+                        r"allow", held), held
+    assert re.match(r"strands are pressed together \(0\.[5-8]\d* edge lengths apart\) \(a "
+                    r"finer polygon may let them slide past", cause(near, closed=False,
+                                                                     check=False))
 
 
 def test_the_step_bound_through_the_hierarchy_is_the_all_pairs_one(rng):

@@ -22,6 +22,7 @@ from .._checks import check_flag
 from ..engine import engine_class, tree_solves_pins
 from ..metrics import METRICS
 from ..spelling import take_spelling
+from ._interrupts import as_interrupt
 from .adaptive import RESTART_SCALE, AdaptiveRun
 from .base import Run, check_dense_size, check_number
 from .penalty import LBFGS, Nesterov, NonlinearCG, pinned_refusal
@@ -46,6 +47,7 @@ INFEASIBLE = tuple(m for m in METHODS if m not in FEASIBLE)
 GROWING = tuple(m for m, cls in METHOD_CLASSES.items() if cls._LENGTH_GROWTH)
 
 
+@as_interrupt
 def make_run(method: str, P, metric: str = "hs", max_iter: int = 200, tol: float = 1e-6, *,
              engine: str = "auto", theta: float | None = None, refine: bool = True,
              max_edges: int | None = None, restarts: int = 0, seed: int = 0,

@@ -28,6 +28,24 @@ def _keyboard_interrupt(err: BaseException) -> KeyboardInterrupt | None:
     return None
 
 
+def as_interrupt(call):
+    """Wrap ``call`` so that a ``SystemError`` carrying a ``KeyboardInterrupt`` (Ctrl+C as a
+    numba kernel returned) is raised as that interrupt: for the calls outside a run's
+    ``step()`` that reach kernels (a run's set-up and start checks, a refinement)."""
+
+    @functools.wraps(call)
+    def guarded(*args, **kwargs):
+        try:
+            return call(*args, **kwargs)
+        except SystemError as err:
+            interrupt = _keyboard_interrupt(err)
+            if interrupt is None:
+                raise
+            raise interrupt from None
+
+    return guarded
+
+
 def resumable(step):
     """Wrap a run's ``step()``: after an interruption inside it, the next call first calls
     ``self._resume()`` (rebuild what the engine holds at the accepted iterate); a

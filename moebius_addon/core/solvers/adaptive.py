@@ -36,6 +36,7 @@ from .._layout import as_layout
 from ..pins import check_pins
 from ..polygon import CONTACT_RATIO, check_polygon, contact_ratio, subdivide
 from ..separate import separate
+from ._interrupts import as_interrupt
 from .base import IterationState, RelaxResult, Status, check_number
 
 #: Edges a refinement makes of every edge (a split in two: the flow doubles its resolution
@@ -51,6 +52,10 @@ SPLIT_FIRST = 4
 MIN_MAX_EDGES = 2000
 #: Default ``max_edges``: this many times the start's edge count (at least MIN_MAX_EDGES).
 MAX_EDGES_FACTOR = 4
+#: A run that jams again after a refinement for a jam is refined again only if its energy fell
+#: by more than this fraction since: a braid held by its ends stalls at the same energy at any
+#: resolution, and more edges only cost time there.
+REFINE_GAIN = 1e-3
 #: A jammed run goes on, refined, from its last iterate whose strands were at least this many
 #: mean edge lengths apart (vertices 4 edges apart along the curve): where a jam forms, the
 #: flow squeezes two strands from about an edge apart to a thousandth within a few iterates
@@ -323,6 +328,13 @@ class AdaptiveRun:
         run = self.run
         layout = run.layout
         edges_now = self._edges(layout.n)
+        jams = [r for r in self.refinements if r["reason"].startswith("jammed")]
+        if jams and float(run.E) >= (1.0 - REFINE_GAIN) * jams[-1]["energy_before"]:
+            last = jams[-1]  # held, not jammed: a finer polygon stalls the same
+            self._why_not = (f"not refined again: refining to {last['edges_after']} edges at "
+                             f"iteration {last['iteration']} did not lower the energy "
+                             f"({last['energy_before']:.10g} → {float(run.E):.10g})")
+            return False
         if FACTOR * edges_now > self.max_edges:
             self._why_not = (f"not refined further: {FACTOR * edges_now} edges would exceed "
                              f"max_edges={self.max_edges}")
@@ -583,6 +595,7 @@ class AdaptiveRun:
             notes.append(f"{len(self._restart_log)} restarts, {kept} kept")
         self.message = message + ("" if not notes else " (" + "; ".join(notes) + ")")
 
+    @as_interrupt
     def step(self) -> bool:
         """Advance the current run by one accepted iterate (refining, restarting or rolling
         back when it finishes). Returns False once finished."""

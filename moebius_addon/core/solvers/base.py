@@ -44,11 +44,14 @@ from ..metrics import METRICS
 from ..obstacles import ObstacleField, auto_obstacle_tol, check_obstacles
 from ..pinned_solve import TREE_MAX_PINS
 from ..pins import check_pins
-from ..polygon import check_polygon
+from ..polygon import check_polygon, contact_ratio
 from .growth import DEFAULT_LENGTH_GROWTH, LengthGrowth
 
 HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
 
+#: A stalled curve nearer than this many edge lengths to an obstacle, or strands this near
+#: each other, are said to be pressed together (:meth:`Run._stall_cause`).
+STALL_CONTACT = 1.0
 #: Iterations in a row without visible motion that end a run with ``settle`` set.
 SETTLE_ITERATIONS = 5
 # A run that stops moving with a projected gradient above this many times tol is jammed, not
@@ -534,3 +537,31 @@ class Run:
 
     def _stall_message(self, gn: float) -> str:
         raise NotImplementedError
+
+    def _stall_cause(self) -> str:
+        """What holds a stalled curve, read from its state: an obstacle or the container's
+        wall it is pressed against, strands pressed together (and the pins that hold them),
+        or nothing in contact. Said so that the advice fits ("more edges" helps strands
+        pressed together, never a curve held by its pins or pressed against a wall)."""
+        X, layout = self.X, self.layout
+        edge = float(self.lengths0[layout.real].mean() if layout.has_open
+                     else self.lengths0.mean())
+        field = self.engine.obstacles
+        if field is not None:
+            _, k, d = field.nearest(X, layout.nxt)
+            if d < STALL_CONTACT * edge:
+                return (f"the curve is pressed against {field.labels[int(field.owner[k])]} "
+                        f"({d / edge:.2g} edge lengths from it)")
+        try:
+            ratio = contact_ratio(layout.split(X), closed=layout.closed
+                                  if layout.closed is not None else True)
+        except ValueError:  # strands that touch: the start check's words
+            ratio = 0.0
+        if ratio < STALL_CONTACT:
+            held = (" between the pinned points that hold them: as untangled as the pins "
+                    "allow" if self.pinned is not None else
+                    " (a finer polygon may let them slide past: refine=True, the panel's "
+                    "Refine When Jammed)")
+            return f"strands are pressed together ({ratio:.2g} edge lengths apart){held}"
+        return ("no strand touches another or an obstacle: the steps fall below the "
+                "energy's rounding here (a larger tol ends such a run as converged)")

@@ -166,10 +166,8 @@ class _PenaltyRun(Run):
         return self.f  # ftol applies to the penalized energy
 
     def _stall_message(self, gn):
-        return (
-            f"stalled at energy {self.E:.10g}: the line search found no decrease while the "
-            f"gradient norm is still {gn:.3g}; strands are probably jammed — use more edges"
-        )
+        return (f"stalled at energy {self.E:.10g}: the line search found no decrease while "
+                f"the gradient norm is still {gn:.3g}; {self._stall_cause()}")
 
     @resumable
     def step(self) -> bool:

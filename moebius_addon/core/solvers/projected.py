@@ -512,11 +512,8 @@ class Relaxation(Run):
         raise ValueError("no nudge of the polygon kept its constraints without contact")
 
     def _stall_message(self, gn: float) -> str:
-        return (
-            f"stalled at energy {self.E:.10g}: steps collapsed while the projected gradient "
-            f"norm is still {gn:.3g}; strands are probably jammed against each other — use "
-            f"more edges"
-        )
+        return (f"stalled at energy {self.E:.10g}: steps collapsed while the projected "
+                f"gradient norm is still {gn:.3g}; {self._stall_cause()}")
 
     def _stats(self) -> dict:
         return {
