@@ -106,11 +106,12 @@ def test_a_group_is_refused_by_object_name_with_the_scene_unchanged(scene, mb,
     with pytest.raises(RuntimeError, match="'Ring B' is scaled unevenly against 'Ring A'"):
         bpy.ops.moebius.relax()
     assert scene_state() == before
-    # a third ring on the first, a hundredth of an edge off: the start touches itself across
-    # the objects
+    # a third ring through the first (the same ring, turned a little about one of its
+    # points): the start meets itself across the objects
     b.scale = (1.5, 1.5, 1.5)
     A = spline_points(a)
-    c = poly_curve("Ring C", [A + [0.0, 0.0, 1e-2 * float(np.linalg.norm(A[1] - A[0]))]])
+    turn = np.array(mathutils.Matrix.Rotation(0.3, 3, "X"))
+    c = poly_curve("Ring C", [(A - A[0]) @ turn.T + A[0]])
     for o in (a, b, c):
         o.select_set(True)
     bpy.context.view_layer.objects.active = a

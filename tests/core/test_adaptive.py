@@ -109,7 +109,7 @@ def jammed_run():
 
 def test_a_jammed_run_is_refined_and_goes_on_lower(jammed_run):
     P, plain, r, _ = jammed_run
-    assert plain.status == core.Status.STALLED and "jammed" in plain.message
+    assert plain.status == core.Status.STALLED and "pressed together" in plain.message
     assert len(r.refinements) == 1
     ref = r.refinements[0]
     assert (ref["edges_before"], ref["edges_after"]) == (180, 360)

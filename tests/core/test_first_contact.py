@@ -55,7 +55,7 @@ def test_both_spellings_of_the_limits():
 
 def test_warmup_names_its_paths(capsys):
     assert set(PATHS) == {"exact", "convert", "identify", "open", "tree", "tangent_point",
-                          "cables"}
+                          "cables", "obstacles", "untangle_cables", "pack_in_volume"}
     with pytest.raises(SystemExit):
         main(["nope"])
     assert "unknown path(s) nope" in capsys.readouterr().err

@@ -501,7 +501,8 @@ class Run:
     def _settled(self) -> bool:
         """Whether the shape stopped changing (``settle``): counts the iterations in a row
         whose largest vertex move is at most ``settle`` mean edge lengths; a run's keys end
-        where its motion ends."""
+        where its motion ends. Strands pressed together are jammed, not settled: the stall
+        that follows says so, and a refining run goes on finer."""
         if not self.settle:
             return False
         X, last = self.X, self._settle_from
@@ -513,7 +514,17 @@ class Run:
         edge = float(self.lengths0[real].mean())
         move = float(np.sqrt(np.max(np.sum((X - last) ** 2, axis=1))))
         self._still = self._still + 1 if move <= self.settle * edge else 0
-        return self._still >= self.settle_iterations
+        return self._still >= self.settle_iterations and self._strand_gap() >= STALL_CONTACT
+
+    def _strand_gap(self) -> float:
+        """The start check's contact ratio of the current iterate: the closest approach of
+        vertices far apart along the curve, in mean edge lengths (0 where strands touch)."""
+        layout = self.layout
+        try:
+            return contact_ratio(layout.split(self.X), closed=layout.closed
+                                 if layout.closed is not None else True)
+        except ValueError:  # strands that touch: the start check's words
+            return 0.0
 
     def _deadline(self) -> None:
         """Raise :class:`_OutOfTime` once the budget is used up (checked inside long steps)."""
@@ -552,11 +563,7 @@ class Run:
             if d < STALL_CONTACT * edge:
                 return (f"the curve is pressed against {field.labels[int(field.owner[k])]} "
                         f"({d / edge:.2g} edge lengths from it)")
-        try:
-            ratio = contact_ratio(layout.split(X), closed=layout.closed
-                                  if layout.closed is not None else True)
-        except ValueError:  # strands that touch: the start check's words
-            ratio = 0.0
+        ratio = self._strand_gap()
         if ratio < STALL_CONTACT:
             held = (" between the pinned points that hold them: as untangled as the pins "
                     "allow" if self.pinned is not None else
