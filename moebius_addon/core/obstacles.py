@@ -855,11 +855,13 @@ class ObstacleField:
         i = int(np.argmin(dist2))
         return i, int(which[i]), float(np.sqrt(dist2[i]))
 
-    def check_clear(self, X: np.ndarray, layout, eps: float) -> None:
-        """Refuse a start that crosses or touches an obstacle (within ``eps``), naming the
-        edge, the obstacle and its triangle, in the caller's units."""
+    def check_clear(self, X: np.ndarray, layout, eps: float, thickness: float = 0.0) -> None:
+        """Refuse a start that crosses or touches an obstacle (within ``eps``; with a tube
+        radius ``thickness`` in the caller's units, within ``SLACK`` × ``eps``, the contact
+        test's margin), naming the edge, the obstacle and its triangle, in the caller's
+        units."""
         i, k, d = self.nearest(X, layout.nxt)
-        if d > eps:
+        if d > (SLACK * eps if thickness > 0 else eps):
             return
         c = int(layout.comp[i])
         edge = int(i - layout.starts[c])
@@ -870,5 +872,12 @@ class ObstacleField:
         if d == 0.0:
             raise ValueError(f"the curve crosses {what}: {where} passes through {tri}; "
                              f"move the curve or {label} so that they do not meet")
+        if thickness > 0:
+            below = (f"below the thickness {thickness:.4g}" if d * self.scale < thickness
+                     else f"within {100 * (SLACK - 1):g}% of the thickness {thickness:.4g} "
+                          f"(the contact test needs that margin to move it)")
+            raise ValueError(f"the curve's tube meets {what}: {where} is "
+                             f"{d * self.scale:.4g} from {tri}, {below}; move it clear or use "
+                             f"a thickness below {d * self.scale / SLACK:.4g}")
         raise ValueError(f"the curve touches {what}: {where} is {d * self.scale:.3g} "
                          f"from {tri}; move it clear first")

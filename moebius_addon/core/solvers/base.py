@@ -42,6 +42,7 @@ from ..obstacles import ObstacleField, auto_obstacle_tol, check_obstacles
 from ..pinned_solve import TREE_MAX_PINS
 from ..pins import check_pins
 from ..polygon import check_polygon
+from ..thickness import check_thickness, closest_tested, near_counts
 from .growth import DEFAULT_LENGTH_GROWTH, LengthGrowth
 
 HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
@@ -56,6 +57,9 @@ MAX_REACH = 1e6
 # inverse from its factorization and the Schur complement, all N × N (measured peak at 3000
 # vertices: 17.4 bytes per pair in single precision, 25.2 in double; with room for more).
 _BYTES_PER_PAIR = 32
+# Tubes closer than this many times their contact distance touch (Run.tubes_touch): the
+# steps approach a contact by a third of the gap each, and stop within 0.1 % (_pairs.SLACK).
+_TOUCH = 1.01
 # Share of the machine's physical memory a run may need before it is refused.
 _MEMORY_SHARE = 0.75
 # Largest polygon whose dense factorization runs: numpy's bundled OpenBLAS (numpy 1.26, 2 threads)
@@ -237,7 +241,7 @@ class Run:
                  fixed_lengths: bool = True, obstacles=None, obstacle_weight: float = 1.0,
                  container=None, obstacle_tol: float | None = None, closed=True, energy="moebius",
                  alpha=None, beta=None, length_target=None, length_growth=None,
-                 **engine_options):
+                 thickness: float = 0.0, **engine_options):
         _check_names(metric, target_lengths)
         #: The energy minimized (:mod:`..energy_choice`): ``energy``, ``alpha``, ``beta``.
         self.energy_choice = check_energy(energy, alpha, beta)
@@ -250,6 +254,8 @@ class Run:
         self.max_seconds = None if max_seconds is None else check_number("max_seconds",
                                                                          max_seconds, 0)
         obstacle_weight = check_number("obstacle_weight", obstacle_weight, 0)
+        #: tube radius in the caller's units (:mod:`..thickness`; 0: none)
+        self.thickness = check_number("thickness", thickness, 0)
         if obstacle_tol is not None:
             obstacle_tol = check_number("obstacle_tol", obstacle_tol, 0)
             if obstacle_tol >= 1.0:
@@ -300,6 +306,16 @@ class Run:
             self.eps = 1e-3 * float(self.lengths0.mean())  # contact distance
         #: the length growth (:mod:`.growth`), or None
         self.growth_schedule = self._check_growth(length_target, length_growth, fixed_lengths)
+        radius = self.thickness / self._scale
+        if self.thickness > 0:
+            if not fixed_lengths:
+                raise ValueError("thickness= counts the stretch along a strand that a tube may "
+                                 "bend in by edges of the target length, which a run without "
+                                 "the edge-length constraints (edge_lengths=False) does not "
+                                 "keep: turn them on")
+            near = near_counts(layout, self.lengths0, radius, self._scale)
+            self.engine.set_thickness(radius, near)
+            check_thickness(self.X, layout, near, radius, self._scale, self.thickness)
         if meshes is not None or container is not None:
             # a container is one more obstacle (its wall repels, the contact bound stops every
             # step short of it) that the curve starts inside (.container)
@@ -313,7 +329,7 @@ class Run:
                 labels.append(container_label)
             field = ObstacleField(meshes, self._shift, self._scale, obstacle_weight, labels,
                                   auto_obstacle_tol(obstacle_tol, layout, meshes))
-            field.check_clear(self.X, layout, self.eps)
+            field.check_clear(self.X, layout, max(self.eps, radius), self.thickness)
             self.engine.obstacles = field
         self.nit = 0
         self.rejected = 0
@@ -496,3 +512,17 @@ class Run:
 
     def _stall_message(self, gn: float) -> str:
         raise NotImplementedError
+
+    def tubes_touch(self) -> bool:
+        """Whether the tubes of the run's thickness touch at the current iterate: strands
+        within :data:`_TOUCH` times twice the thickness, or a strand within that times the
+        thickness of an obstacle. A stall there is the thickness holding strands apart, which
+        no finer polygon resolves (the adaptive run does not refine it)."""
+        radius = self.engine.radius
+        if radius <= 0.0:
+            return False
+        if closest_tested(self.X, self.layout, self.engine.near, _TOUCH * 2.0 * radius)[1]:
+            return True
+        field = self.engine.obstacles
+        return field is not None and field.nearest(self.X, self.layout.nxt)[2] <= (
+            _TOUCH * radius)

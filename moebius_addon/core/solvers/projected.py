@@ -141,6 +141,12 @@ class Relaxation(Run):
     length_growth : float, optional
         Relative growth per iteration, > 0 (default ``growth.DEFAULT_LENGTH_GROWTH``, 1 %);
         needs ``length_target``.
+    thickness : float
+        Tube radius ``r`` in the caller's units (default 0: centre lines alone). Every
+        iterate and the straight path between iterates keep strands ``2r`` apart (parts of
+        one strand more than π r apart along it) and ``r`` from the obstacles and the
+        container (:mod:`..thickness`; docs/api.md, "Thickness"); a start that breaks it is
+        refused, naming where and the distance found.
     """
 
     _OPEN_CURVES = True
@@ -185,6 +191,7 @@ class Relaxation(Run):
         beta: float | None = None,
         length_target=None,
         length_growth: float | None = None,
+        thickness: float = 0.0,
     ):
         _check_names(metric, target_lengths)
         armijo, growth = check_line_search(armijo, growth)
@@ -204,7 +211,8 @@ class Relaxation(Run):
                          pin_tangents=pin_tangents, fixed_lengths=bool(edge_lengths),
                          obstacles=obstacles, obstacle_weight=obstacle_weight, container=container,
                          obstacle_tol=obstacle_tol, closed=closed, energy=energy, alpha=alpha,
-                         beta=beta, length_target=length_target, length_growth=length_growth)
+                         beta=beta, length_target=length_target, length_growth=length_growth,
+                         thickness=thickness)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter
@@ -493,6 +501,13 @@ class Relaxation(Run):
         raise ValueError("no nudge of the polygon kept its constraints without contact")
 
     def _stall_message(self, gn: float) -> str:
+        if self.tubes_touch():
+            return (
+                f"stalled at energy {self.E:.10g}: steps collapsed while the projected "
+                f"gradient norm is still {gn:.3g}; the tubes touch (thickness "
+                f"{self.thickness:.4g} keeps strands twice that apart and that far from the "
+                f"obstacles) — a smaller thickness gives them room"
+            )
         return (
             f"stalled at energy {self.E:.10g}: steps collapsed while the projected gradient "
             f"norm is still {gn:.3g}; strands are probably jammed against each other — use "
