@@ -309,10 +309,10 @@ class Run:
         radius = self.thickness / self._scale
         if self.thickness > 0:
             if not fixed_lengths:
-                raise ValueError("thickness= counts the stretch along a strand that a tube may "
-                                 "bend in by edges of the target length, which a run without "
-                                 "the edge-length constraints (edge_lengths=False) does not "
-                                 "keep: turn them on")
+                raise ValueError("thickness= needs the edge-length constraints: the stretch "
+                                 "along a strand that a tube may bend in is counted in edges "
+                                 "of the target length, which edge_lengths=False does not "
+                                 "keep; turn them on or pass thickness=0")
             near = near_counts(layout, self.lengths0, radius, self._scale)
             self.engine.set_thickness(radius, near)
             check_thickness(self.X, layout, near, radius, self._scale, self.thickness)
