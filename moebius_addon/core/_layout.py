@@ -39,6 +39,11 @@ class Layout:
         return self.closed is not None
 
     @property
+    def closed_flags(self) -> np.ndarray:
+        """(K,) bool: closed per component (``closed`` as the kernels take it)."""
+        return np.ones(self.k, np.bool_) if self.closed is None else self.closed.astype(np.bool_)
+
+    @property
     def real(self) -> np.ndarray:
         """(N,) bool: edge slots that hold an edge (False: the dummy of an open component)."""
         return self.nxt != np.arange(self.n)

@@ -87,6 +87,26 @@ def _pair_contact(X, U, i, i1, j, j1, tau0, tau_max, eps):
     return tau
 
 
+@nb.njit(cache=True, inline="always")
+def tested(i, j, starts, comp, closed, near):
+    """Whether the contact tests look at edges ``i < j``: always on different components; on
+    one, when they share no vertex and lie more than ``near[c]`` edges apart along it (round a
+    closed one the shorter way). ``near`` is 1 without a thickness (the disjoint pairs); a tube
+    bends within π times its radius along the strand, so pairs nearer than that are left out
+    (:mod:`..thickness`)."""
+    c = comp[i]
+    if comp[j] != c:
+        return True
+    if j == i + 1 or (i == starts[c] and j == starts[c + 1] - 1):
+        return False
+    if near[c] > 1:
+        gap = j - i
+        if closed[c]:
+            gap = min(gap, starts[c + 1] - starts[c] - gap)
+        return gap > near[c]
+    return True
+
+
 @nb.njit(cache=True, parallel=True)
 def edge_motion(X, U, nxt):
     """Per edge, what the pair test needs so that pruning a pair costs one squared distance:

@@ -20,7 +20,7 @@ import numpy as np
 from . import tree_contact
 from ._checks import check_number
 from ._layout import Layout, as_checked_layout, as_layout, check_finite
-from ._pairs import _pair_contact, edge_motion, pair_time, segment_distance2  # noqa: F401
+from ._pairs import _pair_contact, edge_motion, pair_time, segment_distance2, tested  # noqa: F401
 
 # From these many edges on, the queries go through the hierarchy (tree_contact): the same answers,
 # measured faster there (FHW and 5_2, ms all pairs / tree: contact 0.33/0.38 at 700 edges,
@@ -37,7 +37,7 @@ def _use_tree(search: str, n: int, crossover: int) -> bool:
 
 
 @nb.njit(cache=True, parallel=True)
-def _contact_rows(X, U, nxt, starts, comp, tau_max, eps, nchunks):
+def _contact_rows(X, U, nxt, starts, comp, closed, near, tau_max, eps, nchunks):
     n = X.shape[0]
     mid, vel, spread, half, vmax = edge_motion(X, U, nxt)
     best = np.full(nchunks, tau_max)
@@ -45,28 +45,28 @@ def _contact_rows(X, U, nxt, starts, comp, tau_max, eps, nchunks):
         ch = np.int64(cc)
         tb = tau_max
         for i in range(ch, n, nchunks):
-            c = comp[i]
-            end_same = starts[c + 1] - 1 if i == starts[c] else starts[c + 1]
             for j in range(i + 2, n):
-                if j >= end_same and j < starts[c + 1]:
-                    continue
-                tb = pair_time(X, U, nxt, i, j, mid, vel, spread, half, vmax, eps, tb)
+                if tested(i, j, starts, comp, closed, near):
+                    tb = pair_time(X, U, nxt, i, j, mid, vel, spread, half, vmax, eps, tb)
         best[ch] = tb
     return best.min()
 
 
 def contact_time_x(X, U, layout: Layout, tau_max: float, eps: float,
-                   search: str = "auto", staged: bool = True) -> float:
+                   search: str = "auto", staged: bool = True, near=None) -> float:
     """First contact of ``X − τU`` up to ``tau_max``; ``search`` "pairs" (all pairs), "tree"
     (the hierarchy: the same value) or "auto" (the tree from ``CONTACT_TREE_FROM`` edges);
-    ``staged`` as in :func:`.tree_contact.contact_time_tree`.
+    ``staged`` as in :func:`.tree_contact.contact_time_tree`. ``near``: per component, pairs
+    of its edges this many apart along it or nearer are not tested (:func:`._pairs.tested`;
+    default 1, the edges that share a vertex; a thickness leaves out more, :mod:`.thickness`).
     Open components' dummy edges (._layout) are points at their last vertex, tested as such
     (by both searches: the hierarchy's rule for the pairs it skips is the all-pairs one)."""
+    near = np.ones(layout.k, np.int64) if near is None else near
     if _use_tree(search, layout.n, CONTACT_TREE_FROM):
-        return tree_contact.contact_time_tree(X, U, layout, tau_max, eps, staged)
+        return tree_contact.contact_time_tree(X, U, layout, tau_max, eps, staged, near)
     return float(
         _contact_rows(X, np.ascontiguousarray(U), layout.nxt, layout.starts, layout.comp,
-                      float(tau_max), float(eps), 16)
+                      layout.closed_flags, near, float(tau_max), float(eps), 16)
     )
 
 

@@ -139,6 +139,12 @@ class DenseEngine:
         #: Meshes the curve is repelled from and never crosses (``obstacles.ObstacleField``):
         #: their energy is added to the curve's, their contacts bound every step.
         self.obstacles = None
+        #: Tube radius at the run's scale (:mod:`.thickness`): strands are kept twice this
+        #: apart, obstacles this far; 0: the contact distance alone (``set_thickness``).
+        self.radius = 0.0
+        #: Per component, pairs of edges this many apart along it or nearer are not tested
+        #: for contact (None: 1, the edges that share a vertex).
+        self.near = None
         self._penalty_factorizations = 0
         self._banded_factorizations = 0
 
@@ -197,14 +203,24 @@ class DenseEngine:
         Eo, go = self.obstacles.energy_gradient(X, self.layout.nxt, self.layout.prv)
         return E + Eo, g + go
 
+    def set_thickness(self, radius: float, near: np.ndarray) -> None:
+        """Keep tubes of ``radius`` (the run's scale) apart: strands ``2 × radius`` (pairs of
+        one strand more than ``near`` edges apart along it, per component), obstacles
+        ``radius`` (:mod:`.thickness`)."""
+        self.radius = float(radius)
+        self.near = near
+
     def contact_time(self, X: np.ndarray, U: np.ndarray, tau_max: float, eps: float,
                      staged: bool = True) -> float:
         """Smallest ``τ ≤ tau_max`` at which ``X − τU`` comes within ``eps`` of touching
         itself (edges not adjacent) or an obstacle, or ``tau_max`` when it does not.
-        ``staged`` as in :func:`.tree_contact.contact_time_tree` (the same value)."""
-        t = contact_time_x(X, U, self.layout, tau_max, eps, staged=staged)
+        ``staged`` as in :func:`.tree_contact.contact_time_tree` (the same value). With a
+        thickness (:meth:`set_thickness`), within ``max(eps, 2 × radius)`` of itself (pairs
+        nearer than ``near`` along a strand left out) or ``max(eps, radius)`` of an obstacle."""
+        t = contact_time_x(X, U, self.layout, tau_max, max(eps, 2.0 * self.radius),
+                           staged=staged, near=self.near)
         if self.obstacles is not None and t > 0.0:
-            t = self.obstacles.contact_time(X, U, self.layout.nxt, t, eps)
+            t = self.obstacles.contact_time(X, U, self.layout.nxt, t, max(eps, self.radius))
         return t
 
     def path_is_free(self, X: np.ndarray, Q: np.ndarray, eps: float) -> bool:

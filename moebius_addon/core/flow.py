@@ -61,10 +61,11 @@ def relax(
         See :class:`Relaxation` (``energy_target``, ``ftol``, ``max_seconds``, ``initial_step``,
         ``armijo``, ``growth``, ``backproject_iter``, ``backproject_tol``, ``edge_lengths``,
         ``barycenter``, ``target_lengths``, ``check``, ``reuse_factorization``,
-        ``precision``, ``pinned``, ``pin_tangents``, ``length_target``, ``length_growth``)
-        and the method's own class. ``length_target``: grow the total length to this during
-        the run, ``length_growth`` (default 0.01) per iteration, then hold it (docs/api.md,
-        "Length growth").
+        ``precision``, ``pinned``, ``pin_tangents``, ``length_target``, ``length_growth``,
+        ``thickness``) and the method's own class. ``thickness``: a tube radius kept at every
+        iterate and between them (docs/api.md, "Thickness"). ``length_target``: grow the
+        total length to this during the run, ``length_growth`` (default 0.01) per
+        iteration, then hold it (docs/api.md, "Length growth").
         ``pinned``: vertex indices (a list per component for a link) that keep their
         positions exactly; feasible methods only (docs/api.md, "Pinned vertices").
 

@@ -896,12 +896,13 @@ class ObstacleField:
         i = int(np.argmin(dist2))
         return i, int(which[i]), float(np.sqrt(dist2[i]))
 
-    def check_clear(self, X: np.ndarray, layout, eps: float) -> None:
+    def check_clear(self, X: np.ndarray, layout, eps: float, thickness: float = 0.0) -> None:
         """Refuse a start that crosses or touches an obstacle (within :data:`START_CLEARANCE`
-        times the contact distance ``eps``), naming the edge, the obstacle and its triangle,
-        in the caller's units."""
+        times the contact distance ``eps``; with a tube radius ``thickness`` in the caller's
+        units, within ``SLACK`` × ``eps``, the contact test's margin), naming the edge, the
+        obstacle and its triangle, in the caller's units."""
         i, k, d = self.nearest(X, layout.nxt)
-        if d > START_CLEARANCE * eps:
+        if d > (SLACK * eps if thickness > 0 else START_CLEARANCE * eps):
             return
         c = int(layout.comp[i])
         edge = int(i - layout.starts[c])
@@ -922,6 +923,13 @@ class ObstacleField:
         if d == 0.0:
             raise ValueError(f"the curve crosses {what}: {where} passes through {tri}; "
                              f"move the curve or {label} so that they do not meet")
+        if thickness > 0:
+            below = (f"below the thickness {thickness:.4g}" if d * self.scale < thickness
+                     else f"within {100 * (SLACK - 1):g}% of the thickness {thickness:.4g} "
+                          f"(the contact test needs that margin to move it)")
+            raise ValueError(f"the curve's tube meets {what}: {where} is "
+                             f"{d * self.scale:.4g} from {tri}, {below}; move it clear or use "
+                             f"a thickness below {d * self.scale / SLACK:.4g}")
         raise ValueError(f"the curve touches {what}: {where} is {d * self.scale:.3g} "
                          f"from {tri}, nearer than the {START_CLEARANCE * eps * self.scale:.3g} "
                          "the flow needs to move; move it clear first")

@@ -20,21 +20,10 @@ import numpy as np
 
 from . import bvh
 from ._layout import Layout
-from ._pairs import SLACK, edge_motion, pair_time, segment_distance2
+from ._pairs import SLACK, edge_motion, pair_time, segment_distance2, tested
 
 _CHUNKS = 16
 _TASKS = 8 * _CHUNKS  # node pairs in the frontier before the parallel search
-
-
-@nb.njit(cache=True)
-def _disjoint(i, j, starts, comp):
-    """Edges ``i < j`` share no vertex (the all-pairs rule)."""
-    c = comp[i]
-    if comp[j] != c:
-        return True
-    if j == i + 1:
-        return False
-    return not (i == starts[c] and j == starts[c + 1] - 1)
 
 
 @nb.njit(cache=True)
@@ -122,8 +111,8 @@ def _may_meet(bmin, bmax, umin, umax, a, b, T, eps):
 
 
 @nb.njit(cache=True, parallel=True)
-def _contact_search(X, U, nxt, starts, comp, perm, lo, hi, left, right, tau_max, eps,
-                    nchunks, want):
+def _contact_search(X, U, nxt, starts, comp, closed, near, perm, lo, hi, left, right,
+                    tau_max, eps, nchunks, want):
     mid, vel, spread, half, vmax = edge_motion(X, U, nxt)
     scale = 0.0
     for i in range(X.shape[0]):
@@ -156,7 +145,7 @@ def _contact_search(X, U, nxt, starts, comp, perm, lo, hi, left, right, tau_max,
                             i, j = perm[q], perm[r]
                             if i > j:
                                 i, j = j, i
-                            if _disjoint(i, j, starts, comp):
+                            if tested(i, j, starts, comp, closed, near):
                                 tb = pair_time(X, U, nxt, i, j, mid, vel, spread, half, vmax,
                                                eps, tb)
                 else:
@@ -166,8 +155,9 @@ def _contact_search(X, U, nxt, starts, comp, perm, lo, hi, left, right, tau_max,
 
 
 def contact_time_tree(X: np.ndarray, U: np.ndarray, layout: Layout, tau_max: float,
-                      eps: float, staged: bool = True) -> float:
-    """:func:`collision.contact_time_x` through the hierarchy (the same value).
+                      eps: float, staged: bool = True, near=None) -> float:
+    """:func:`collision.contact_time_x` through the hierarchy (the same value; ``near`` as
+    there).
 
     The swept boxes of a long horizon overlap everywhere, so the search looks for a contact
     before ``tau_max / 64``, then ``/ 8``, then up to ``tau_max``: a pair's contact time below
@@ -178,9 +168,11 @@ def contact_time_tree(X: np.ndarray, U: np.ndarray, layout: Layout, tau_max: flo
     tree = bvh.build(X, layout)
     U = np.ascontiguousarray(U)
     tau_max = float(tau_max)
+    near = np.ones(layout.k, np.int64) if near is None else near
+    closed = layout.closed_flags
     for horizon in (tau_max / 64.0, tau_max / 8.0, tau_max) if staged else (tau_max,):
-        t = float(_contact_search(X, U, layout.nxt, layout.starts, layout.comp, *tree, horizon,
-                                  float(eps), _CHUNKS, _TASKS))
+        t = float(_contact_search(X, U, layout.nxt, layout.starts, layout.comp, closed,
+                                  near, *tree, horizon, float(eps), _CHUNKS, _TASKS))
         if t < horizon:
             return t
     return tau_max

@@ -358,7 +358,7 @@ def test_a_run_ends_when_its_shape_stops_changing():
     # moves checked here from the iterates the callback sees
     P = core.knots.named("3_1", 60)
     xs = [P]
-    r = core.relax(P, max_iter=300, tol=0.0, settle=1e-3, method="projected_gradient_implicit",
+    r = core.relax(P, max_iter=300, tol=0.0, settle=1e-3, method="projected_gradient",
                    callback=lambda s: xs.append(s.x.copy()))
     assert r.status == core.Status.CONVERGED and r.message.startswith("settled: no vertex moved")
     edge = np.linalg.norm(np.roll(P, -1, 0) - P, axis=1).mean()
@@ -366,7 +366,7 @@ def test_a_run_ends_when_its_shape_stops_changing():
              for a, b in zip(xs[:-1], xs[1:], strict=True)]
     assert r.nit < 300 and all(m <= 1e-3 for m in moves[-5:]) and moves[-6] > 1e-3
     # the same run without it goes on, through the same iterates
-    r0 = core.relax(P, max_iter=r.nit, tol=0.0, method="projected_gradient_implicit")
+    r0 = core.relax(P, max_iter=r.nit, tol=0.0, method="projected_gradient")
     np.testing.assert_array_equal(r0.x, r.x)
     with pytest.raises(ValueError, match="settle"):
         core.relax(P, max_iter=1, settle=-1.0)

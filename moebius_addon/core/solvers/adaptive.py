@@ -458,6 +458,14 @@ class AdaptiveRun:
         self._checkpoint = (self.nit, None, len(self.history["energy"]))
         self._note_checkpoint(new)
 
+    def _held_by_tubes(self, run) -> bool:
+        """Whether a stalled run stopped where its tubes touch (``Run.tubes_touch``): the
+        thickness holds the strands, which neither a finer polygon nor a fresh start changes."""
+        if getattr(run, "tubes_touch", None) is None or not run.tubes_touch():
+            return False
+        self._why_not = "not refined: the tubes touch, at any resolution"
+        return True
+
     def _jammed(self, run) -> bool:
         """Whether a stalled run's strands are closer than the start check allows (contact
         ratio below 1): a jam a finer polygon resolves. A run stalled against an obstacle, or
@@ -559,7 +567,7 @@ class AdaptiveRun:
                     self._split_grown(run)
             if not run.done:
                 return
-            if run.status == Status.STALLED and self.refine and (
+            if run.status == Status.STALLED and self.refine and not self._held_by_tubes(run) and (
                     self._refine_run("jammed: " + run.message) if self._jammed(run)
                     else self._start_afresh(run)):
                 continue

@@ -45,6 +45,7 @@ from ..obstacles import ObstacleField, auto_obstacle_tol, check_obstacles
 from ..pinned_solve import TREE_MAX_PINS
 from ..pins import check_pins
 from ..polygon import check_polygon, contact_ratio
+from ..thickness import check_thickness, closest_tested, near_counts
 from .growth import DEFAULT_LENGTH_GROWTH, LengthGrowth
 
 HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
@@ -64,6 +65,9 @@ MAX_REACH = 1e6
 # inverse from its factorization and the Schur complement, all N × N (measured peak at 3000
 # vertices: 17.4 bytes per pair in single precision, 25.2 in double; with room for more).
 _BYTES_PER_PAIR = 32
+# Tubes closer than this many times their contact distance touch (Run.tubes_touch): the
+# steps approach a contact by a third of the gap each, and stop within 0.1 % (_pairs.SLACK).
+_TOUCH = 1.01
 # Share of the machine's physical memory a run may need before it is refused.
 _MEMORY_SHARE = 0.75
 # Largest polygon whose dense factorization runs: numpy's bundled OpenBLAS (numpy 1.26, 2 threads)
@@ -246,7 +250,7 @@ class Run:
                  container=None, obstacle_tol: float | None = None, closed=True, energy="moebius",
                  alpha=None, beta=None, length_target=None, length_growth=None,
                  settle: float = 0.0, settle_iterations: int = SETTLE_ITERATIONS,
-                 **engine_options):
+                 thickness: float = 0.0, **engine_options):
         _check_names(metric, target_lengths)
         check = check_flag("check", check)
         pin_tangents = check_flag("pin_tangents", pin_tangents)
@@ -269,6 +273,8 @@ class Run:
         self._settle_from: np.ndarray | None = None
         self._still = 0
         obstacle_weight = check_number("obstacle_weight", obstacle_weight, 0)
+        #: tube radius in the caller's units (:mod:`..thickness`; 0: none)
+        self.thickness = check_number("thickness", thickness, 0)
         if obstacle_tol is not None:
             obstacle_tol = check_number("obstacle_tol", obstacle_tol, 0)
             if obstacle_tol >= 1.0:
@@ -319,6 +325,16 @@ class Run:
             self.eps = 1e-3 * float(self.lengths0.mean())  # contact distance
         #: the length growth (:mod:`.growth`), or None
         self.growth_schedule = self._check_growth(length_target, length_growth, fixed_lengths)
+        radius = self.thickness / self._scale
+        if self.thickness > 0:
+            if not fixed_lengths:
+                raise ValueError("thickness= needs the edge-length constraints: the stretch "
+                                 "along a strand that a tube may bend in is counted in edges "
+                                 "of the target length, which edge_lengths=False does not "
+                                 "keep; turn them on or pass thickness=0")
+            near = near_counts(layout, self.lengths0, radius, self._scale)
+            self.engine.set_thickness(radius, near)
+            check_thickness(self.X, layout, near, radius, self._scale, self.thickness)
         if meshes is not None or container is not None:
             # a container is one more obstacle (its wall repels, the contact bound stops every
             # step short of it) that the curve starts inside (.container)
@@ -333,7 +349,7 @@ class Run:
             field = ObstacleField(meshes, self._shift, self._scale, obstacle_weight, labels,
                                   auto_obstacle_tol(obstacle_tol, layout, meshes))
             field.fixed = self.pinned  # a pinned end and tangent may lie on a mesh
-            field.check_clear(self.X, layout, self.eps)
+            field.check_clear(self.X, layout, max(self.eps, radius), self.thickness)
             self.engine.obstacles = field
         self.nit = 0
         self.rejected = 0
@@ -554,6 +570,10 @@ class Run:
         wall it is pressed against, strands pressed together (and the pins that hold them),
         or nothing in contact. Said so that the advice fits ("more edges" helps strands
         pressed together, never a curve held by its pins or pressed against a wall)."""
+        if self.tubes_touch():
+            return (f"the tubes touch (thickness {self.thickness:.4g} keeps strands twice that "
+                    "apart and that far from the obstacles): a smaller thickness gives them "
+                    "room")
         X, layout = self.X, self.layout
         edge = float(self.lengths0[layout.real].mean() if layout.has_open
                      else self.lengths0.mean())
@@ -572,3 +592,17 @@ class Run:
             return f"strands are pressed together ({ratio:.2g} edge lengths apart){held}"
         return ("no strand touches another or an obstacle: the steps fall below the "
                 "energy's rounding here (a larger tol ends such a run as converged)")
+
+    def tubes_touch(self) -> bool:
+        """Whether the tubes of the run's thickness touch at the current iterate: strands
+        within :data:`_TOUCH` times twice the thickness, or a strand within that times the
+        thickness of an obstacle. A stall there is the thickness holding strands apart, which
+        no finer polygon resolves (the adaptive run does not refine it)."""
+        radius = self.engine.radius
+        if radius <= 0.0:
+            return False
+        if closest_tested(self.X, self.layout, self.engine.near, _TOUCH * 2.0 * radius)[1]:
+            return True
+        field = self.engine.obstacles
+        return field is not None and field.nearest(self.X, self.layout.nxt)[2] <= (
+            _TOUCH * radius)

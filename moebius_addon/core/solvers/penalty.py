@@ -82,12 +82,20 @@ class _PenaltyRun(Run):
                  obstacle_tol: float | None = None, closed=True,
                  energy="moebius", alpha=None, beta=None, length_target=None,
                  length_growth=None, settle: float = 0.0,
-                 settle_iterations: int = SETTLE_ITERATIONS, **ignored):
+                 settle_iterations: int = SETTLE_ITERATIONS, thickness: float = 0.0,
+                 **ignored):
         unknown = set(ignored) - _FEASIBLE_ONLY
         if unknown:
             raise TypeError(f"unknown option(s) {', '.join(sorted(unknown))}")
         if count_pins(pinned):
             raise ValueError(pinned_refusal(self.NAME))
+        if check_number("thickness", thickness, 0) > 0:
+            # the stretch a tube may bend in is counted in edges of the target length
+            # (..thickness), which a penalty lets drift
+            raise ValueError(f"method {self.NAME!r} cannot keep a thickness (it holds the edge "
+                             f"lengths by a penalty, and the tube's rule counts edges along a "
+                             f"strand): use a feasible method, projected_gradient, "
+                             f"projected_gradient_implicit or trust_region, or thickness=0")
         _check_names(metric, target_lengths)
         c1, c2 = check_number("c1", c1), check_number("c2", c2)
         if not 0 < c1 < c2 < 1:

@@ -154,6 +154,12 @@ class Relaxation(Run):
         Stop (converged) once no vertex moved more than ``settle`` mean edge lengths in each
         of ``settle_iterations`` (default 5) iterations in a row: the shape no longer changes
         visibly. 0 (default): not used.
+    thickness : float
+        Tube radius ``r`` in the caller's units (default 0: centre lines alone). Every
+        iterate and the straight path between iterates keep strands ``2r`` apart (parts of
+        one strand more than π r apart along it) and ``r`` from the obstacles and the
+        container (:mod:`..thickness`; docs/api.md, "Thickness"); a start that breaks it is
+        refused, naming where and the distance found.
     """
 
     _OPEN_CURVES = True
@@ -200,6 +206,7 @@ class Relaxation(Run):
         length_growth: float | None = None,
         settle: float = 0.0,
         settle_iterations: int = SETTLE_ITERATIONS,
+        thickness: float = 0.0,
     ):
         _check_names(metric, target_lengths)
         edge_lengths = check_flag("edge_lengths", edge_lengths)
@@ -223,7 +230,8 @@ class Relaxation(Run):
                          obstacles=obstacles, obstacle_weight=obstacle_weight, container=container,
                          obstacle_tol=obstacle_tol, closed=closed, energy=energy, alpha=alpha,
                          beta=beta, length_target=length_target, length_growth=length_growth,
-                         settle=settle, settle_iterations=settle_iterations)
+                         settle=settle, settle_iterations=settle_iterations,
+                         thickness=thickness)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter
