@@ -30,6 +30,18 @@ from . import api, geometry, keyframes
 from .labels import DEFAULT_MAX_ITERATIONS, DEFAULT_SETTLE, DEFAULT_TOLERANCE
 
 
+def _thickness(text: str):
+    """``--thickness``: 'bevel' or a radius >= 0."""
+    if text == "bevel":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not 'bevel' or a number: {text!r}") from None
+    if not value >= 0.0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"a radius must be a finite number >= 0: {text!r}")
+    return value
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="blender -c moebius",
@@ -99,6 +111,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--settle", type=float, default=100 * DEFAULT_SETTLE, metavar="PERCENT",
                    help="stop once no point moves more than PERCENT of an edge in each of 5 "
                         "iterations in a row (default %(default)g; 0: never)")
+    p.add_argument("--thickness", type=_thickness, default="bevel", metavar="R",
+                   help="tube radius kept between strands and from obstacles, in the curve's "
+                        "units (default 'bevel': the curve's bevel depth; 0: centre lines "
+                        "only)")
     p.add_argument("--no-refine", dest="refine", action="store_false",
                    help="do not add edges: refuse a start too coarse for its shape and stop "
                         "where strands jam, as before refinement existed (default: refine)")
@@ -238,6 +254,7 @@ def _run(args, run: dict, notation: str | None):
                                   penalty=args.penalty, engine=args.engine,
                                   theta=args.theta, max_iterations=args.max_iterations,
                                   tolerance=args.tolerance, settle=args.settle / 100.0,
+                                  thickness=args.thickness,
                                   frame_start=args.frame_start,
                                   keyframe_stride=args.stride, refine=args.refine,
                                   max_edges=args.max_edges, restarts=args.restarts,

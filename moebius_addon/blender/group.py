@@ -9,6 +9,7 @@ no contact) holds in every object's own coordinates.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Sequence
 
 import bpy
@@ -44,6 +45,8 @@ class Member:
                              "sheared): the distances kept apart would differ between them; "
                              "apply the scale of both (Object ▸ Apply ▸ Scale)")
         self._inv = np.linalg.inv(self.A)
+        #: lengths in the object's coordinates times this are lengths in the run's
+        self.scale = 1.0 if self.identity else float(np.sqrt(s2))
         #: the splines at the current frame (object coordinates) and whether each is closed
         self.polygons = geometry.curve_polygons(obj, allow_open=True)
         self.closed = geometry.curve_closed(obj)
@@ -81,6 +84,22 @@ def members(objects) -> list[Member]:
         out.append(Member(o, objs[0], start))
         start += len(out[-1].polygons)
     return out
+
+
+def bevel_thickness(members_: Sequence[Member]) -> float:
+    """The tube radius of the run's curves in its coordinates: the largest bevel (the
+    rendered tube's radius, in each object's units) — every tube is kept at least that thick,
+    so none of them meets another."""
+    return max((m.obj.data.bevel_depth * m.scale for m in members_), default=0.0)
+
+
+def name_components(message: str, members_: Sequence[Member]) -> str:
+    """A core message with its "component k" named as the user knows it: the object (and its
+    spline) holding that component."""
+    if len(members_) == 1 and len(members_[0].polygons) == 1:
+        return message
+    return re.sub(r"\bcomponent (\d+)\b",
+                  lambda m: component_owner(members_, int(m.group(1))), message)
 
 
 def group_name(objects: Sequence[bpy.types.Object]) -> str:

@@ -33,15 +33,16 @@ def acting_settings(method: str, engine: str = DEFAULT_ENGINE) -> frozenset:
     settings that reach a run of ``method`` on ``engine`` (the panel greys out or hides the
     others): the Armijo constant and the step growth are the explicit method's (the implicit
     one keeps its own σ = 1e-4 and growth 1.5, see ``core.solvers``), the back-projection and
-    constraint toggles belong to the methods that keep the constraints, the penalty weight to
-    the penalty methods, θ to the engines that can run the tree ("auto" and "tree")."""
+    constraint toggles and the thickness belong to the methods that keep the constraints, the
+    penalty weight to the penalty methods, θ to the engines that can run the tree ("auto" and
+    "tree")."""
     tree = {"theta"} if engine != "exact" else set()
     if method in PENALTY_METHODS:
         return frozenset({"penalty"} | tree)
     # the automatic choice passes them on to the explicit method (unknots)
     own = {"armijo", "growth"} if method in (EXPLICIT_METHOD, AUTO_METHOD) else set()
     return frozenset(own | tree | {"backproject_iter", "backproject_digits",
-                                   "keep_edge_lengths", "keep_barycenter"})
+                                   "keep_edge_lengths", "keep_barycenter", "keep_thickness"})
 
 
 def relax_settings(settings) -> dict:
@@ -79,6 +80,8 @@ def relax_settings(settings) -> dict:
             edge_lengths=settings.keep_edge_lengths,
             barycenter=settings.keep_barycenter,
         )
+    if "keep_thickness" in acting:  # the curves' bevel, or centre lines only
+        kwargs["thickness"] = "bevel" if settings.keep_thickness else 0.0
     if getattr(settings, "pin_selected", False):
         kwargs.update(pin_selected=True, pin_tangents=settings.pin_tangents)
     if getattr(settings, "obstacles", None) is not None:

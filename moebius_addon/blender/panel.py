@@ -225,6 +225,9 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
         col.label(text="Constraints")
         col.prop(s, "keep_edge_lengths")
         col.prop(s, "keep_barycenter")
+        sub = col.row()
+        sub.active = "keep_thickness" in acting
+        sub.prop(s, "keep_thickness")
         col = layout.column(align=True)
         col.label(text="Pins and Obstacles")
         sub = col.column(align=True)

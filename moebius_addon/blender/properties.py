@@ -185,6 +185,13 @@ class MoebiusSettings(bpy.types.PropertyGroup):
         description="Constrain the barycenter so the curve does not drift (not with the "
                     "penalty methods)",
     )
+    keep_thickness: BoolProperty(
+        name="Keep Thickness", default=True,
+        description="Keep the rendered tubes apart, not only the centre lines: the curves' "
+                    "bevel (Object Data ▸ Geometry ▸ Bevel ▸ Depth) is a radius the run keeps "
+                    "between strands and from obstacles and the container (the methods that "
+                    "keep edge lengths)",
+    )
     # Pins and obstacles (scene_constraints)
     pin_selected: BoolProperty(
         name="Pin Selected Points", default=False,

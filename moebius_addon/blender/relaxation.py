@@ -14,7 +14,7 @@ from ..core.compiling import compiling
 from ..core.spelling import take_spelling
 from . import geometry, keyframes, scene_constraints
 from .gradients import refresh_gradients
-from .group import group_name, members
+from .group import bevel_thickness, group_name, members, name_components
 from .identification import type_kept
 from .labels import (
     AUTO_METHOD,
@@ -23,6 +23,7 @@ from .labels import (
     DEFAULT_SETTLE,
     EXPLICIT_METHOD,
     KNOT_METHOD,
+    PENALTY_METHODS,
     method_label,
 )
 from .options import check_edge_count, check_relax_options, edge_limit
@@ -338,7 +339,8 @@ class ObjectRelaxation:
             core.check_polygon(as_input(polygons), closed=options.get("closed", True),
                                coarseness=not refine)
         except ValueError as err:
-            raise ValueError(f"{self.name}: {err}") from None
+            raise ValueError(f"{self.name}: {name_components(str(err), self.members)}"
+                             ) from None
         #: the notes of the refinement settings (e.g. why a curve is not refined)
         self.refine_note = ""
         if refine:
@@ -371,9 +373,25 @@ class ObjectRelaxation:
         self.stride = int(keyframe_stride)
         # make_run("projected_gradient", ...) is core.Relaxation itself: the default is the
         # same run as before methods existed
-        self.run = core.make_run(self.method, as_input(polygons), metric=metric,
-                                 max_iter=max_iterations, tol=tolerance, refine=refine,
-                                 max_edges=max_edges, restarts=restarts, seed=seed, **options)
+        thickness = options.pop("thickness", "bevel")
+        if isinstance(thickness, str):
+            if thickness != "bevel":
+                raise ValueError(f"thickness must be a radius (the first curve's units) or "
+                                 f"'bevel', got {thickness!r}")
+            keeps = self.method not in PENALTY_METHODS and options.get("edge_lengths", True)
+            thickness = bevel_thickness(self.members) if keeps else 0.0
+        #: the tube radius the run keeps, in the first object's units (0: centre lines only)
+        self.thickness = thickness
+        if thickness:
+            options["thickness"] = thickness
+        try:
+            self.run = core.make_run(self.method, as_input(polygons), metric=metric,
+                                     max_iter=max_iterations, tol=tolerance, refine=refine,
+                                     max_edges=max_edges, restarts=restarts, seed=seed,
+                                     **options)
+        except ValueError as err:  # the core's words, its components named as objects
+            raise ValueError(f"{self.name}: {name_components(str(err), self.members)}"
+                             ) from None
         #: the engine that runs ("exact" or "tree": "auto" resolved by the curve's size)
         self.engine = self.run.engine.name
         self.start = [p.copy() for p in polygons]

@@ -44,7 +44,7 @@ def test_settings_pass_each_method_only_its_options(scene, mb, core):
     s = scene.moebius
     legacy = {"metric", "max_iterations", "tolerance", "frame_start", "keyframe_stride",
               "initial_step", "armijo", "growth", "backproject_iter", "backproject_tol",
-              "edge_lengths", "barycenter", "settle"}
+              "edge_lengths", "barycenter", "settle", "thickness"}
     assert set(mb.relax_settings(s)) == legacy | {"method", "engine", "theta", "refine", "energy"}
     # refinement on by default, Max Edges 0 (the core's default) not passed; restarts only
     # when asked, and to the methods that keep the constraints
