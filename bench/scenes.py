@@ -6,6 +6,7 @@ independent numpy test (no curve meets itself, another curve or a mesh; the cont
 never left; pinned vertices exact to the bit)::
 
     NUMBA_NUM_THREADS=2 .venv/bin/python bench/scenes.py --scene cables --iterations 20
+    NUMBA_NUM_THREADS=2 .venv/bin/python bench/scenes.py --scene cables --thickness 0,0.3
     NUMBA_NUM_THREADS=2 .venv/bin/python bench/scenes.py --scene all --frames out/scenes
     .venv/bin/python bench/scenes.py --render out/scenes        # contact sheets, real bpy
 
@@ -741,6 +742,10 @@ def main(argv=None) -> int:
     ap.add_argument("--gap", type=int, default=2, help="earbuds: edges cut at the junction")
     ap.add_argument("--cables", type=int, default=100)
     ap.add_argument("--edges", type=int, default=200)
+    ap.add_argument("--thickness", default="0",
+                    help="tube radii in mean edge lengths, comma-separated: each scene runs "
+                         "once per radius, in turn, in this process (the Untangle Cables "
+                         "preset's bevel is 0.3)")
     ap.add_argument("--no-check", action="store_true")
     ap.add_argument("--render", type=Path, default=None,
                     help="render the runs saved under this folder into docs/img/scene_*.png")
@@ -752,11 +757,24 @@ def main(argv=None) -> int:
     names = ["earbuds", "rings", "bunny", "cables"] if a.scene == "all" else [a.scene]
     bad = 0
     tp = {k: v for k, v in (("alpha", a.alpha), ("beta", a.beta)) if v is not None}
+    radii = [float(x) for x in a.thickness.split(",")]
+    rows = []
     for name in names:
-        out = run(make(name, a), a.iterations, a.max_seconds,
-                  a.frames / name if a.frames else None, a.metric, not a.no_check, a.energy,
-                  **tp)
-        bad += bool(out["failures"])
+        for radius in radii:
+            scene = make(name, a)
+            if radius:
+                scene.options["thickness"] = radius * mean_edge(scene.parts, scene.closed)
+                scene.note += f"; thickness {radius:g} mean edges"
+            folder = a.frames / (name + (f"_r{radius:g}" if radius else "")) if a.frames else None
+            out = run(scene, a.iterations, a.max_seconds, folder, a.metric, not a.no_check,
+                      a.energy, **tp)
+            rows.append((name, radius, out))
+            bad += bool(out["failures"])
+    if len(radii) > 1:  # side by side, measured in this one run
+        print("\nscene, thickness (mean edges): median s/iteration, least curve gap (mean edges)")
+        for name, radius, out in rows:
+            print(f"  {name:8s} {radius:5g}: {out['median_s']:.3f} s, gap "
+                  f"{out['curve_gap_min']:.3g} (twice the radius {2 * radius:g})")
     return 1 if bad else 0
 
 

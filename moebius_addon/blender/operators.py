@@ -542,8 +542,8 @@ class MOEBIUS_OT_show_gradient(bpy.types.Operator):
 
 
 class MOEBIUS_OT_apply_preset(bpy.types.Operator):
-    """Set the panel's settings for a kind of scene (and give the active curve a thickness);
-    every setting can be changed afterwards"""
+    """Set the panel's settings for a kind of scene (and give the selected curves a
+    thickness); every setting can be changed afterwards"""
 
     bl_idname = "moebius.apply_preset"
     bl_label = "Apply Preset"
@@ -568,7 +568,9 @@ class MOEBIUS_OT_apply_preset(bpy.types.Operator):
 
     def execute(self, context):
         try:
-            done = presets.apply_preset(context.scene, self.preset, context.active_object)
+            curves = _selected_curves(context)
+            done = presets.apply_preset(context.scene, self.preset,
+                                        curves or context.active_object)
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}

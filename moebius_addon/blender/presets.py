@@ -46,11 +46,11 @@ def _select_ends(obj: bpy.types.Object) -> int:
     return count
 
 
-def apply_preset(scene: bpy.types.Scene, name: str, obj: bpy.types.Object | None = None
-                 ) -> str:
+def apply_preset(scene: bpy.types.Scene, name: str, obj=None) -> str:
     """Set the settings of preset ``name`` (a key of ``options.PRESETS``) on
     ``scene.moebius``, and prepare the curve object ``obj`` (None, or not a curve: settings
-    only). Returns what was done, in words.
+    only; a list: each curve object of it, as Relax relaxes a selection together). Returns
+    what was done, in words.
 
     Raises
     ------
@@ -61,13 +61,13 @@ def apply_preset(scene: bpy.types.Scene, name: str, obj: bpy.types.Object | None
     if name not in options.PRESETS:
         raise ValueError(f"unknown preset '{name}'; choose one of {', '.join(options.PRESETS)}")
     label, _, values = options.PRESETS[name]
-    if obj is not None and obj.type != "CURVE":
-        obj = None
-    if obj is not None and obj.mode == "EDIT":
-        raise ValueError(f"'{obj.name}' is in Edit Mode: leave it (Tab) to apply the preset "
-                         "(it sets the curve's thickness and selection)")
-    if obj is not None and not obj.data.splines:
-        obj = None
+    objs = [o for o in ([obj] if isinstance(obj, bpy.types.Object) or obj is None else obj)
+            if o is not None and o.type == "CURVE"]
+    for o in objs:
+        if o.mode == "EDIT":
+            raise ValueError(f"'{o.name}' is in Edit Mode: leave it (Tab) to apply the preset "
+                             "(it sets the curve's thickness and selection)")
+    objs = [o for o in objs if o.data.splines]
     s = scene.moebius
     if name == "relax_knot":
         for key in options.PRESET_SETTINGS:
@@ -80,18 +80,22 @@ def apply_preset(scene: bpy.types.Scene, name: str, obj: bpy.types.Object | None
             s.obstacles = bpy.data.collections["Obstacles"]
         notes.append(f"obstacles '{s.obstacles.name}'" if s.obstacles is not None else
                      "no obstacles: choose their collection in Advanced")
-    if obj is not None:
-        length, edges = curve_length(obj)
+    if objs:
+        lengths = [curve_length(o) for o in objs]
+        named = f"'{objs[0].name}'" + (f" and {len(objs) - 1} more" if len(objs) > 1 else "")
         if name == "untangle_cables":
-            notes.append(f"{_select_ends(obj)} cable ends of '{obj.name}' selected to pin")
+            ends = sum(_select_ends(o) for o in objs)
+            notes.append(f"{ends} cable ends of {named} selected to pin")
         if name == "pack_in_volume":
+            length = sum(L for L, _ in lengths)
             s.length_target = options.PACK_LENGTH_FACTOR * length
             notes.append(f"length {length:.4g} → {s.length_target:.4g}")
-        data = obj.data
-        data.bevel_depth = options.BEVEL_EDGES * length / max(edges, 1)
-        data.bevel_resolution = 4
-        data.use_fill_caps = True
-        notes.append(f"thickness {data.bevel_depth:.3g}")
+        for o, (length, edges) in zip(objs, lengths, strict=True):
+            data = o.data
+            data.bevel_depth = options.BEVEL_EDGES * length / max(edges, 1)
+            data.bevel_resolution = 4
+            data.use_fill_caps = True
+        notes.append(f"thickness {objs[0].data.bevel_depth:.3g}")
     if name == "pack_in_volume" and s.container is None:
         notes.append("no container: choose a closed mesh around the curve in Advanced")
     return f"{label}" + (": " + ", ".join(notes) if notes else "")

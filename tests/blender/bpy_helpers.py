@@ -133,3 +133,46 @@ def imported_points(frame):
     X = X.reshape(-1, 3)
     M = np.array(ev.matrix_world)
     return X @ M[:3, :3].T + M[:3, 3], ev.data
+
+
+#: The torus of :func:`cable_scene`: major and minor radius, height.
+R_TORUS, r_TORUS, Z_TORUS = 0.6, 0.08, 0.5
+
+
+def _into(collection, obj):
+    for c in obj.users_collection:
+        c.objects.unlink(obj)
+    collection.objects.link(obj)
+
+
+def cable_scene(resample, cables: int = 10, edges: int = 40, seed: int = 7, twist: float = 0.2,
+                spread: float = 0.05) -> list:
+    """The artist's cable scene: two plates (below z = 0, above z = 1) and a torus about the
+    z axis at mid-height, in the collection 'Obstacles', and ``cables`` cables around the axis
+    from plate to plate, each its own curve object of ``edges`` equal edges (``resample``:
+    the core's), wavy (``twist`` radians about the axis, ``spread`` sideways), their ends on
+    the plates and leaving them straight up; the cables selected, the first active."""
+    scene = bpy.context.scene
+    obstacles = bpy.data.collections.new("Obstacles")
+    scene.collection.children.link(obstacles)
+    for name, z in (("Floor", -0.05), ("Ceiling", 1.05)):
+        bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, z), scale=(2.0, 2.0, 0.1))
+        bpy.context.active_object.name = name
+        _into(obstacles, bpy.context.active_object)
+    bpy.ops.mesh.primitive_torus_add(major_radius=R_TORUS, minor_radius=r_TORUS,
+                                     location=(0.0, 0.0, Z_TORUS))
+    bpy.context.active_object.name = "Ring"
+    _into(obstacles, bpy.context.active_object)
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, 600)
+    bump = np.sin(np.pi * t) ** 2  # no sideways motion at the plates: the cables leave them
+    objs = []                      # straight up
+    for c in range(cables):
+        a = 2 * np.pi * c / cables + twist * bump * np.sin(2 * np.pi * t + c)
+        w = 0.25 + spread * bump * rng.uniform(-1, 1) * np.cos(3 * np.pi * t + c)
+        P = resample(np.c_[w * np.cos(a), w * np.sin(a), t], edges + 1, closed=False)
+        objs.append(poly_curve(f"Cable.{c:03d}", [P], cyclic=False))
+    for obj in objs:
+        obj.select_set(True)
+    bpy.context.view_layer.objects.active = objs[0]
+    return objs

@@ -8,52 +8,23 @@ from importlib import import_module
 import bpy
 import numpy as np
 import pytest
-from bpy_helpers import poly_curve, scene_state
+from bpy_helpers import R_TORUS, Z_TORUS, r_TORUS, scene_state
+from bpy_helpers import cable_scene as cable_scene_of
 
 from tests.mesh_checks import segments_closest
 
 CABLES, EDGES = 10, 40
-R_TORUS, r_TORUS, Z_TORUS = 0.6, 0.08, 0.5
 
 
 def _keys(mb, obj):
     return import_module(mb.__name__ + ".keyframes").read_flow_keyframes(obj)
 
 
-def _into(collection, obj):
-    for c in obj.users_collection:
-        c.objects.unlink(obj)
-    collection.objects.link(obj)
-
-
 @pytest.fixture
 def cable_scene(scene, core):
-    """Two plates (z below 0 and above 1), a torus about the z axis at mid-height, all in the
-    collection 'Obstacles', and ten cables around the axis from plate to plate, each its own
-    object, wavy, their ends on the plates and leaving them straight up."""
-    obstacles = bpy.data.collections.new("Obstacles")
-    scene.collection.children.link(obstacles)
-    for name, z in (("Floor", -0.05), ("Ceiling", 1.05)):
-        bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, z), scale=(2.0, 2.0, 0.1))
-        bpy.context.active_object.name = name
-        _into(obstacles, bpy.context.active_object)
-    bpy.ops.mesh.primitive_torus_add(major_radius=R_TORUS, minor_radius=r_TORUS,
-                                     location=(0.0, 0.0, Z_TORUS))
-    bpy.context.active_object.name = "Ring"
-    _into(obstacles, bpy.context.active_object)
-    rng = np.random.default_rng(7)
-    t = np.linspace(0.0, 1.0, 600)
-    bump = np.sin(np.pi * t) ** 2  # no sideways motion at the plates: the cables leave them
-    cables = []                    # straight up
-    for c in range(CABLES):
-        a = 2 * np.pi * c / CABLES + 0.2 * bump * np.sin(2 * np.pi * t + c)
-        w = 0.25 + 0.05 * bump * rng.uniform(-1, 1) * np.cos(3 * np.pi * t + c)
-        P = core.resample(np.c_[w * np.cos(a), w * np.sin(a), t], EDGES + 1, closed=False)
-        cables.append(poly_curve(f"Cable.{c:03d}", [P], cyclic=False))
-    for obj in cables:
-        obj.select_set(True)
-    bpy.context.view_layer.objects.active = cables[0]
-    return cables
+    """Ten cables as ten curve objects between two plates through a torus
+    (``bpy_helpers.cable_scene``), all selected, the first active."""
+    return cable_scene_of(core.resample, CABLES, EDGES)
 
 
 def _tube_radius(obj):
@@ -87,14 +58,11 @@ def test_ten_cable_objects_untangle_as_tubes_that_never_meet(scene, mb, cable_sc
     assert s.pin_tangents and s.keep_thickness
     edge = float(np.linalg.norm(np.diff(_world(cables[0], np.array(
         [p.co[:3] for p in cables[0].data.splines[0].points])), axis=0), axis=1).mean())
-    for obj in cables:  # the preset thickens the active one; the rest as an artist would
-        obj.data.bevel_depth = cables[0].data.bevel_depth
-        for p in obj.data.splines[0].points:
-            p.select = False
-        for k in (0, EDGES):
-            obj.data.splines[0].points[k].select = True
-    r = _tube_radius(cables[0])
-    assert r == pytest.approx(0.3 * edge, rel=1e-3)
+    for obj in cables:  # the preset thickens every selected cable and selects its two ends
+        assert _tube_radius(obj) == pytest.approx(0.3 * edge, rel=2e-3)
+        assert [p.select for p in obj.data.splines[0].points] == [True] + [False] * (
+            EDGES - 1) + [True]
+    r = max(_tube_radius(obj) for obj in cables)
     s.max_iterations = 12
     assert bpy.ops.moebius.relax() == {"FINISHED"}
     assert s.last_object == "'Cable.000' and 9 other curves"
