@@ -175,6 +175,20 @@ CASES = [
     ("15 001 vertices that cross, exact",
      lambda: core.relax(_lemniscate(15_001), max_iter=1, engine="exact"), ValueError,
      "15001 vertices are more than the dense metric's factorization handles"),
+    # values that overflowed inside the run (its energy NaN, stopped as a stall) or left no
+    # room to grow
+    ("tangent-point beta 150", lambda: core.relax(T, max_iter=1, energy="tangent_point",
+                                                  alpha=100, beta=150), ValueError,
+     r"beta must be at most 40, got 150: \|x − y\|\^−beta between points an edge apart "
+     "overflows float64"),
+    ("obstacle_weight 1e300", lambda: core.relax(T, max_iter=1, obstacles=[(
+        np.array([[9.0, 9, 9], [10, 9, 9], [9, 10, 9]]), np.array([[0, 1, 2]]))],
+        obstacle_weight=1e300), ValueError,
+     r"obstacle_weight must be at most 1e\+06, got 1e\+300: the weighted sum overflows"),
+    ("length_growth 300", lambda: core.relax(T, max_iter=1, length_target=100.0,
+                                             length_growth=300.0), ValueError,
+     r"length_growth must be at most 1 \(every edge 2 times as long per iteration\), got "
+     r"300\.0: a larger step leaves no room to grow"),
 ]
 
 

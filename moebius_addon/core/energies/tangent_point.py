@@ -40,6 +40,10 @@ LINKS = True
 #: refined to 1 200 edges on all six (7_4: 6.2 against 59.5 CPU s, stalled).
 DEFAULT_ALPHA = 2.0
 DEFAULT_BETA = 4.5
+#: The largest ``beta``: a run works at total length 1, where points an edge apart are 1/N
+#: apart; N^beta must stay far inside float64's 1e308 for N to 10^6 (alpha = 100, beta = 150
+#: gave a finite energy of 5.8e19 on the start and NaN in the run).
+MAX_BETA = 40.0
 
 # what :func:`pair` computes (a constant argument at every call site)
 KIND_2_4 = 0  # α = 2, β = 4: no pow
@@ -63,6 +67,10 @@ def check_exponents(alpha, beta) -> tuple[float, float]:
     a, b = check_number("alpha", alpha), check_number("beta", beta)
     if a <= 0.0:
         raise ValueError(f"alpha must be > 0, got {alpha!r} (the default is {DEFAULT_ALPHA:g})")
+    if b > MAX_BETA:
+        raise ValueError(f"beta must be at most {MAX_BETA:g}, got {beta!r}: |x − y|^−beta "
+                         "between points an edge apart overflows float64 at the resolutions a "
+                         f"run reaches (the default is ({DEFAULT_ALPHA:g}, {DEFAULT_BETA:g}))")
     if not (a + 1.0 < b < 2.0 * a + 1.0):
         raise ValueError(f"beta must lie in (alpha + 1, 2 alpha + 1) = ({a + 1.0:g}, "
                          f"{2.0 * a + 1.0:g}) for alpha = {a:g}, got {beta!r} (below, the energy "

@@ -53,6 +53,9 @@ HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
 #: A stalled curve nearer than this many edge lengths to an obstacle, or strands this near
 #: each other, are said to be pressed together (:meth:`Run._stall_cause`).
 STALL_CONTACT = 1.0
+#: The largest ``obstacle_weight``: the obstacle energy of a curve near a mesh reaches 1e9 and
+#: more, and 1e300 times it overflowed (the run's energy NaN, stopped as a stall).
+MAX_OBSTACLE_WEIGHT = 1e6
 #: Iterations in a row without visible motion that end a run with ``settle`` set.
 SETTLE_ITERATIONS = 5
 # A run that stops moving with a projected gradient above this many times tol is jammed, not
@@ -273,6 +276,10 @@ class Run:
         self._settle_from: np.ndarray | None = None
         self._still = 0
         obstacle_weight = check_number("obstacle_weight", obstacle_weight, 0)
+        if obstacle_weight > MAX_OBSTACLE_WEIGHT:
+            raise ValueError(f"obstacle_weight must be at most {MAX_OBSTACLE_WEIGHT:g}, got "
+                             f"{obstacle_weight!r}: the weighted sum overflows float64 (the "
+                             "step bound, not the weight, keeps the curve off the meshes)")
         #: tube radius in the caller's units (:mod:`..thickness`; 0: none)
         self.thickness = check_number("thickness", thickness, 0)
         if obstacle_tol is not None:

@@ -23,6 +23,10 @@ import numpy as np
 from .._checks import check_number
 from ..constraints import Constraints
 
+#: The largest ``length_growth``: each iteration at most doubles the edges (a loop of 60 edges
+#: grew to three times its length at rates 1, 2 and 30; at 300 it never grew, "no room to grow
+#: without contact").
+MAX_LENGTH_GROWTH = 1.0
 #: ``length_growth`` when only ``length_target`` is given: 1 % more length per iteration.
 DEFAULT_LENGTH_GROWTH = 0.01
 #: A target below the start's length by less than this fraction counts as the start's length
@@ -69,6 +73,11 @@ class LengthGrowth:
     def __init__(self, length_target, length_growth, lengths0: np.ndarray, layout, pinned,
                  scale: float):
         self.rate = check_number("length_growth", length_growth, 0, above=True)
+        if self.rate > MAX_LENGTH_GROWTH:
+            raise ValueError(f"length_growth must be at most {MAX_LENGTH_GROWTH:g} (every edge "
+                             f"{1 + MAX_LENGTH_GROWTH:g} times as long per iteration), got "
+                             f"{length_growth!r}: a larger step leaves no room to grow without "
+                             "contact, and the curve never grows")
         targets = _as_targets(length_target, layout.k)
         grows = np.ones(layout.n, bool) if not layout.has_open else layout.real.copy()
         if pinned is not None:
