@@ -111,10 +111,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--settle", type=float, default=100 * DEFAULT_SETTLE, metavar="PERCENT",
                    help="stop once no point moves more than PERCENT of an edge in each of 5 "
                         "iterations in a row (default %(default)g; 0: never)")
-    p.add_argument("--thickness", type=_thickness, default="bevel", metavar="R",
+    p.add_argument("--thickness", type=_thickness, default=0.0, metavar="R",
                    help="tube radius kept between strands and from obstacles, in the curve's "
-                        "units (default 'bevel': the curve's bevel depth; 0: centre lines "
-                        "only)")
+                        "units, or 'bevel' (the curve's bevel depth); default 0: centre lines "
+                        "only")
     p.add_argument("--no-refine", dest="refine", action="store_false",
                    help="do not add edges: refuse a start too coarse for its shape and stop "
                         "where strands jam, as before refinement existed (default: refine)")

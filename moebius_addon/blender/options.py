@@ -114,6 +114,7 @@ PRESETS = {
         "collection (Advanced ▸ Obstacles; one named 'Obstacles' is taken if none is set), "
         "the tree's θ 0.3; a thickness set on the curve",
         {"keep_open": True, "close_open": False, "pin_selected": True, "pin_tangents": True,
+         "keep_thickness": True,
          "use_length_target": False, "method": EXPLICIT_METHOD, "refine": True,
          "theta": 0.3},
     ),
@@ -122,6 +123,7 @@ PRESETS = {
         "Grow the curve to three times its length at 1 % per iteration inside the Container "
         "(Advanced ▸ Container: a closed mesh around the curve); a thickness set on the curve",
         {"use_length_target": True, "length_growth": 1.0, "method": EXPLICIT_METHOD,
+         "keep_thickness": True,
          "keep_open": False, "pin_selected": False, "refine": True, "max_iterations": 400},
     ),
     "relax_knot": (

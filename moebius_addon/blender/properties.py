@@ -186,11 +186,11 @@ class MoebiusSettings(bpy.types.PropertyGroup):
                     "penalty methods)",
     )
     keep_thickness: BoolProperty(
-        name="Keep Thickness", default=True,
+        name="Keep Thickness", default=False,
         description="Keep the rendered tubes apart, not only the centre lines: the curves' "
                     "bevel (Object Data ▸ Geometry ▸ Bevel ▸ Depth) is a radius the run keeps "
                     "between strands and from obstacles and the container (the methods that "
-                    "keep edge lengths)",
+                    "keep edge lengths; Untangle Cables and Pack in Volume turn it on)",
     )
     # Pins and obstacles (scene_constraints)
     pin_selected: BoolProperty(

@@ -254,7 +254,10 @@ class ObjectRelaxation:
         ``energy_target``, ``ftol``, ``max_seconds``, and the method's own options); the
         penalty methods ignore the options that need hard constraints. ``allow_large=True``
         lifts :data:`~.options.EDGE_LIMIT` (never the core's own size refusals). Pins and
-        obstacles (:mod:`.scene_constraints`): ``pinned=`` indices (a list per spline for a
+        obstacles (:mod:`.scene_constraints`): ``thickness=`` a tube radius kept between
+        strands and from the meshes (the first curve's units), or ``"bevel"``: the curves'
+        largest bevel depth (0 for the penalty methods, which cannot keep one; default 0:
+        centre lines only); ``pinned=`` indices (a list per spline for a
         link) or ``pin_selected=True`` (the points selected in Edit Mode), ``pin_tangents``;
         ``obstacles=`` a collection, a list of mesh objects or the core's ``(V, F)`` arrays
         (in the curve's object coordinates), ``obstacle_weight``; ``container=`` a closed mesh
@@ -373,7 +376,7 @@ class ObjectRelaxation:
         self.stride = int(keyframe_stride)
         # make_run("projected_gradient", ...) is core.Relaxation itself: the default is the
         # same run as before methods existed
-        thickness = options.pop("thickness", "bevel")
+        thickness = options.pop("thickness", 0.0)
         if isinstance(thickness, str):
             if thickness != "bevel":
                 raise ValueError(f"thickness must be a radius (the first curve's units) or "

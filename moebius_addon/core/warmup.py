@@ -168,14 +168,17 @@ def _untangle_cables() -> None:
                    0.3 * np.sin(2 * np.pi * c / 6) + 0.02 * np.cos(2 * t + c), t]
              for c in range(6)]
     ring = _torus(0.6, 0.08, 24, 12, z=0.5)
-    for tangents, gap in ((True, 0.0), (False, 0.02)):
+    bevel = 0.3 / 170  # the preset's tube: 0.3 mean edge lengths
+    for tangents, gap, thickness in ((True, 0.0, bevel), (False, 0.02, 0.0)):
         plates = [_box([-1.0, -1.0, -0.04 - gap], [1.0, 1.0, -gap]),
                   _box([-1.0, -1.0, 1.0 + gap], [1.0, 1.0, 1.04 + gap])]
         _relax(parts, "projected_gradient", closed=False, pinned=[[0, 170]] * 6,
-               pin_tangents=tangents, obstacles=[*plates, ring], theta=0.3)
+               pin_tangents=tangents, obstacles=[*plates, ring], theta=0.3,
+               thickness=thickness)
     small = [resample(p, 30, closed=False) for p in parts[:2]]
-    _relax(small, "projected_gradient", closed=False, pinned=[[0, 29]] * 2,
-           obstacles=plates)
+    for thickness in (0.0, 0.3 / 29):
+        _relax(small, "projected_gradient", closed=False, pinned=[[0, 29]] * 2,
+               obstacles=plates, thickness=thickness)
 
 
 def _pack_in_volume() -> None:
@@ -183,9 +186,9 @@ def _pack_in_volume() -> None:
     for n in (60, 1000):
         t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
         P = resample(np.c_[0.6 * np.cos(t), 0.6 * np.sin(t), 0.2 * np.sin(5 * t)], n)
-        length = n * float(np.linalg.norm(P[1] - P[0]))
-        _relax(P, "projected_gradient", container=_sphere(0.9), length_target=3.0 * length,
-               length_growth=0.01)
+        edge = float(np.linalg.norm(P[1] - P[0]))
+        _relax(P, "projected_gradient", container=_sphere(0.9), length_target=3.0 * n * edge,
+               length_growth=0.01, thickness=0.3 * edge)
 
 
 #: The paths, in the order a first session meets them.

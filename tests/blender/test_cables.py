@@ -56,10 +56,10 @@ def test_ten_cable_objects_untangle_as_tubes_that_never_meet(scene, mb, cable_sc
     s = scene.moebius
     assert bpy.ops.moebius.apply_preset(preset="untangle_cables") == {"FINISHED"}
     assert s.pin_tangents and s.keep_thickness
-    edge = float(np.linalg.norm(np.diff(_world(cables[0], np.array(
-        [p.co[:3] for p in cables[0].data.splines[0].points])), axis=0), axis=1).mean())
     for obj in cables:  # the preset thickens every selected cable and selects its two ends
-        assert _tube_radius(obj) == pytest.approx(0.3 * edge, rel=2e-3)
+        X = _world(obj, np.array([p.co[:3] for p in obj.data.splines[0].points]))
+        edge = float(np.linalg.norm(np.diff(X, axis=0), axis=1).mean())
+        assert _tube_radius(obj) == pytest.approx(0.3 * edge, rel=1e-5)
         assert [p.select for p in obj.data.splines[0].points] == [True] + [False] * (
             EDGES - 1) + [True]
     r = max(_tube_radius(obj) for obj in cables)
@@ -97,7 +97,7 @@ def test_tubes_that_meet_at_the_start_are_refused_by_name(scene, mb, cable_scene
     before = scene_state()
     with pytest.raises(RuntimeError, match=r"'Cable\.000' and 9 other curves: 'Cable\.\d+' and "
                                            r"'Cable\.\d+' are [\d.]+ apart .*below twice the "
-                                           r"thickness 0\.18"):
+                                           r"thickness 0\.09"):
         bpy.ops.moebius.relax()
     assert scene_state() == before
     scene.moebius.keep_thickness = False  # centre lines only: it runs
