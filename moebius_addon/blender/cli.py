@@ -115,6 +115,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="tube radius kept between strands and from obstacles, in the curve's "
                         "units, or 'bevel' (the curve's bevel depth); default 0: centre lines "
                         "only")
+    p.add_argument("--push-apart", action="store_true",
+                   help="with --thickness: a start whose tubes meet is not refused; the tubes "
+                        "thicken as the flow pushes the strands apart")
     p.add_argument("--no-refine", dest="refine", action="store_false",
                    help="do not add edges: refuse a start too coarse for its shape and stop "
                         "where strands jam, as before refinement existed (default: refine)")
@@ -254,7 +257,7 @@ def _run(args, run: dict, notation: str | None):
                                   penalty=args.penalty, engine=args.engine,
                                   theta=args.theta, max_iterations=args.max_iterations,
                                   tolerance=args.tolerance, settle=args.settle / 100.0,
-                                  thickness=args.thickness,
+                                  thickness=args.thickness, push_apart=args.push_apart,
                                   frame_start=args.frame_start,
                                   keyframe_stride=args.stride, refine=args.refine,
                                   max_edges=args.max_edges, restarts=args.restarts,

@@ -82,6 +82,8 @@ def relax_settings(settings) -> dict:
         )
     if "keep_thickness" in acting:  # the curves' bevel, or centre lines only
         kwargs["thickness"] = "bevel" if settings.keep_thickness else 0.0
+        if settings.keep_thickness and settings.push_apart:
+            kwargs["push_apart"] = True
     if getattr(settings, "pin_selected", False):
         kwargs.update(pin_selected=True, pin_tangents=settings.pin_tangents)
     if getattr(settings, "obstacles", None) is not None:

@@ -228,6 +228,9 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
         sub = col.row()
         sub.active = "keep_thickness" in acting
         sub.prop(s, "keep_thickness")
+        sub = col.row()
+        sub.active = "keep_thickness" in acting and s.keep_thickness
+        sub.prop(s, "push_apart")
         col = layout.column(align=True)
         col.label(text="Pins and Obstacles")
         sub = col.column(align=True)

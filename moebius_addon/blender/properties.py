@@ -192,6 +192,12 @@ class MoebiusSettings(bpy.types.PropertyGroup):
                     "between strands and from obstacles and the container (the methods that "
                     "keep edge lengths; Untangle Cables and Pack in Volume turn it on)",
     )
+    push_apart: BoolProperty(
+        name="Push Apart First", default=False,
+        description="With Keep Thickness: a start whose tubes already meet is not refused; the "
+                    "run keeps the tubes it allows and thickens them as the flow pushes the "
+                    "strands apart, until they reach the bevel",
+    )
     # Pins and obstacles (scene_constraints)
     pin_selected: BoolProperty(
         name="Pin Selected Points", default=False,

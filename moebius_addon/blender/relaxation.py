@@ -257,8 +257,10 @@ class ObjectRelaxation:
         obstacles (:mod:`.scene_constraints`): ``thickness=`` a tube radius kept between
         strands and from the meshes (the first curve's units), or ``"bevel"``: the curves'
         largest bevel depth (0 for the penalty methods, which cannot keep one; default 0:
-        centre lines only); ``pinned=`` indices (a list per spline for a
-        link) or ``pin_selected=True`` (the points selected in Edit Mode), ``pin_tangents``;
+        centre lines only), ``push_apart=True`` (a start whose tubes meet is not refused:
+        the tubes thicken as the flow pushes the strands apart); ``pinned=`` indices (a list
+        per spline for a link) or ``pin_selected=True`` (the points selected in Edit Mode),
+        ``pin_tangents``;
         ``obstacles=`` a collection, a list of mesh objects or the core's ``(V, F)`` arrays
         (in the curve's object coordinates), ``obstacle_weight``; ``container=`` a closed mesh
         object (or the core's ``(V, F)``) the curve stays inside. ``length_target=`` (object
@@ -387,6 +389,8 @@ class ObjectRelaxation:
         self.thickness = thickness
         if thickness:
             options["thickness"] = thickness
+        else:
+            options.pop("push_apart", None)  # no tubes to push apart to
         try:
             self.run = core.make_run(self.method, as_input(polygons), metric=metric,
                                      max_iter=max_iterations, tol=tolerance, refine=refine,

@@ -100,6 +100,10 @@ def test_tubes_that_meet_at_the_start_are_refused_by_name(scene, mb, cable_scene
                                            r"thickness 0\.09"):
         bpy.ops.moebius.relax()
     assert scene_state() == before
-    scene.moebius.keep_thickness = False  # centre lines only: it runs
-    scene.moebius.max_iterations = 1
+    s = scene.moebius
+    s.push_apart = True  # or pushed apart first: the tubes it allows, thickened as it goes
+    s.max_iterations = 2
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    s.push_apart = False
+    s.keep_thickness = False  # or centre lines only
     assert bpy.ops.moebius.relax() == {"FINISHED"}

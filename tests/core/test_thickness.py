@@ -284,3 +284,31 @@ def test_refined_run_keeps_the_thickness():
     pairs = _tube_pairs(start, [False, False], r)
     assert closest_tubes(start, [False, False], pairs) > 2 * r * 1.001
     _check_tubes(start, xs, [False, False], r)
+
+
+# (5) push apart: a start whose tubes meet runs with the tubes it allows, grown to the thickness
+
+
+def test_a_start_whose_tubes_meet_is_pushed_apart_to_the_thickness():
+    t = np.linspace(0.0, 1.0, 400)
+    start = core.resample([np.c_[0.1 * np.sin(np.pi * t), 0 * t, t],
+                           np.c_[0.25 - 0.1 * np.sin(np.pi * t), 0.01 * np.sin(2 * np.pi * t),
+                                 t]], [41, 41], closed=False)  # 0.05 apart in the middle
+    options = dict(closed=False, pinned=[[0, 40]] * 2, thickness=0.04)
+    with pytest.raises(ValueError, match="below twice the thickness 0.04"):
+        core.make_run("projected_gradient", start, **options)
+    run = core.make_run("projected_gradient", start, max_iter=30, tol=0.0, push_apart=True,
+                        **options)
+    xs, radii = [start], [run.engine.radius * run._scale]
+    while run.step():
+        xs.append([p.copy() for p in run.x])
+        radii.append(run.engine.radius * run._scale)
+    if run.nit > len(xs) - 1:  # the last iterate comes with False
+        xs.append([p.copy() for p in run.x])
+        radii.append(run.engine.radius * run._scale)
+    assert radii[0] < 0.026 and np.all(np.diff(radii) >= 0) and radii[-1] == pytest.approx(0.04)
+    pairs = _tube_pairs(start, [False, False], 0.04)
+    for k in range(1, len(xs)):  # each move kept the tubes of the radius it had
+        for x in path_points(xs[k - 1:k + 1]):
+            assert closest_tubes(x, [False, False], pairs) >= 2 * radii[k - 1] * (1 - 1e-9)
+    assert closest_tubes(xs[-1], [False, False], pairs) >= 0.08 * (1 - 1e-9)

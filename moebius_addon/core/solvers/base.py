@@ -37,6 +37,7 @@ from .._checks import (
     check_number,  # noqa: F401 - public as core.check_number
 )
 from .._layout import as_unit_layout
+from .._pairs import SLACK
 from ..container import check_container, check_inside
 from ..energy_choice import check_energy
 from ..engine import make_engine
@@ -56,6 +57,9 @@ STALL_CONTACT = 1.0
 #: The largest ``obstacle_weight``: the obstacle energy of a curve near a mesh reaches 1e9 and
 #: more, and 1e300 times it overflowed (the run's energy NaN, stopped as a stall).
 MAX_OBSTACLE_WEIGHT = 1e6
+#: ``push_apart`` keeps tubes this much thinner than the start allows (beside the contact
+#: test's own margin ``SLACK``), so that the first step has room.
+PUSH_MARGIN = 1.01
 #: Iterations in a row without visible motion that end a run with ``settle`` set.
 SETTLE_ITERATIONS = 5
 # A run that stops moving with a projected gradient above this many times tol is jammed, not
@@ -253,7 +257,7 @@ class Run:
                  container=None, obstacle_tol: float | None = None, closed=True, energy="moebius",
                  alpha=None, beta=None, length_target=None, length_growth=None,
                  settle: float = 0.0, settle_iterations: int = SETTLE_ITERATIONS,
-                 thickness: float = 0.0, **engine_options):
+                 thickness: float = 0.0, push_apart: bool = False, **engine_options):
         _check_names(metric, target_lengths)
         check = check_flag("check", check)
         pin_tangents = check_flag("pin_tangents", pin_tangents)
@@ -282,6 +286,10 @@ class Run:
                              "step bound, not the weight, keeps the curve off the meshes)")
         #: tube radius in the caller's units (:mod:`..thickness`; 0: none)
         self.thickness = check_number("thickness", thickness, 0)
+        push_apart = check_flag("push_apart", push_apart)
+        #: with ``push_apart``, the radius to reach (the run's units) while the tubes kept
+        #: (``engine.radius``) grow to it as the flow pushes the strands apart; else None
+        self._radius_goal: float | None = None
         if obstacle_tol is not None:
             obstacle_tol = check_number("obstacle_tol", obstacle_tol, 0)
             if obstacle_tol >= 1.0:
@@ -341,7 +349,11 @@ class Run:
                                  "keep; turn them on or pass thickness=0")
             near = near_counts(layout, self.lengths0, radius, self._scale)
             self.engine.set_thickness(radius, near)
-            check_thickness(self.X, layout, near, radius, self._scale, self.thickness)
+            if push_apart:  # the tubes the start allows, grown after each iterate
+                self._radius_goal, self._near_goal = radius, near
+                radius = self._reachable_radius(None)
+                self.engine.set_thickness(radius, near)
+            check_thickness(self.X, layout, near, radius, self._scale, radius * self._scale)
         if meshes is not None or container is not None:
             # a container is one more obstacle (its wall repels, the contact bound stops every
             # step short of it) that the curve starts inside (.container)
@@ -356,8 +368,13 @@ class Run:
             field = ObstacleField(meshes, self._shift, self._scale, obstacle_weight, labels,
                                   auto_obstacle_tol(obstacle_tol, layout, meshes))
             field.fixed = self.pinned  # a pinned end and tangent may lie on a mesh
-            field.check_clear(self.X, layout, max(self.eps, radius), self.thickness)
+            if self._radius_goal is not None:
+                radius = min(radius, self._reachable_radius(field))
+                self.engine.set_thickness(radius, self._near_goal)
+            field.check_clear(self.X, layout, max(self.eps, radius), radius * self._scale)
             self.engine.obstacles = field
+        #: the iteration at which the pushed-apart tubes reached the thickness asked
+        self.thickness_reached_at: int | None = None
         self.nit = 0
         self.rejected = 0
         self.done = False
@@ -487,7 +504,7 @@ class Run:
     def _finish(self, success: bool, message: str, status: Status) -> None:
         self.done = True
         self.success = success
-        self.message = message
+        self.message = message + self._thickness_note()
         self.status = status
 
     def stop(self, message: str = "stopped by the caller",
@@ -496,7 +513,47 @@ class Run:
         if not self.done:
             self._finish(True, message, status)
 
+    def _reachable_radius(self, field) -> float:
+        """The largest radius up to the goal whose tubes the current iterate keeps apart,
+        with the contact test's margin: half the closest tested strands' distance, and the
+        nearest obstacle's distance (``field``, or the engine's)."""
+        goal, margin = self._radius_goal, SLACK * PUSH_MARGIN
+        X, layout = self.X, self.layout
+        d, pair = closest_tested(X, layout, self._near_goal, 2.0 * goal * margin)
+        radius = goal if pair is None else min(goal, d / (2.0 * margin))
+        field = field if field is not None else self.engine.obstacles
+        if field is not None:
+            radius = min(radius, field.nearest(X, layout.nxt)[2] / margin)
+        return radius
+
+    def _push_apart(self) -> None:
+        """Grow the tubes kept towards the thickness asked as the strands move apart (never
+        shrink them: every iterate so far keeps the radius it had)."""
+        if self._radius_goal is None or self.engine.radius >= self._radius_goal:
+            return
+        radius = max(self.engine.radius, self._reachable_radius(None))
+        if radius > self.engine.radius:
+            self.engine.set_thickness(radius, self._near_goal)
+        if radius >= self._radius_goal and self.thickness_reached_at is None:
+            self.thickness_reached_at = self.nit
+
+    def _thickness_note(self) -> str:
+        """What the push apart reached, for the result's message (empty without one)."""
+        if self._radius_goal is None:
+            return ""
+        if self.thickness_reached_at == 0:  # the start had room: nothing was pushed
+            return ""
+        if self.thickness_reached_at is not None:
+            return (f" (tubes pushed apart to the thickness {self.thickness:.4g} by iteration "
+                    f"{self.thickness_reached_at})")
+        if self.engine.radius >= self._radius_goal:
+            return ""
+        return (f" (tubes pushed apart to {self.engine.radius * self._scale:.4g} of the "
+                f"thickness {self.thickness:.4g}: the flow did not move the strands further "
+                "apart)")
+
     def _check_stop(self, prev: float | None) -> None:
+        self._push_apart()
         gn = self.history["grad_norm"][-1]
         cur = self._objective()
         if gn <= self.tol:

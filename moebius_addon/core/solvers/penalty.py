@@ -35,7 +35,7 @@ DEFAULT_PENALTY_WEIGHT = 1e4
 # can pass one option set to every method) and ignored by the penalty methods.
 _FEASIBLE_ONLY = frozenset({
     "armijo", "growth", "backproject_iter", "backproject_tol", "edge_lengths", "barycenter",
-    "reuse_factorization", "precision", "exact_backprojection",
+    "reuse_factorization", "precision", "exact_backprojection", "push_apart",
 })
 
 

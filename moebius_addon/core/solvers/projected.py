@@ -159,7 +159,12 @@ class Relaxation(Run):
         iterate and the straight path between iterates keep strands ``2r`` apart (parts of
         one strand more than π r apart along it) and ``r`` from the obstacles and the
         container (:mod:`..thickness`; docs/api.md, "Thickness"); a start that breaks it is
-        refused, naming where and the distance found.
+        refused, naming where and the distance found, unless ``push_apart``.
+    push_apart : bool
+        With a thickness: a start whose tubes meet is not refused; the run keeps the tubes
+        its iterates allow (never thinner than before) as the flow pushes the strands apart,
+        until they reach ``thickness`` (the message says by which iteration, or how far they
+        got).
     """
 
     _OPEN_CURVES = True
@@ -207,6 +212,7 @@ class Relaxation(Run):
         settle: float = 0.0,
         settle_iterations: int = SETTLE_ITERATIONS,
         thickness: float = 0.0,
+        push_apart: bool = False,
     ):
         _check_names(metric, target_lengths)
         edge_lengths = check_flag("edge_lengths", edge_lengths)
@@ -231,7 +237,7 @@ class Relaxation(Run):
                          obstacle_tol=obstacle_tol, closed=closed, energy=energy, alpha=alpha,
                          beta=beta, length_target=length_target, length_growth=length_growth,
                          settle=settle, settle_iterations=settle_iterations,
-                         thickness=thickness)
+                         thickness=thickness, push_apart=push_apart)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter
@@ -484,7 +490,9 @@ class Relaxation(Run):
     def _check_stop(self, prev: float | None) -> None:
         if not self._growing:
             super()._check_stop(prev)
-        elif self.nit >= self.max_iter:  # no convergence before the target length is reached
+            return
+        self._push_apart()
+        if self.nit >= self.max_iter:  # no convergence before the target length is reached
             self._finish(False, f"maximum number of iterations ({self.max_iter}) reached "
                                 f"while growing ({self.growth_schedule.words()})",
                          Status.MAX_ITER)
