@@ -86,11 +86,25 @@ def members(objects) -> list[Member]:
     return out
 
 
+#: A custom property of a curve object: its tube radius in world units, kept instead of its
+#: bevel (a tube another modifier or a render setting draws).
+THICKNESS_PROP = "moebius_thickness"
+
+
 def bevel_thickness(members_: Sequence[Member]) -> float:
-    """The tube radius of the run's curves in its coordinates: the largest bevel (the
-    rendered tube's radius, in each object's units) — every tube is kept at least that thick,
-    so none of them meets another."""
-    return max((m.obj.data.bevel_depth * m.scale for m in members_), default=0.0)
+    """The tube radius of the run's curves in its coordinates: the largest of each curve's
+    :data:`THICKNESS_PROP` (world units) or else its bevel (the rendered tube's radius, in
+    the object's units) — every tube is kept at least that thick, so none meets another."""
+    first = members_[0].obj.matrix_world.to_scale()
+    world = float(abs(first[0] * first[1] * first[2])) ** (1.0 / 3.0) or 1.0
+    radii = []
+    for m in members_:
+        own = m.obj.get(THICKNESS_PROP)
+        if isinstance(own, (int, float)) and own > 0:
+            radii.append(float(own) / world)
+        else:
+            radii.append(m.obj.data.bevel_depth * m.scale)
+    return max(radii, default=0.0)
 
 
 def name_components(message: str, members_: Sequence[Member]) -> str:

@@ -100,6 +100,12 @@ def test_tubes_that_meet_at_the_start_are_refused_by_name(scene, mb, cable_scene
                                            r"thickness 0\.09"):
         bpy.ops.moebius.relax()
     assert scene_state() == before
+    for obj in cables:  # a radius in world units on the object counts instead of the bevel
+        obj.data.bevel_depth = 0.001
+        obj["moebius_thickness"] = 0.09
+    with pytest.raises(RuntimeError, match=r"below twice the thickness 0\.09"):
+        bpy.ops.moebius.relax()
+    assert scene_state() == before
     s = scene.moebius
     s.push_apart = True  # or pushed apart first: the tubes it allows, thickened as it goes
     s.max_iterations = 2
