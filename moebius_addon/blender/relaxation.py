@@ -313,17 +313,10 @@ class ObjectRelaxation:
             options["closed"] = closed if len(closed) > 1 else closed[0]
         for m in self.members:
             keyframes.check_flow_target(m.obj)
-        pin_selected = len(self.members) > 1 and options.pop("pin_selected", False)
         try:  # obstacles as (V, F) arrays, selected points as pins
-            options = scene_constraints.resolve(obj, options)
+            options = scene_constraints.resolve([m.obj for m in self.members], options)
         except ValueError as err:
-            raise ValueError(f"'{obj.name}': {err}") from None
-        if pin_selected:
-            if options.get("pinned") is not None:
-                raise ValueError("give pinned= or pin_selected=True, not both")
-            options["pinned"] = self._selected_points()
-        self._shown = [p.copy() for p in polygons]  # the shape at the current frame
-        self._cuts = np.cumsum([len(p) for p in polygons])[:-1]
+            raise ValueError(f"{self.name}: {err}") from None
         # the earlier flow keys, continued from their last iterate (read by show() otherwise)
         if append:
             polygons, frame_start = self._read_prior(polygons, frame_start)
@@ -434,18 +427,6 @@ class ObjectRelaxation:
             return wanted
         return min(wanted, max(n, edge_limit(metric, method, engine)))
 
-    def _selected_points(self) -> list[list[int]]:
-        """Pin Selected Points over the run's objects: the selected points of every spline."""
-        per = []
-        for m in self.members:
-            sel = scene_constraints.selected_points(m.obj)
-            per += ([[] for _ in m.polygons] if sel is None
-                    else [sel] if len(m.polygons) == 1 else sel)
-        if not any(per):
-            raise ValueError(f"Pin Selected Points is on, but no point of {self.name} is "
-                             "selected: select the points to pin in Edit Mode (or turn it off)")
-        return per
-
     def _read_prior(self, polygons, frame_start):
         """Continue: every object's flow keys (the same frames on each), their last iterate
         the start in the run's coordinates, and its frame."""
@@ -526,7 +507,7 @@ class ObjectRelaxation:
             self._live = True
         # a refined iterate has more points than the curve: every k-th is the same shape to
         # the eye (the curve grows to the refined count when the run is keyed)
-        sizes = [len(p) for p in self._shown]
+        sizes = [len(p) for m in self.members for p in m.polygons]
         shown = at_count(self.x, sizes, self._closed)
         for m in self.members:
             geometry.write_polygons(m.obj.data, m.to_local(shown[m.span]))

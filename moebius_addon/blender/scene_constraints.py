@@ -11,8 +11,12 @@ a mesh object (the core checks that it is closed and holds the curve), ``pin_sel
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import bpy
 import numpy as np
+
+from .group import group_name
 
 
 def obstacle_meshes(source, curve: bpy.types.Object,
@@ -95,9 +99,11 @@ def selected_points(obj: bpy.types.Object):
     return per[0] if len(per) == 1 else per
 
 
-def resolve(obj: bpy.types.Object, options: dict) -> dict:
-    """``options`` with their Blender forms turned into the core's (see the module text);
-    ``pin_selected`` is consumed.
+def resolve(objects: Sequence[bpy.types.Object], options: dict) -> dict:
+    """``options`` with their Blender forms turned into the core's (see the module text), for
+    a run on the curve ``objects`` in the first one's coordinates; ``pin_selected`` is
+    consumed: the selected points of every spline of every object, one list per spline (one
+    list for a single spline).
 
     Raises
     ------
@@ -105,6 +111,7 @@ def resolve(obj: bpy.types.Object, options: dict) -> dict:
         ``pin_selected`` with no point selected; obstacles or a container that are not meshes.
     """
     options = dict(options)
+    obj = objects[0]
     if isinstance(options.get("container"), bpy.types.Object):  # named in the core's messages
         container = options["container"]
         options["container"] = {container.name: container_mesh(container, obj)}
@@ -114,11 +121,16 @@ def resolve(obj: bpy.types.Object, options: dict) -> dict:
             and all(isinstance(o, bpy.types.Object) for o in source))):
         options["obstacles"] = obstacle_meshes(source, obj)
     if options.pop("pin_selected", False):
-        pinned = selected_points(obj)
-        if pinned is None:
-            raise ValueError(f"Pin Selected Points is on, but no point of '{obj.name}' is "
-                             "selected: select the points to pin in Edit Mode (or turn it off)")
+        per = []
+        for o in objects:
+            sel = selected_points(o)
+            per += ([[] for _ in o.data.splines] if sel is None
+                    else [sel] if len(o.data.splines) == 1 else sel)
+        if not any(per):
+            raise ValueError(f"Pin Selected Points is on, but no point of {group_name(objects)} "
+                             "is selected: select the points to pin in Edit Mode (or turn it "
+                             "off)")
         if options.get("pinned") is not None:
             raise ValueError("give pinned= or pin_selected=True, not both")
-        options["pinned"] = pinned
+        options["pinned"] = per[0] if len(per) == 1 else per
     return options

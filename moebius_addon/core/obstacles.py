@@ -834,15 +834,20 @@ class ObstacleField:
         #: cable whose end and tangent are pinned on the plate it hangs from) is left out of
         #: the energy and the start check; a step never moves it, so no contact is possible
         self.fixed: np.ndarray | None = None
+        self._skipped: tuple | None = None  # (nxt, fixed, the mask _skip made of them)
 
     def _skip(self, nxt: np.ndarray) -> np.ndarray:
         """The edge slots whose two ends are :attr:`fixed` (an open end's dummy slot, whose
-        two ends are its last vertex, too)."""
+        two ends are its last vertex, too); made once per layout (every evaluation asks)."""
+        if (self._skipped is not None and self._skipped[0] is nxt
+                and self._skipped[1] is self.fixed):
+            return self._skipped[2]
         skip = np.zeros(len(nxt), dtype=np.bool_)
         if self.fixed is not None:
             pinned = np.zeros(len(nxt), dtype=np.bool_)
             pinned[self.fixed] = True
             skip = pinned & pinned[nxt]
+        self._skipped = (nxt, self.fixed, skip)
         return skip
 
     @property
@@ -911,7 +916,7 @@ class ObstacleField:
         tri = f"triangle {int(self.local[k])} of {label}"
         what = "the container's wall" if label.startswith("the container") else "an obstacle"
         ends = [] if self.fixed is None else [v for v in (i, int(layout.nxt[i]))
-                                               if v in set(self.fixed.tolist())]
+                                               if np.any(self.fixed == v)]
         if ends:  # a pinned end on the mesh: fixed with its neighbour, its edge never moves
             v = ends[0]
             where = (f"vertex {v - int(layout.starts[c])} of component {c}" if layout.is_link

@@ -51,18 +51,14 @@ def resumable(step):
     ``self._resume()`` (rebuild what the engine holds at the accepted iterate); a
     ``SystemError`` that carries a ``KeyboardInterrupt`` is raised as that interrupt."""
 
+    stepped = as_interrupt(step)
+
     @functools.wraps(step)
     def guarded(self, *args, **kwargs):
         if getattr(self, "_interrupted", False) and not self.done:
             self._resume()
         self._interrupted = True
-        try:
-            more = step(self, *args, **kwargs)
-        except SystemError as err:
-            interrupt = _keyboard_interrupt(err)
-            if interrupt is None:
-                raise
-            raise interrupt from None
+        more = stepped(self, *args, **kwargs)
         self._interrupted = False
         return more
 

@@ -55,7 +55,7 @@ HISTORY_KEYS = ("energy", "step", "grad_norm", "constraint_residual", "seconds")
 #: each other, are said to be pressed together (:meth:`Run._stall_cause`).
 STALL_CONTACT = 1.0
 #: The largest ``obstacle_weight``: the obstacle energy of a curve near a mesh reaches 1e9 and
-#: more, and 1e300 times it overflowed (the run's energy NaN, stopped as a stall).
+#: more, and 1e300 times it made the gradient NaN (a trefoil stalled at once, energy 6.3e302).
 MAX_OBSTACLE_WEIGHT = 1e6
 #: ``push_apart`` keeps tubes this much thinner than the start allows (beside the contact
 #: test's own margin ``SLACK``), so that the first step has room.
@@ -335,9 +335,7 @@ class Run:
             ln, equilateral)
         if layout.has_open:  # the dummy edges (._layout) have no row: any positive target
             self.lengths0[~layout.real] = 1.0
-            self.eps = 1e-3 * float(self.lengths0[layout.real].mean())
-        else:
-            self.eps = 1e-3 * float(self.lengths0.mean())  # contact distance
+        self.eps = 1e-3 * self._mean_edge()  # contact distance
         #: the length growth (:mod:`.growth`), or None
         self.growth_schedule = self._check_growth(length_target, length_growth, fixed_lengths)
         radius = self.thickness / self._scale
@@ -590,11 +588,15 @@ class Run:
         if last is None or last.shape != X.shape:
             self._still = 0
             return False
-        real = self.layout.real if self.layout.has_open else slice(None)
-        edge = float(self.lengths0[real].mean())
         move = float(np.sqrt(np.max(np.sum((X - last) ** 2, axis=1))))
-        self._still = self._still + 1 if move <= self.settle * edge else 0
+        self._still = self._still + 1 if move <= self.settle * self._mean_edge() else 0
         return self._still >= self.settle_iterations and self._strand_gap() >= STALL_CONTACT
+
+    def _mean_edge(self) -> float:
+        """The mean target edge length (an open component's dummy slots left out)."""
+        if self.layout.has_open:
+            return float(self.lengths0[self.layout.real].mean())
+        return float(self.lengths0.mean())
 
     def _strand_gap(self) -> float:
         """The start check's contact ratio of the current iterate: the closest approach of
@@ -639,8 +641,7 @@ class Run:
                     "apart and that far from the obstacles): a smaller thickness gives them "
                     "room")
         X, layout = self.X, self.layout
-        edge = float(self.lengths0[layout.real].mean() if layout.has_open
-                     else self.lengths0.mean())
+        edge = self._mean_edge()
         field = self.engine.obstacles
         if field is not None:
             _, k, d = field.nearest(X, layout.nxt)
