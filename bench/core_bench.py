@@ -19,12 +19,12 @@ import numpy as np
 from paper import machine  # bench/ is on sys.path when run as a script
 
 from moebius_addon import core
-from moebius_addon.core import knots
-from moebius_addon.core.collision import contact_time_x
-from moebius_addon.core.constraints import jacobian
-from moebius_addon.core.linalg import Factorization
-from moebius_addon.core.metrics import gram_x
-from moebius_addon.core.moebius_dense import energy_gradient_x, energy_x
+from moebius_addon.core.energies.moebius_dense import energy_gradient_x, energy_x
+from moebius_addon.core.geometry.collision import contact_time_x
+from moebius_addon.core.geometry.constraints import jacobian
+from moebius_addon.core.metrics.gram import gram_x
+from moebius_addon.core.metrics.saddle import Factorization
+from moebius_addon.core.topology import knots
 
 
 def best_of(f, repeat=5):

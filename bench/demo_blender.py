@@ -34,7 +34,8 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 import moebius_addon  # noqa: E402
-from moebius_addon.core import knots, objio  # noqa: E402
+from moebius_addon.core.geometry import objio  # noqa: E402
+from moebius_addon.core.topology import knots  # noqa: E402
 
 
 def world_points(obj) -> np.ndarray:

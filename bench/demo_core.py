@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 from moebius_addon import core
-from moebius_addon.core import knots
+from moebius_addon.core.topology import knots
 
 
 def main() -> None:

@@ -30,7 +30,7 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 from demo_blender import frame_camera, render, setup_render  # noqa: E402
 
-from moebius_addon.core import objio  # noqa: E402
+from moebius_addon.core.geometry import objio  # noqa: E402
 
 CSV = ROOT / "docs" / "data" / "energy_table.csv"
 CURVES = ROOT / "docs" / "data" / "energy_table_curves.npz"

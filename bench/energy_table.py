@@ -11,7 +11,7 @@ trefoil by ``--order-study``) Richardson extrapolation gives
 ``E_∞ = E(n2) + (E(n2) − E(n1)) / (2^p − 1)``. The relaxed curve is identified
 (``core.identify``) to check it is still the knot it started as.
 
-The knots run as one ``core.batch`` job (one task per knot, ``stages=(1, 2)``, largest first;
+The knots run as one ``core.runs.batch`` job (one task per knot, ``stages=(1, 2)``, largest first;
 ``--workers``/``--threads`` a local Dask cluster, ``--scheduler`` a running one, ``--workers 0``
 this process; docs/api.md "Batch runs"), resumable in ``out/energy_table/batch``. Finished
 knots become rows of ``docs/data/energy_table.csv`` (name, crossings, n1, E1, iterations,
@@ -45,7 +45,8 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from moebius_addon import core  # noqa: E402
-from moebius_addon.core import batch, knots  # noqa: E402
+from moebius_addon.core.runs import batch  # noqa: E402
+from moebius_addon.core.topology import knots  # noqa: E402
 
 CSV = ROOT / "docs" / "data" / "energy_table.csv"
 CURVES = ROOT / "docs" / "data" / "energy_table_curves.npz"
@@ -77,7 +78,7 @@ def table_tasks(names: list[str], args) -> list[batch.Task]:
 
 
 def table_row(r: dict, order: float) -> dict:
-    """The table's row from a batch row (results.csv of ``core.batch``)."""
+    """The table's row from a batch row (results.csv of ``core.runs.batch``)."""
     e1, e2 = float(r["energy1"]), float(r["energy2"])
     extrapolated = e2 + (e2 - e1) / (2.0 ** order - 1.0)
     return {"name": r["name"], "crossings": knots.info(r["name"])["crossings"], "n1": r["n1"],

@@ -18,11 +18,12 @@ import time
 
 import numpy as np
 
-from moebius_addon.core import _lapack, knots
-from moebius_addon.core.constraints import jacobian
-from moebius_addon.core.linalg import Factorization
-from moebius_addon.core.metrics import gram_x
-from moebius_addon.core.solvers import Relaxation
+from moebius_addon.core.geometry.constraints import jacobian
+from moebius_addon.core.metrics import _lapack
+from moebius_addon.core.metrics.gram import gram_x
+from moebius_addon.core.metrics.saddle import Factorization
+from moebius_addon.core.runs.methods import Relaxation
+from moebius_addon.core.topology import knots
 
 
 def previous(A, jac, dtype):

@@ -43,7 +43,7 @@ from cables_tree import plates_scene  # noqa: E402
 from scenes import cables_torus  # noqa: E402
 
 from moebius_addon import core  # noqa: E402
-from moebius_addon.core import engine  # noqa: E402
+from moebius_addon.core.runs import engine  # noqa: E402
 
 SETTINGS = {"before": (0.0, np.inf), "after": (engine.GRADIENT_REUSE, engine.EARLY_TEST_BELOW)}
 
@@ -60,9 +60,9 @@ def timed(**kw) -> tuple[float, int, float]:
 
 
 def accuracy() -> None:
-    from moebius_addon.core import barnes_hut
-    from moebius_addon.core._layout import as_layout
-    from moebius_addon.core.energy_choice import MOEBIUS
+    from moebius_addon.core.energies.choice import MOEBIUS
+    from moebius_addon.core.geometry.layout import as_layout
+    from moebius_addon.core.tree import moebius as barnes_hut
 
     rng = np.random.default_rng(1)
     sc = cables_torus()
@@ -88,8 +88,8 @@ def accuracy() -> None:
 
 
 def nearest() -> None:
-    from moebius_addon.core import obstacles
-    from moebius_addon.core._layout import as_layout
+    from moebius_addon.core.geometry import obstacles
+    from moebius_addon.core.geometry.layout import as_layout
 
     sc = cables_torus()
     X, lay = as_layout(sc.parts, closed=sc.closed)

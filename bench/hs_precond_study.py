@@ -28,12 +28,15 @@ import argparse
 
 import numpy as np
 
-from moebius_addon.core import hs_solve, hs_tree, knots, resample
-from moebius_addon.core.banded import BandedSaddle
-from moebius_addon.core.constraints import jacobian
-from moebius_addon.core.linalg import field_product
-from moebius_addon.core.metrics import banded_parts_of_lengths, gram_x
-from moebius_addon.core.solvers import Relaxation
+from moebius_addon.core import resample
+from moebius_addon.core.geometry.constraints import jacobian
+from moebius_addon.core.metrics import hs_solve
+from moebius_addon.core.metrics.banded import BandedSaddle
+from moebius_addon.core.metrics.gram import banded_parts_of_lengths, gram_x
+from moebius_addon.core.metrics.saddle import field_product
+from moebius_addon.core.runs.methods import Relaxation
+from moebius_addon.core.topology import knots
+from moebius_addon.core.tree import hs_metric as hs_tree
 
 
 class _Dense:

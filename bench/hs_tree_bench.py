@@ -28,12 +28,13 @@ from pathlib import Path
 import numpy as np
 
 from moebius_addon import core
-from moebius_addon.core import hs_solve, hs_tree
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.banded import BandedSaddle
-from moebius_addon.core.constraints import jacobian, make_constraints
-from moebius_addon.core.metrics import banded_parts_of_lengths, gram_x
-from moebius_addon.core.moebius_dense import energy_gradient_x
+from moebius_addon.core.energies.moebius_dense import energy_gradient_x
+from moebius_addon.core.geometry.constraints import jacobian, make_constraints
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.metrics import hs_solve
+from moebius_addon.core.metrics.banded import BandedSaddle
+from moebius_addon.core.metrics.gram import banded_parts_of_lengths, gram_x
+from moebius_addon.core.tree import hs_metric as hs_tree
 
 OUT = Path("out")
 
@@ -121,7 +122,7 @@ def pcg(sizes) -> list[dict]:
             con = make_constraints(X, lay, ln)
             jac = jacobian(X, con)
             op = hs_tree.HsOperator(X, lay, "hs")
-            _, g = energy_gradient_x(X, lay) if n <= 20000 else core.engine.TreeEngine(
+            _, g = energy_gradient_x(X, lay) if n <= 20000 else core.runs.engine.TreeEngine(
                 lay, "hs").energy_gradient(X)
             rnd = np.random.default_rng(1).standard_normal(g.shape)
             row = {"curve": name, "edges": n}
@@ -167,7 +168,7 @@ def flow(n: int, name: str, iterations: int, target: float | None, eg: bool) -> 
                   flush=True)
     if eg:
         X, lay = unit(P)
-        engine = core.engine.TreeEngine(lay, "hs")
+        engine = core.runs.engine.TreeEngine(lay, "hs")
         row["eg_s"] = best(lambda: engine.energy_gradient(X + 0.0))
         row["median_in_eg"] = row["median_iteration_s"] / row["eg_s"]
     print(json.dumps(row), flush=True)

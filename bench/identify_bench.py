@@ -21,7 +21,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from moebius_addon import core  # noqa: E402
-from moebius_addon.core import knots  # noqa: E402
+from moebius_addon.core.topology import knots  # noqa: E402
 
 
 def main() -> None:

@@ -40,7 +40,8 @@ import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 
 import moebius_addon  # noqa: E402
-from moebius_addon.core import knots, resample  # noqa: E402
+from moebius_addon.core import resample  # noqa: E402
+from moebius_addon.core.topology import knots  # noqa: E402
 
 WAYS = {"per point": False, "shape keys": True}
 

@@ -33,7 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from moebius_addon import core
-from moebius_addon.core import hs_solve, knots, tangle
+from moebius_addon.core.metrics import hs_solve
+from moebius_addon.core.topology import knots, tangle
 
 OUT = Path("out")
 IMG = Path(__file__).resolve().parent.parent / "docs" / "img" / "krylov_scaling.png"

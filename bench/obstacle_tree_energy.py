@@ -20,8 +20,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from moebius_addon import core  # noqa: E402
-from moebius_addon.core._layout import as_layout  # noqa: E402
-from moebius_addon.core.obstacles import ObstacleField  # noqa: E402
+from moebius_addon.core.geometry.layout import as_layout  # noqa: E402
+from moebius_addon.core.geometry.obstacles import ObstacleField  # noqa: E402
 
 
 def torus(R, r, nu, nv):

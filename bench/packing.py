@@ -22,7 +22,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from moebius_addon import core  # noqa: E402
-from moebius_addon.core.container import check_container  # noqa: E402
+from moebius_addon.core.geometry.container import check_container  # noqa: E402
 from tests.core.test_container import uv_sphere  # noqa: E402
 from tests.mesh_checks import ray_parity_inside  # noqa: E402
 

@@ -1,5 +1,5 @@
 """The paper's optimizer comparison (Reiter & Schumacher, Figs. 3 and 4; issue 5): every method
-of ``core.solvers`` with every metric on the Freedman–He–Wang unknot, a fixed wall-time budget
+of ``core.runs.methods`` with every metric on the Freedman–He–Wang unknot, a fixed wall-time budget
 per run, plus iterations-to-round (E ≤ 4.01) against the edge count for the explicit projected
 gradient with hs, h1 and l2.
 
@@ -28,9 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from moebius_addon.core import knots, relax, resample
-from moebius_addon.core.metrics import METRICS
-from moebius_addon.core.solvers import FEASIBLE, INFEASIBLE, METHODS
+from moebius_addon.core import relax, resample
+from moebius_addon.core.metrics.gram import METRICS
+from moebius_addon.core.runs.methods import FEASIBLE, INFEASIBLE, METHODS
+from moebius_addon.core.topology import knots
 
 # Factorization precision of the feasible methods: the penalty methods factor in double
 # precision, so the comparison does too (``--precision auto`` for the core's default).

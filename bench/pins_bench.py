@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from moebius_addon import core
-from moebius_addon.core.solvers import make_run
+from moebius_addon.core.runs.methods import make_run
 
 
 def per_iteration(P, engine: str, pins: int, iters: int) -> tuple[float, float]:

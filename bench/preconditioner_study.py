@@ -39,12 +39,12 @@ import scipy.sparse.linalg as spl
 from core_bench import best_of  # bench/ is on sys.path when run as a script
 from paper import machine
 
-from moebius_addon.core import knots
-from moebius_addon.core.constraints import jacobian
-from moebius_addon.core.linalg import Factorization, field_product
-from moebius_addon.core.metrics import gram_x
-from moebius_addon.core.moebius_dense import energy_gradient_x
-from moebius_addon.core.solvers import Relaxation
+from moebius_addon.core.energies.moebius_dense import energy_gradient_x
+from moebius_addon.core.geometry.constraints import jacobian
+from moebius_addon.core.metrics.gram import gram_x
+from moebius_addon.core.metrics.saddle import Factorization, field_product
+from moebius_addon.core.runs.methods import Relaxation
+from moebius_addon.core.topology import knots
 
 TOL = 1e-10
 

@@ -26,11 +26,13 @@ import time
 import numpy as np
 from core_bench import best_of  # bench/ is on sys.path when run as a script
 
-from moebius_addon.core import Relaxation, _lapack, knots
-from moebius_addon.core.collision import contact_time_x
-from moebius_addon.core.linalg import Factorization
-from moebius_addon.core.metrics import gram_x
-from moebius_addon.core.moebius_dense import energy_gradient_x, energy_x
+from moebius_addon.core import Relaxation
+from moebius_addon.core.energies.moebius_dense import energy_gradient_x, energy_x
+from moebius_addon.core.geometry.collision import contact_time_x
+from moebius_addon.core.metrics import _lapack
+from moebius_addon.core.metrics.gram import gram_x
+from moebius_addon.core.metrics.saddle import Factorization
+from moebius_addon.core.topology import knots
 
 
 class Counter:

@@ -176,7 +176,7 @@ def worker(args) -> None:
         # the same E+g in its two parts: the frame (hierarchy, split, cluster data) and the
         # sums on it, as the driver's "info eg" line splits Repulsor's (mesh; energy and
         # differential on the built trees)
-        from moebius_addon.core.engine import _frame, as_checked_layout
+        from moebius_addon.core.runs.engine import _frame, as_checked_layout
         choice = core.check_energy("tangent_point", ALPHA, BETA)
         for again in range(1 + args.again):  # --again: new frames in the same process
             t0 = time.perf_counter()

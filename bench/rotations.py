@@ -13,8 +13,8 @@ import time
 
 import numpy as np
 
-from moebius_addon.core import knots
-from moebius_addon.core.solvers import Relaxation
+from moebius_addon.core.runs.methods import Relaxation
+from moebius_addon.core.topology import knots
 
 
 def main():

@@ -24,7 +24,7 @@ if os.environ.get("SESSION_WITH_BPY"):  # inside the Blender module, with its ow
 from paper import machine  # bench/ is on sys.path when run as a script
 
 from moebius_addon import core
-from moebius_addon.core import knots
+from moebius_addon.core.topology import knots
 
 
 def main():

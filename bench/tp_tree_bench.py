@@ -17,11 +17,11 @@ from core_bench import best_of  # bench/ is on sys.path when run as a script
 from paper import machine
 from tree_bench import curve
 
-from moebius_addon.core import barnes_hut
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.moebius_dense import energy_gradient_x
-from moebius_addon.core.tangent_point_dense import tp_energy_gradient_x, tp_energy_x
-from moebius_addon.core.tangent_point_tree import THETA, TangentPointFrame
+from moebius_addon.core.energies.moebius_dense import energy_gradient_x
+from moebius_addon.core.energies.tangent_point_dense import tp_energy_gradient_x, tp_energy_x
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.tree import moebius as barnes_hut
+from moebius_addon.core.tree.tangent_point import THETA, TangentPointFrame
 
 THETAS = (0.1, 0.15, 0.175, 0.2, 0.25, 0.3, 0.5)
 EXPONENTS = ((2.0, 4.0), (2.5, 5.0), (3.0, 6.0))

@@ -29,10 +29,11 @@ from core_bench import best_of  # bench/ is on sys.path when run as a script
 from paper import machine
 
 from moebius_addon import core
-from moebius_addon.core import barnes_hut, bvh
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.collision import closest_pairs, contact_time_x
-from moebius_addon.core.moebius_dense import energy_gradient_x
+from moebius_addon.core.energies.moebius_dense import energy_gradient_x
+from moebius_addon.core.geometry.collision import closest_pairs, contact_time_x
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.tree import bvh
+from moebius_addon.core.tree import moebius as barnes_hut
 
 EXACT_UP_TO = 20000
 THETAS = (0.0625, 0.125, 0.175, 0.2, 0.25, 0.5)
@@ -143,9 +144,10 @@ def flow(sizes: list[int], theta: float) -> list[dict]:
 def banded_runs(sizes: list[int], iterations: int = 5,
                 metric_names: tuple[str, ...] = ("h1", "h2")) -> list[dict]:
     """The O(N) saddle solver of the banded metrics (core/banded.py) and the flow with it."""
-    from moebius_addon.core import banded, metrics
-    from moebius_addon.core._layout import as_unit_layout
-    from moebius_addon.core.constraints import jacobian, make_constraints
+    from moebius_addon.core.geometry.constraints import jacobian, make_constraints
+    from moebius_addon.core.geometry.layout import as_unit_layout
+    from moebius_addon.core.metrics import banded
+    from moebius_addon.core.metrics import gram as metrics
 
     rows = []
     rng = np.random.default_rng(0)

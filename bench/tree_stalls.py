@@ -24,8 +24,8 @@ import time
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from moebius_addon import core  # noqa: E402
-from moebius_addon.core import knots  # noqa: E402
-from moebius_addon.core.solvers import adaptive  # noqa: E402
+from moebius_addon.core.runs import adaptive  # noqa: E402
+from moebius_addon.core.topology import knots  # noqa: E402
 
 
 def main() -> None:

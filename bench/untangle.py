@@ -63,7 +63,7 @@ def table_rows() -> dict:
 
 
 def tasks(max_crossings: int = 9) -> list[dict]:
-    from moebius_addon.core import knots
+    from moebius_addon.core.topology import knots
 
     rows = table_rows()
     out = []
@@ -91,7 +91,7 @@ def tasks(max_crossings: int = 9) -> list[dict]:
 
 
 def start_of(task: dict):
-    from moebius_addon.core import tangle
+    from moebius_addon.core.topology import tangle
 
     return tangle.tangled(task["name"], task["n"], task["seed"], task["how"],
                           **task.get("moves", {}))
@@ -283,7 +283,7 @@ def report() -> None:
             print(" ", r["id"], r["edges_end"], r["energy"], r["table"])
     # the energy table checked from other starts: per knot of <= 8 crossings with at least
     # three tangled starts, is the table's value the lowest found (no start 0.1 % lower)?
-    from moebius_addon.core import knots
+    from moebius_addon.core.topology import knots
 
     by_knot: dict[str, list] = {}
     for r in rows:

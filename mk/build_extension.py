@@ -13,7 +13,7 @@ lists one version per platform) and ``blender_ext.py server-generate`` writes it
 
 The linux-x64 zip also carries numba's cache of the kernels, compiled for a generic x86-64 CPU
 (``moebius_addon/core/kernel_cache``; ``core/_shipped_cache.py`` says how it is found): the
-staged package runs ``core.warmup`` under each Python of ``--kernel-cache`` (by default this
+staged package runs ``core.compilation.warmup`` under each Python of ``--kernel-cache`` (by default this
 one; ``make`` adds the 3.13 of the Blender 5.2 venv) with the numba and llvmlite wheels it
 ships, so that the first session after installing loads the kernels instead of compiling them.
 The zips of the other platforms carry none (they compile on first use, saying so).
@@ -153,7 +153,7 @@ def _numba_for(python: str, stage_dir: Path) -> Path:
 
 
 def build_kernel_cache(stage_dir: Path, pythons: dict[str, str]) -> None:
-    """Run ``core.warmup`` of the staged package under each interpreter of ``pythons``
+    """Run ``core.compilation.warmup`` of the staged package under each interpreter of ``pythons``
     (version -> executable; each needs numpy) with the shipped numba, compiling for
     :data:`GENERIC_CPU`, and put the cache into ``core/kernel_cache`` of the staged package.
     The interpreters run side by side (one process each)."""
@@ -204,7 +204,7 @@ def ship_kernel_cache(work: Path, stage_dir: Path) -> None:
 
 
 def _shipped_cache():
-    """``moebius_addon.core._shipped_cache`` of this checkout, loaded by path (importing the
+    """``moebius_addon.core.compilation.shipped_cache`` of this checkout, loaded by path (importing the
     package would need numba in the build's Python)."""
     import importlib.util
 

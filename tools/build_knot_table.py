@@ -38,7 +38,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from moebius_addon.core import goeritz, invariants, jones, pd  # noqa: E402
+from moebius_addon.core.topology import goeritz, invariants, jones, pd  # noqa: E402
 
 OUT = ROOT / "moebius_addon" / "core" / "data" / "knot_table.json.gz"
 MAX_KNOT_CROSSINGS = 12

@@ -21,7 +21,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-identify = importlib.import_module("moebius_addon.core.identify")
+identify = importlib.import_module("moebius_addon.core.topology.identify")
 
 
 def homfly(vector: str) -> tuple:
@@ -81,7 +81,7 @@ def main() -> None:
 
 
 def table_names() -> list[str]:
-    from moebius_addon.core import knots
+    from moebius_addon.core.topology import knots
 
     return knots.names("knot")
 

@@ -20,7 +20,7 @@ def knot_names() -> list[str]:
     """Every name :func:`knot_polygons` takes as it is listed: the generators, then the knot
     table (``core.knots.names()``: 7 166 knots and links); aliases and mirror images
     (``"trefoil"``, ``"m3_1"``) are taken too (:func:`check_knot`)."""
-    from ..core import knots
+    from ..core.topology import knots
 
     return [*(key for key, *_ in SPECIAL_KNOTS), *knots.names()]
 
@@ -29,7 +29,7 @@ def search_knots(text: str, limit: int = 100) -> list[tuple[str, str]]:
     """``(name, description)`` of the catalogue entries matching ``text``, best first: the
     generators whose name or label contain it, then ``core.knots.search`` (names, aliases,
     mirror images, descriptions). What *Add Knot*'s search field lists."""
-    from ..core import knots, table
+    from ..core.topology import knots, table
 
     low = text.strip().lower()
     out = [(key, label) for key, label, _ in SPECIAL_KNOTS
@@ -44,7 +44,7 @@ def check_knot(kind: str, n: int | None = None, metric: str = "hs",
     """ValueError for a name :func:`knot_polygons` does not know (naming close matches) or
     more edges than a run of ``method`` in ``metric`` on ``engine`` takes
     (:func:`~.options.check_edge_count`): the same refusal in every door, before any work."""
-    from ..core import table
+    from ..core.topology import table
 
     if kind not in _SPECIAL and table.lookup(kind) is None:
         near = [name for name, _ in search_knots(kind, 8)] or table.close_matches(
@@ -86,7 +86,7 @@ def knot_polygons(kind: str, n: int | None = None, p: int = 2, q: int = 3,
     -------
     list of (n_i, 3) float64 arrays
     """
-    from ..core import knots
+    from ..core.topology import knots
 
     check_knot(kind, n, metric, method, engine)
     n = n or None
@@ -138,7 +138,7 @@ def add_knot(kind: str = "fhw", n: int | None = None, p: int = 2, q: int = 3, se
     label = {"torus": f"torus {p},{q}", "random": f"random {seed}"}.get(kind, kind)
     obj = _place(f"Knot {label}", polygons, size, location, context)
     if kind not in _SPECIAL:
-        from ..core import table
+        from ..core.topology import table
 
         obj[KNOT_TYPE_PROP] = table.lookup(kind)
     elif kind in ("fhw", "helix", "random", "circle"):
@@ -189,7 +189,7 @@ def notation_polygons(text: str, n: int | None = None, *, metric: str = "hs",
                       method: str = DEFAULT_METHOD, engine: str = DEFAULT_ENGINE) -> list:
     """Polygons of a knot or link typed as a braid word or PD code
     (``core.knots.from_notation``), equilateral and checked like :func:`knot_polygons`."""
-    from ..core import knots, notation, pd
+    from ..core.topology import knots, notation, pd
 
     if not str(text).strip():
         raise ValueError("type a braid word (1 -2 1 -2) or a PD code "
@@ -232,7 +232,7 @@ def add_notation(text: str, n: int | None = None, size: float = 2.0,
     """Add the knot or link of a braid word (``"1 -2 1 -2"``) or PD code as a curve object
     ready to relax (:func:`notation_polygons`); the text is kept in the object's
     ``moebius_notation`` property, and a link's components get their own colours."""
-    from ..core import notation
+    from ..core.topology import notation
 
     polygons = notation_polygons(text, n, metric=metric, method=method, engine=engine)
     kind, value = notation.parse_notation(text)

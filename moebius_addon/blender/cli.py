@@ -23,9 +23,9 @@ import time
 
 import bpy
 
-from ..core.compiling import compiling
-from ..core.energy_choice import check_energy
-from ..core.engine import AUTO_TREE_FROM
+from ..core.compilation.notice import compiling
+from ..core.energies.choice import check_energy
+from ..core.runs.engine import AUTO_TREE_FROM
 from . import api, geometry, keyframes
 from .labels import DEFAULT_MAX_ITERATIONS, DEFAULT_SETTLE, DEFAULT_TOLERANCE
 
@@ -316,7 +316,7 @@ def main(argv: list[str]) -> int:
             api.check_knot(args.knot, args.edges, **run)
         notation = args.braid or args.pd
         if notation:
-            from ..core import notation as parse
+            from ..core.topology import notation as parse
 
             if args.pd and not parse.is_pd(args.pd):
                 raise ValueError(f"--pd {args.pd!r} is not a PD code: write it as "

@@ -9,7 +9,7 @@ import bpy
 import numpy as np
 
 from .. import core
-from ..core.compiling import compiling
+from ..core.compilation.notice import compiling
 from . import geometry
 from .keyframes import ENERGY_PROP
 from .labels import DEFAULT_ENGINE, DEFAULT_METHOD
@@ -126,7 +126,7 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
         if int(edges) < 4:
             raise ValueError(f"{edges} edges is too few; a closed polygon needs at least 4")
         counts = [int(edges)] * len(cleaned)
-    few = core.polygon.MIN_CHECKED_VERTICES
+    few = core.geometry.polygon.MIN_CHECKED_VERTICES
     if min(counts) < few:
         raise ValueError(
             f"'{obj.name}': {min(counts)} edges per component is too few: below {few} the "
@@ -147,7 +147,7 @@ def prepare_conversion(obj: bpy.types.Object, edges: int = 100, edge_length: flo
     except ValueError as err:
         raise ValueError(f"'{obj.name}' after resampling to {counts} edges: {err}") from None
     ratio = core.contact_ratio(as_input(polygons), closed=_closed_arg(flags))
-    if ratio < core.polygon.CONTACT_RATIO:
+    if ratio < core.geometry.polygon.CONTACT_RATIO:
         limit = EDGE_LIMIT if allow_large else edge_limit(metric, method, engine)
         raise ValueError(f"'{obj.name}' is too coarse at {counts} edges for its shape: strands "
                          f"far apart along the curve come closer than one edge length, and the "
@@ -174,10 +174,10 @@ def _finer_conversion(cleaned, counts, edge_length, limit: int, flags, ratio: fl
         polygons = [core.resample(p, n, closed=c)
                     for p, n, c in zip(cleaned, trial, flags, strict=True)]
         return (core.contact_ratio(as_input(polygons), closed=_closed_arg(flags))
-                >= core.polygon.CONTACT_RATIO)
+                >= core.geometry.polygon.CONTACT_RATIO)
 
     top = limit / sum(counts)
-    factor = max(1.1, 1.05 * core.polygon.CONTACT_RATIO / max(ratio, 1e-9))
+    factor = max(1.1, 1.05 * core.geometry.polygon.CONTACT_RATIO / max(ratio, 1e-9))
     for _ in range(SUGGEST_TRIALS):
         if factor > top:
             return (f"move the strands apart: by their closest approach they need about "

@@ -9,7 +9,7 @@ import bpy
 import numpy as np
 
 from .. import core
-from ..core.compiling import compiling
+from ..core.compilation.notice import compiling
 from . import geometry
 from .polygons import as_input
 from .progress import Progress, reporter

@@ -9,8 +9,8 @@ from __future__ import annotations
 from fractions import Fraction
 
 from .. import core
-from ..core import barnes_hut
-from ..core.engine import AUTO_TREE_FROM, ENGINE_NAMES
+from ..core.runs.engine import AUTO_TREE_FROM, ENGINE_NAMES
+from ..core.tree import moebius as barnes_hut
 
 #: Metrics offered for the flow, as ``(core name, label, description)``.
 METRICS = (
@@ -54,8 +54,8 @@ def metric_order_text(energy: str, alpha: float, beta: float) -> str:
     return f"s = {f.numerator}/{f.denominator}" if abs(float(f) - s) < 1e-6 else f"s = {s:.4g}"
 
 
-#: Default exponents α, β of the tangent-point energy (``core.energy_choice``).
-DEFAULT_TP_ALPHA, DEFAULT_TP_BETA = core.energy_choice.DEFAULT_EXPONENTS
+#: Default exponents α, β of the tangent-point energy (``core.energies.choice``).
+DEFAULT_TP_ALPHA, DEFAULT_TP_BETA = core.energies.choice.DEFAULT_EXPONENTS
 
 #: The paper's explicit projected gradient (``core.Relaxation``): best on unknots.
 EXPLICIT_METHOD = "projected_gradient"
@@ -74,7 +74,7 @@ DEFAULT_PENALTY = core.DEFAULT_PENALTY_WEIGHT
 DEFAULT_MAX_ITERATIONS = 200
 DEFAULT_TOLERANCE = 1e-6
 #: A run ends when no vertex moved more than this many mean edge lengths in each of
-#: ``core.solvers.base.SETTLE_ITERATIONS`` (5) iterations in a row: the shape stopped changing
+#: ``core.runs.base.SETTLE_ITERATIONS`` (5) iterations in a row: the shape stopped changing
 #: visibly, so its keys end where its motion ends (0.1 %: a 7_2 of 150 edges ends at
 #: iteration 61 of its 67, its energy the same to 10 digits).
 DEFAULT_SETTLE = 1e-3
@@ -114,15 +114,15 @@ _METHOD_TEXT = {
 #: then exactly ``core.METHODS`` in its order (a method without a text here gets its name as
 #: label).
 METHODS = tuple(
-    (m, *_METHOD_TEXT.get(m, (m.replace("_", " ").title(), f"core.solvers '{m}'")))
+    (m, *_METHOD_TEXT.get(m, (m.replace("_", " ").title(), f"core.runs.methods '{m}'")))
     for m in (AUTO_METHOD, *core.METHODS)
 )
 
 #: Methods that replace the edge-length constraints by a penalty of weight α.
-PENALTY_METHODS = core.solvers.INFEASIBLE
+PENALTY_METHODS = core.runs.methods.INFEASIBLE
 
 
-#: Default engine: the tree from ``core.engine.AUTO_TREE_FROM`` edges on, exact below (the
+#: Default engine: the tree from ``core.runs.engine.AUTO_TREE_FROM`` edges on, exact below (the
 #: core's).
 DEFAULT_ENGINE = "auto"
 #: Default admissibility θ of the tree (the core's).
@@ -144,9 +144,9 @@ _ENGINE_TEXT = {
 }
 
 #: Engines that evaluate the energy, as ``(name, label, description)``: exactly
-#: ``core.engine.ENGINE_NAMES`` in its order.
+#: ``core.runs.engine.ENGINE_NAMES`` in its order.
 ENGINES = tuple(
-    (e, *_ENGINE_TEXT.get(e, (e.title(), f"core.engine '{e}'")))
+    (e, *_ENGINE_TEXT.get(e, (e.title(), f"core.runs.engine '{e}'")))
     for e in ENGINE_NAMES
 )
 

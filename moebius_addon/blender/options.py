@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from .. import core
-from ..core import barnes_hut
-from ..core.engine import engine_class
+from ..core.runs.engine import engine_class
+from ..core.tree import moebius as barnes_hut
 from .labels import (
     AUTO_METHOD,
     DEFAULT_ENGINE,
@@ -32,7 +32,7 @@ def acting_settings(method: str, engine: str = DEFAULT_ENGINE) -> frozenset:
     """Names of the ``scene.moebius`` line-search, back-projection, constraint and engine
     settings that reach a run of ``method`` on ``engine`` (the panel greys out or hides the
     others): the Armijo constant and the step growth are the explicit method's (the implicit
-    one keeps its own σ = 1e-4 and growth 1.5, see ``core.solvers``), the back-projection and
+    one keeps its own σ = 1e-4 and growth 1.5, see ``core.runs.methods``), the back-projection and
     constraint toggles and the thickness belong to the methods that keep the constraints, the
     penalty weight to the penalty methods, θ to the engines that can run the tree ("auto" and
     "tree")."""
@@ -158,7 +158,7 @@ def check_relax_options(max_iterations, tolerance, keyframe_stride, frame_start,
 
     The method options are the extra keywords of ``core.make_run``: ``penalty`` of a penalty
     method, ``engine`` and ``theta`` (refused by name as the core would: an engine not in
-    ``core.engine.ENGINE_NAMES``, a θ outside (0, 2); None is the core's default θ)."""
+    ``core.runs.engine.ENGINE_NAMES``, a θ outside (0, 2); None is the core's default θ)."""
     max_iterations = core.check_number("max_iterations", max_iterations, 0, integer=True)
     tolerance = core.check_number("tolerance", tolerance, 0)
     keyframe_stride = core.check_number("keyframe_stride", keyframe_stride, 1, integer=True)

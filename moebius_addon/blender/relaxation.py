@@ -10,8 +10,8 @@ import bpy
 import numpy as np
 
 from .. import core
-from ..core.compiling import compiling
-from ..core.spelling import take_spelling
+from ..core.compilation.notice import compiling
+from ..core.runs.aliases import take_spelling
 from . import geometry, keyframes, scene_constraints
 from .gradients import refresh_gradients
 from .group import bevel_thickness, group_name, members, name_components
@@ -97,7 +97,7 @@ def method_hint(method: str, result, polygons: Sequence[np.ndarray],
     one on unknots; Automatic gives links the implicit one), nor a run that grows the curve
     (``grows``: the implicit method cannot)."""
     if (method != EXPLICIT_METHOD or result.status != core.Status.MAX_ITER or not closed
-            or (grows and KNOT_METHOD not in core.solvers.GROWING)):
+            or (grows and KNOT_METHOD not in core.runs.methods.GROWING)):
         return ""
     try:
         if len(polygons) != 1 or not core.is_knotted(polygons[0]):
@@ -109,7 +109,7 @@ def method_hint(method: str, result, polygons: Sequence[np.ndarray],
 
 
 class Preparation:
-    """The kernels of a run prepared in a background thread (``core.warmup`` on small curves:
+    """The kernels of a run prepared in a background thread (``core.warm`` on small curves:
     numba compiles them, or loads them from its cache), so that a window stays responsive
     while a first run waits (the modal *Relax*). ``done``, ``seconds``, ``kernels`` (compiled
     so far), ``error`` (an exception of the warm-up: the run itself will meet and report it)."""
@@ -153,14 +153,14 @@ class Preparation:
 
 
 def solver_paths(obj: bpy.types.Object, engine: str = DEFAULT_ENGINE) -> list[str]:
-    """The paths of ``core.warmup`` a run on ``obj`` meets first: ``"open"`` for an open curve,
-    ``"tree"`` where the tree engine runs (``engine``, or from ``core.engine.AUTO_TREE_FROM``
+    """The paths of ``core.warm`` a run on ``obj`` meets first: ``"open"`` for an open curve,
+    ``"tree"`` where the tree engine runs (``engine``, or from ``core.runs.engine.AUTO_TREE_FROM``
     points on with ``"auto"``), else ``"exact"``."""
     splines = obj.data.splines
     if not all(sp.use_cyclic_u for sp in splines):
         return ["open"]
     n = sum(len(sp.points) for sp in splines)
-    if engine in core.engine.ENGINE_NAMES and core.engine.uses_tree(engine, n, run=True):
+    if engine in core.runs.engine.ENGINE_NAMES and core.runs.engine.uses_tree(engine, n, run=True):
         return ["tree"]
     return ["exact"]
 
@@ -231,7 +231,7 @@ class ObjectRelaxation:
         Weight α of the edge-stretch penalty, for the penalty methods ``"ncg"``, ``"lbfgs"``
         and ``"nesterov"`` only (None: the core's default, 1e4); positive and finite.
     engine : str
-        ``"auto"`` (default: the tree from ``core.engine.AUTO_TREE_FROM`` edges on), ``"exact"`` or
+        ``"auto"`` (default: the tree from ``AUTO_TREE_FROM`` edges on), ``"exact"`` or
         ``"tree"`` (``core.make_run``); the attribute ``engine`` says which one runs.
     theta : float, optional
         Admissibility θ of the tree in (0, 2) (None: the core's ``barnes_hut.THETA``).
@@ -356,15 +356,15 @@ class ObjectRelaxation:
             else choose_method(method, polygons))
         #: whether the run grows the curve's length (Length Target)
         self.grows = options.get("length_target") is not None
-        if self.grows and self.method not in core.solvers.GROWING:
+        if self.grows and self.method not in core.runs.methods.GROWING:
             raise ValueError(
                 f"Advanced ▸ Method: {method_label(self.method)} cannot grow the curve's length "
                 f"(Length Target): choose "
-                f"{' or '.join(method_label(m) for m in core.solvers.GROWING)}, or Automatic")
+                f"{' or '.join(method_label(m) for m in core.runs.methods.GROWING)}, or Automatic")
         if method == AUTO_METHOD and self.method != EXPLICIT_METHOD:
             # the panel's Armijo constant and step growth are the explicit method's; the
-            # implicit one keeps its own (core.solvers), but bad values are refused all the same
-            core.solvers.projected.check_line_search(options.pop("armijo", 0.5),
+            # implicit one keeps its own (core.METHODS), but bad values are refused all the same
+            core.runs.projected.check_line_search(options.pop("armijo", 0.5),
                                                      options.pop("growth", 8.0))
         self.append = continued
         self.frame_start = int(frame_start)
@@ -566,7 +566,7 @@ class ObjectRelaxation:
             self.open) else type_kept(self.start, as_link(result.x))
         stats = getattr(scene, "moebius", None)
         if stats is not None:
-            # the end as the result reports it (on the tree: its exact energy, core.engine)
+            # the end as the result reports it (on the tree: its exact energy, core.runs.engine)
             stats.store_run(self.obj.name if len(self.members) == 1 else self.name, self.nit,
                             self.energies[0], float(result.fun),
                             time.perf_counter() - self.t0, str(result.message), len(frames),

@@ -3,21 +3,43 @@
 The discrete method of Reiter & Schumacher, *Sobolev Gradients for the Möbius Energy*: the
 Möbius energy of polygons and links, the metrics of the paper, the constraints, and the
 projected Sobolev-gradient flow with collision-bounded Armijo steps, and the further optimizers
-of the paper's comparison (``METHODS``, ``make_run``). See ``docs/api.md`` ("Architecture")
-for how the modules stack: ``flow`` → ``solvers`` → ``engine`` → kernels.
+of the paper's comparison (``METHODS``, ``make_run``). The rooms:
+
+- :mod:`.energies` — the energies, their pair kernels and dense sums;
+- :mod:`.tree` — the tree engine: the edge hierarchy, near and far fields, tree contact;
+- :mod:`.metrics` — Gram matrices and the saddle-point solves of the projected gradient;
+- :mod:`.geometry` — polygons, layouts, collision, pins, constraints, obstacles, containers;
+- :mod:`.topology` — the catalogue, the knot table, notations, invariants, identification;
+- :mod:`.runs` — the engine (the one door to the numerics), the optimizers, entry points, batch;
+- :mod:`.compilation` — numba's threads, the shipped kernels, the warm-up.
+
+A run goes ``runs.flow`` → ``runs.methods`` → ``runs.engine`` → ``energies``/``tree``/``metrics``
+(docs/api.md, "Architecture").
 """
 
-from ._threads import prefer_stable_layer
+from .compilation.threads import prefer_stable_layer
 
 prefer_stable_layer()  # before any parallel kernel runs: numba settles on a layer then
 
-from . import invariants, knots, open_energy, pd, table, tangle  # noqa: E402, F401
-from ._shipped_cache import use_shipped_cache  # noqa: E402
-from .collision import max_collision_free_step  # noqa: E402
-from .compiling import compiling  # noqa: E402
-from .constraints import Constraints  # noqa: E402
-from .energy_choice import EnergyChoice, check_energy  # noqa: E402
-from .engine import (  # noqa: E402
+from .compilation.notice import compiling  # noqa: E402
+from .compilation.shipped_cache import use_shipped_cache  # noqa: E402
+from .compilation.warmup import warm  # noqa: E402
+from .energies import moebius_open as open_energy  # noqa: E402, F401
+from .energies.choice import EnergyChoice, check_energy  # noqa: E402
+from .geometry.collision import max_collision_free_step  # noqa: E402
+from .geometry.constraints import Constraints  # noqa: E402
+from .geometry.objio import read_obj, write_obj  # noqa: E402
+from .geometry.polygon import (  # noqa: E402
+    check_polygon,
+    contact_ratio,
+    resample,
+    subdivide,
+    suggest_edge_count,
+)
+from .metrics.gram import METRICS, gram_matrix  # noqa: E402
+from .runs.adaptive import default_max_edges  # noqa: E402
+from .runs.base import IterationState, RelaxResult, Status, check_number  # noqa: E402
+from .runs.engine import (  # noqa: E402
     ENERGY_NAMES,
     ENGINES,
     energy,
@@ -25,9 +47,12 @@ from .engine import (  # noqa: E402
     moebius_energy,
     moebius_gradient,
 )
-from .flow import relax, sobolev_gradient  # noqa: E402
-from .identify import Identification, Match, identify  # noqa: E402
-from .invariants import (  # noqa: E402
+from .runs.flow import relax, sobolev_gradient  # noqa: E402
+from .runs.methods import METHODS, Relaxation, check_size, make_run  # noqa: E402
+from .runs.penalty import DEFAULT_PENALTY_WEIGHT  # noqa: E402
+from .topology import invariants, knots, pd, table, tangle  # noqa: E402
+from .topology.identify import Identification, Match, identify  # noqa: E402
+from .topology.invariants import (  # noqa: E402
     alexander_polynomial,
     is_knotted,
     jones_polynomial,
@@ -35,20 +60,6 @@ from .invariants import (  # noqa: E402
     linking_numbers,
     signature,
 )
-from .metrics import METRICS, gram_matrix  # noqa: E402
-from .objio import read_obj, write_obj  # noqa: E402
-from .polygon import (  # noqa: E402
-    check_polygon,
-    contact_ratio,
-    resample,
-    subdivide,
-    suggest_edge_count,
-)
-from .solvers import METHODS, Relaxation, check_size, make_run  # noqa: E402
-from .solvers.adaptive import default_max_edges  # noqa: E402
-from .solvers.base import IterationState, RelaxResult, Status, check_number  # noqa: E402
-from .solvers.penalty import DEFAULT_PENALTY_WEIGHT  # noqa: E402
-from .warmup import warm  # noqa: E402
 
 # every kernel module is imported now: their kernels look in the cache shipped with the
 # package as well

@@ -3,7 +3,7 @@ directory (``BLENDER_USER_RESOURCES``), then each preset and feature run through
 operators on a small scene of its own, counting the kernels numba compiles on each
 (``core.compiling``) and its CPU seconds. Prints one JSON line: ``{path: {"kernels", "seconds",
 "iterations"}}``, ``"scipy"``: whether this Python can import scipy, and ``"generic"``:
-whether this CPU runs the shipped kernels (``core._shipped_cache.host_runs_generic``).
+whether this CPU runs the shipped kernels (``core.compilation.shipped_cache.host_runs_generic``).
 
     python tests/blender/first_session.py EXTENSION.zip
 """

@@ -29,8 +29,8 @@ def trefoil(scene, mb):
 def test_method_enum_lists_auto_then_exactly_the_core_methods(mb, core):
     settings = bpy.types.Scene.bl_rna.properties["moebius"].fixed_type
     method = settings.properties["method"]
-    assert (METHODS, FEASIBLE, INFEASIBLE) == (core.METHODS, core.solvers.FEASIBLE,
-                                               core.solvers.INFEASIBLE)
+    assert (METHODS, FEASIBLE, INFEASIBLE) == (core.METHODS, core.runs.methods.FEASIBLE,
+                                               core.runs.methods.INFEASIBLE)
     assert [item.identifier for item in method.enum_items] == ["auto", *core.METHODS]
     assert method.default == "auto"
     for item in method.enum_items:
@@ -57,7 +57,7 @@ def test_settings_pass_each_method_only_its_options(scene, mb, core):
     s.refine, s.max_edges, s.restarts = True, 0, 0
     # the default run is the core's: θ is a float32 property, passed on as typed
     assert mb.relax_settings(s)["engine"] == "auto"
-    assert mb.relax_settings(s)["theta"] == core.barnes_hut.THETA
+    assert mb.relax_settings(s)["theta"] == core.tree.moebius.THETA
     # the tolerance is set as digits (a number field shows only six decimals)
     assert mb.relax_settings(s)["backproject_tol"] == pytest.approx(1e-10, rel=1e-12)
     s.backproject_digits = 8

@@ -92,7 +92,7 @@ def test_theta_and_engine_reach_the_run_and_the_report_names_the_engine(scene, m
         assert bpy.ops.moebius.relax() == {"FINISHED"}
         assert f", {engine} engine: 2 iterations" in capfd.readouterr().out
         assert s.last_engine == engine
-    s.engine = "auto"  # 60 edges: exact (the tree from core.engine.AUTO_TREE_FROM edges on)
+    s.engine = "auto"  # 60 edges: exact (the tree from core.runs.engine.AUTO_TREE_FROM edges on)
     assert mb.ObjectRelaxation(trefoil, **mb.relax_settings(s)).engine == "exact"
     cli = import_module(mb.__name__ + ".cli")
     capfd.readouterr()

@@ -15,8 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from moebius_addon.core import knots, resample
-from moebius_addon.core.solvers import METHODS, make_run
+from moebius_addon.core import resample
+from moebius_addon.core.runs.methods import METHODS, make_run
+from moebius_addon.core.topology import knots
 
 REFERENCE = Path(__file__).resolve().parent / "data" / "unchanged_runs.json"
 _KEYS = ("energy", "step", "grad_norm", "constraint_residual")

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import barnes_hut, knots
-from moebius_addon.core.solvers import adaptive
+from moebius_addon.core.runs import adaptive
+from moebius_addon.core.topology import knots
+from moebius_addon.core.tree import moebius as barnes_hut
 from tests.mesh_checks import segments_closest
 
 
@@ -61,7 +62,7 @@ def test_subdivide_open_polylines_and_links():
 
 
 def test_pins_after_a_split_keep_the_fixed_pieces():
-    from moebius_addon.core._layout import as_layout
+    from moebius_addon.core.geometry.layout import as_layout
 
     _, layout = as_layout(knots.circle(10))
     # 3 alone; 6 and 7 side by side (the edge between them is fixed: its new midpoint too);
@@ -214,7 +215,7 @@ def _barrier_by_numpy(X, reach, gap):
 
 
 def test_the_separation_barrier_against_numpy_and_its_gradient():
-    from moebius_addon.core import separate
+    from moebius_addon.core.geometry import push_apart as separate
 
     rng = np.random.default_rng(3)
     X = core.resample(knots.named("3_1", 30) * [1.0, 1.0, 0.3], 30)  # flattened: strands close

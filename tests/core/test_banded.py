@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import banded, metrics
-from moebius_addon.core._layout import as_unit_layout
-from moebius_addon.core.constraints import jacobian, make_constraints
-from moebius_addon.core.linalg import Factorization
-from moebius_addon.core.solvers.base import DENSE_MAX_VERTICES
+from moebius_addon.core.geometry.constraints import jacobian, make_constraints
+from moebius_addon.core.geometry.layout import as_unit_layout
+from moebius_addon.core.metrics import banded
+from moebius_addon.core.metrics import gram as metrics
+from moebius_addon.core.metrics.saddle import Factorization
+from moebius_addon.core.runs.base import DENSE_MAX_VERTICES
 
 
 def _ring(n):

@@ -1,4 +1,4 @@
-"""core.batch: tasks from what a user types, runs here and on a LocalCluster, resume, failures,
+"""core.runs.batch: tasks from what a user types, runs here and on a LocalCluster, resume, failures,
 refusals before any work. Tasks are tiny (40 edges, a few iterations)."""
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from moebius_addon.core import batch, write_obj
+from moebius_addon.core import write_obj
+from moebius_addon.core.runs import batch
 
 ROOT = Path(__file__).resolve().parents[2]
 SMALL = {"edges": [40], "max_iter": 4, "identify": False}
@@ -182,7 +183,7 @@ def test_local_cluster_equals_in_process(tmp_path):
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     for args in (["--edges", "40", "--max-iter", "4", "--no-identify", *inputs],
                  ["3_1", "--edges", "40", "--stages", "1", "1.5", "--max-iter", "3"]):
-        subprocess.run([sys.executable, "-m", "moebius_addon.core.batch", *args, "--workers",
+        subprocess.run([sys.executable, "-m", "moebius_addon.core.runs.batch", *args, "--workers",
                         "0", "--out", str(here)], env=env, check=True, capture_output=True)
     cluster = tmp_path / "cluster"
     environ = dict(os.environ)
@@ -357,7 +358,7 @@ def test_ctrl_c_says_what_finished_and_how_to_resume(tmp_path, workers):
         if (os.cpu_count() or 1) < 2:
             pytest.skip("two workers need two cores")
     out = tmp_path / "out"
-    args = [sys.executable, "-m", "moebius_addon.core.batch", "--crossings", "3-8", "--edges",
+    args = [sys.executable, "-m", "moebius_addon.core.runs.batch", "--crossings", "3-8", "--edges",
             "60", "--max-iter", "200", "--tol", "1e-12", "--no-identify", "--workers", workers,
             "--dashboard", "", "--out", str(out)]
     env = {**os.environ,
@@ -378,7 +379,7 @@ def test_ctrl_c_says_what_finished_and_how_to_resume(tmp_path, workers):
     assert re.search(rf"interrupted: {len(finished)} done now, 0 failed, \d+ not run", said)
     assert "run the same command again to resume" in said
     assert err.strip().endswith(
-        "interrupted; to resume: python -m moebius_addon.core.batch " +
+        "interrupted; to resume: python -m moebius_addon.core.runs.batch " +
         " ".join(shlex.quote(a) for a in args[3:]))
     assert batch.done_ids(out) == finished
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import bvh
-from moebius_addon.core._layout import as_layout
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.tree import bvh
 
 
 def _tree(P, leaf_size=bvh.LEAF_SIZE):

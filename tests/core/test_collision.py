@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from moebius_addon.core import max_collision_free_step
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.collision import closest_pairs, segment_distance2
+from moebius_addon.core.geometry.collision import closest_pairs, segment_distance2
+from moebius_addon.core.geometry.layout import as_layout
 from tests.conftest import ngon
 
 
@@ -74,7 +74,7 @@ def test_step_is_the_first_contact(rng):
     loop sweeps through a trefoil (translation + linearized rotation about z). At the returned τ two
     edges are eps apart; before it none are closer (sampled); and it agrees with the
     conservative advancement of every pair without pruning."""
-    from moebius_addon.core.collision import _pair_contact
+    from moebius_addon.core.geometry.collision import _pair_contact
     from tests.conftest import trefoil
 
     A = trefoil(150)

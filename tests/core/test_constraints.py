@@ -3,16 +3,16 @@
 import numpy as np
 import pytest
 
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.constraints import jacobian, make_constraints, residual
-from moebius_addon.core.linalg import (
+from moebius_addon.core.geometry.constraints import jacobian, make_constraints, residual
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.metrics.gram import gram_x
+from moebius_addon.core.metrics.saddle import (
     CholeskySolve,
     Factorization,
     SaddlePointSolver,
     field_product,
     spd_inverse,
 )
-from moebius_addon.core.metrics import gram_x
 from tests.conftest import ngon, trefoil
 
 
@@ -133,8 +133,8 @@ def test_reused_factorization_gives_the_current_solution(rng):
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_lapack_and_numpy_fallback_agree(dtype, rng):
-    from moebius_addon.core import _lapack
-    from moebius_addon.core.linalg import _numpy_triangular_inverse
+    from moebius_addon.core.metrics import _lapack
+    from moebius_addon.core.metrics.saddle import _numpy_triangular_inverse
 
     n = 260
     B = rng.standard_normal((n, n))
@@ -151,7 +151,7 @@ def test_lapack_and_numpy_fallback_agree(dtype, rng):
 
 @pytest.mark.parametrize("dtype", [np.float64, np.float32])
 def test_lapack_cholesky_and_blocked_solve(dtype, rng, monkeypatch):
-    from moebius_addon.core import _lapack
+    from moebius_addon.core.metrics import _lapack
 
     if not _lapack.available():
         pytest.skip("numpy's OpenBLAS not found: the numpy fallback is used instead")
@@ -196,7 +196,7 @@ def test_refactoring_reuses_the_old_arrays_without_changing_the_solution(dtype, 
 @pytest.mark.parametrize("link", [False, True])
 def test_tangent_projector_is_the_euclidean_projection(link, rng):
     # I − Cᵀ(CCᵀ)⁻¹C against a dense solve
-    from moebius_addon.core.constraints import TangentProjector
+    from moebius_addon.core.geometry.constraints import TangentProjector
     from tests.conftest import ngon, trefoil
 
     P = [trefoil(40), ngon(17) * 3 + 10, trefoil(23) + 20] if link else trefoil(60)

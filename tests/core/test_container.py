@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import container as ct
+from moebius_addon.core.geometry import container as ct
 from tests.mesh_checks import crossings, ray_parity_inside
 
 

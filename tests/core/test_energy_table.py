@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import knots
+from moebius_addon.core.topology import knots
 
 ROOT = Path(__file__).resolve().parents[2]
 CSV = ROOT / "docs" / "data" / "energy_table.csv"

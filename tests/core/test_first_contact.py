@@ -1,13 +1,13 @@
 """What a first contact sees: numba's compiling said (core.compiling), both spellings of the
-iteration limit and the tolerance (core.spelling), the warm-up paths (core.warmup)."""
+iteration limit and the tolerance (core.runs.aliases), the warm-up paths (core.warm)."""
 
 import numba as nb
 import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core.compiling import PREPARING, compiling
-from moebius_addon.core.warmup import PATHS, main
+from moebius_addon.core.compilation.notice import PREPARING, compiling
+from moebius_addon.core.compilation.warmup import PATHS, main
 
 
 def test_compiling_is_said_once_and_counted():

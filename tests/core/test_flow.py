@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import METRICS, Relaxation, Status, knots, moebius_energy, relax, resample
-from moebius_addon.core.engine import ENGINES, DenseEngine, make_engine
-from moebius_addon.core.solvers import base, projected
+from moebius_addon.core import METRICS, Relaxation, Status, moebius_energy, relax, resample
+from moebius_addon.core.runs import base, projected
+from moebius_addon.core.runs.engine import ENGINES, DenseEngine, make_engine
+from moebius_addon.core.topology import knots
 from tests.conftest import ngon, trefoil
 
 
@@ -348,7 +349,7 @@ def test_a_tree_run_reports_the_exact_energy_of_its_result(monkeypatch):
     assert r.fun > 4.0
     assert r.stats["run_energy"] == r.history["energy"][-1] != r.fun  # what the run saw
     # above the limit the tree's value is the result's
-    monkeypatch.setattr(core.engine, "EXACT_RESULT_MAX", 1000)
+    monkeypatch.setattr(core.runs.engine, "EXACT_RESULT_MAX", 1000)
     r = core.relax(P, max_iter=3, engine="tree")
     assert r.fun == r.history["energy"][-1] and "run_energy" not in r.stats
 
@@ -393,7 +394,7 @@ def test_an_interrupted_relax_raises_with_the_result_so_far():
 def test_ctrl_c_in_a_kernel_outside_a_step_is_a_keyboard_interrupt(monkeypatch):
     # Ctrl+C as a numba kernel returns reaches Python as a SystemError carrying the interrupt;
     # the start checks of a run (outside its step) run kernels too
-    from moebius_addon.core.solvers import base as solver_base
+    from moebius_addon.core.runs import base as solver_base
 
     def interrupted(*args, **kwargs):
         try:

@@ -1,4 +1,4 @@
-"""core.goeritz: the signature by the Goeritz matrix and Gordon–Litherland's correction.
+"""core.topology.goeritz: the signature by the Goeritz matrix and Gordon–Litherland's correction.
 
 Against values that do not come from this code: the signatures of torus knots and links
 T(2, n) (−(n − 1) for n positive crossings), KnotInfo's and LinkInfo's values for the whole
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import goeritz, knots, pd
+from moebius_addon.core.topology import goeritz, knots, pd
 from tests.conftest import random_rotation
 
 

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import hs_solve, hs_tree
-from moebius_addon.core._layout import layout_from_sizes
-from moebius_addon.core.constraints import jacobian, make_constraints
+from moebius_addon.core.geometry.constraints import jacobian, make_constraints
+from moebius_addon.core.geometry.layout import layout_from_sizes
+from moebius_addon.core.metrics import hs_solve
+from moebius_addon.core.tree import hs_metric as hs_tree
 from tests.core.test_hs_tree import CURVES, _check_solves, _unit, slow_matrix
 
 

@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import hs_solve, hs_tree
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.constraints import jacobian, make_constraints, residual
-from moebius_addon.core.metrics import gram_x
+from moebius_addon.core.geometry.constraints import jacobian, make_constraints, residual
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.metrics import hs_solve
+from moebius_addon.core.metrics.gram import gram_x
+from moebius_addon.core.tree import hs_metric as hs_tree
 from tests.conftest import ngon, out_here_and_in_one_thread, trefoil
 
 
@@ -333,7 +334,7 @@ def test_the_previous_iterates_solver_is_let_go_before_the_next_is_built(monkeyp
     # memory may pass on, and the old operator must be gone when the new one is built
     import weakref
 
-    from moebius_addon.core import engine as engines
+    from moebius_addon.core.runs import engine as engines
 
     monkeypatch.setattr(hs_solve, "COARSE_FROM", 100)
     monkeypatch.setattr(hs_solve, "MULTILEVEL_FROM", 100)
@@ -411,7 +412,7 @@ def test_memory_does_not_grow_across_iterations(monkeypatch):
 def _lean(monkeypatch, single: bool):
     """Lean iterations (engine.LEAN_FROM) from 0 vertices, single-precision weights or not, and
     a spy counting the solvers that let go of their operator."""
-    from moebius_addon.core import engine as engines
+    from moebius_addon.core.runs import engine as engines
 
     monkeypatch.setattr(engines, "LEAN_FROM", 0)
     monkeypatch.setattr(engines, "LEAN_SHARE", 0.0)  # short of memory at any size
@@ -448,7 +449,7 @@ def test_lean_iterations_are_the_same_iterates(monkeypatch):
 def test_a_shed_solver_is_built_again_for_a_later_solve(monkeypatch):
     # a solve after shed (a restart's nudge, another method's product) rebuilds the solver at
     # the same iterate: the same answer as before it was shed
-    from moebius_addon.core import engine as engines
+    from moebius_addon.core.runs import engine as engines
 
     _lean(monkeypatch, single=False)
     P = core.resample(core.knots.named("5_2"), 800)
@@ -508,7 +509,7 @@ def test_lean_run_with_single_weights_follows_the_double_run(monkeypatch):
 
 
 def test_a_run_is_lean_where_memory_is_short(monkeypatch):
-    from moebius_addon.core import engine as engines
+    from moebius_addon.core.runs import engine as engines
 
     gb = 1e9
     monkeypatch.setattr(engines, "available_memory", lambda: 20 * gb)
@@ -519,7 +520,7 @@ def test_a_run_is_lean_where_memory_is_short(monkeypatch):
     assert engines.lean_run(10**6) and not engines.lean_run(5 * 10**5)
     monkeypatch.setattr(engines, "available_memory", lambda: None)  # the system does not say
     assert engines.lean_run(engines.LEAN_FROM) and not engines.lean_run(1000)
-    from moebius_addon.core._memory import available_memory
+    from moebius_addon.core.runs.memory import available_memory
 
     assert available_memory() > 0
 
@@ -529,7 +530,7 @@ def test_preconditioner_band_from_edges_is_the_band_from_triplets(name, rng):
     # the hs preconditioner's band filled vertex by vertex from one 2 × 2 block per edge
     # (banded.EdgeParts, in parallel) is the band of its triplets added in another order: the
     # same scaling, the same solves to rounding; without product=False it is refused
-    from moebius_addon.core.banded import BandedSaddle, EdgeParts
+    from moebius_addon.core.metrics.banded import BandedSaddle, EdgeParts
 
     X, lay = _unit(CURVES[name]())
     jac = jacobian(X, make_constraints(X, lay, np.linalg.norm(X[lay.nxt] - X, axis=1)))

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import Match, identify, knots
+from moebius_addon.core import Match
+from moebius_addon.core.topology import identify, knots
 from tests.conftest import random_rotation
 
 _RNG = np.random.default_rng(2026)
@@ -68,9 +69,9 @@ RELAXED = Path(__file__).resolve().parents[2] / "docs" / "data" / "energy_table_
 def test_further_directions_find_a_simpler_diagram(monkeypatch):
     # the relaxed 10_95 of the energy table: every diagram of the first dozen directions keeps
     # 12 crossings, as many as 12n_595 (the same invariants) needs; another dozen has 10
-    from moebius_addon.core.invariants import planar_diagram
+    from moebius_addon.core.topology.invariants import planar_diagram
 
-    module = importlib.import_module("moebius_addon.core.identify")  # core.identify: the function
+    module = importlib.import_module("moebius_addon.core.topology.identify")
 
     with np.load(RELAXED) as packed:
         P, Q = packed["10_95"].astype(np.float64), packed["10_156"].astype(np.float64)

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import invariants
-from moebius_addon.core.invariants import (
+from moebius_addon.core.topology import invariants
+from moebius_addon.core.topology.invariants import (
     alexander_polynomial,
     determinant,
     is_knotted,
@@ -136,9 +136,9 @@ def test_every_projection_sees_the_same_chirality():
         d = invariants._as_diagram(rows, layout_l.starts)
         a, b = d.component(d.over), d.component(d.under)
         assert d.sign[a != b].sum() // 2 == 2
-    want = core.jones.jones(core.pd.from_braid(core.knots.info("7_4")["braid"]))
+    want = core.topology.jones.jones(core.pd.from_braid(core.knots.info("7_4")["braid"]))
     for rows in found_k:
         d, _ = core.pd.from_passages(rows[:, 0], rows[:, 1], rows[:, 2].astype(np.int64),
                                      layout_k.starts)
-        assert core.jones.jones(d) == want
+        assert core.topology.jones.jones(d) == want
 

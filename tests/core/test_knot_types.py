@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from moebius_addon.core import knots, relax, resample
+from moebius_addon.core import relax, resample
+from moebius_addon.core.topology import knots
 from tests.conftest import random_rotation
 
 topoly = pytest.importorskip("topoly")

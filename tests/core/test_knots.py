@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from moebius_addon.core import Relaxation, check_polygon, contact_ratio, knots
+from moebius_addon.core import Relaxation, check_polygon, contact_ratio
+from moebius_addon.core.topology import knots
 from tests.conftest import random_rotation
 
 topoly = pytest.importorskip("topoly")

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import hs_tree
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.energy_choice import EnergyChoice
-from moebius_addon.core.metrics import check_order, gram_x
-from moebius_addon.core.open_metrics import _weights
+from moebius_addon.core.energies.choice import EnergyChoice
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.metrics.gram import check_order, gram_x
+from moebius_addon.core.metrics.open import _weights
+from moebius_addon.core.tree import hs_metric as hs_tree
 from tests.conftest import trefoil
 
 

@@ -4,7 +4,7 @@ that say what is wrong."""
 import numpy as np
 import pytest
 
-from moebius_addon.core.objio import read_obj, write_obj
+from moebius_addon.core.geometry.objio import read_obj, write_obj
 from tests.conftest import SHARED, read_obj_vertices, trefoil
 
 DATA = SHARED / "data" / "repulsive-curves"

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import obstacles as ob
-from moebius_addon.core._layout import as_layout
+from moebius_addon.core.geometry import obstacles as ob
+from moebius_addon.core.geometry.layout import as_layout
 from tests.conftest import out_here_and_in_one_thread
 from tests.mesh_checks import crossings, segments_closest
 
@@ -478,7 +478,7 @@ HIERARCHY_CODE = """
 import numpy as np
 from tests.core.test_obstacles import _fine_torus_and_ring
 from moebius_addon.core import obstacles as ob
-from moebius_addon.core._layout import as_layout
+from moebius_addon.core.geometry.layout import as_layout
 V, F, P = _fine_torus_and_ring()
 X, layout = as_layout(P, True)
 E, G = ob.ObstacleField([(V, F)], tol=0.05).energy_gradient(X, layout.nxt, layout.prv)
@@ -494,7 +494,7 @@ def test_the_hierarchy_energy_is_bitwise_the_same_for_any_thread_count():
 def test_the_cone_axis_is_the_principal_eigenvector():
     # written out in the kernel (numba's eigh needs scipy): against numpy's, sums of rank-one
     # normal-line matrices of every scale, and the matrices a degenerate node gives
-    from moebius_addon.core.obstacles import _principal_axis
+    from moebius_addon.core.geometry.obstacles import _principal_axis
 
     rng = np.random.default_rng(3)
     out = np.empty(3)
@@ -514,7 +514,7 @@ def test_the_cone_axis_is_the_principal_eigenvector():
 
 def _plate(z0, z1):
     """A closed box from (-2, -2, z0) to (2, 2, z1), faces outward."""
-    from moebius_addon.core.warmup import _box
+    from moebius_addon.core.compilation.warmup import _box
 
     return _box([-2.0, -2.0, z0], [2.0, 2.0, z1])
 

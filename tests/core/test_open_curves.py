@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import metrics
-from moebius_addon.core._layout import Layout, as_layout
-from moebius_addon.core.collision import max_collision_free_step
-from moebius_addon.core.open_metrics import open_hs
+from moebius_addon.core.geometry.collision import max_collision_free_step
+from moebius_addon.core.geometry.layout import Layout, as_layout
+from moebius_addon.core.metrics import gram as metrics
+from moebius_addon.core.metrics.open import open_hs
 
 
 def _slow_open_energy(P):
@@ -152,8 +152,8 @@ def _check_path(history_x, closed):
 
 
 def _open_step(P, U, closed):
-    from moebius_addon.core._layout import as_layout
-    from moebius_addon.core.collision import contact_time_x
+    from moebius_addon.core.geometry.collision import contact_time_x
+    from moebius_addon.core.geometry.layout import as_layout
 
     X, lay = as_layout(P, closed)
     Ux, _ = as_layout(U, closed)

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import _arc_field as af
-from moebius_addon.core import barnes_hut as bh
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.moebius_dense import energy_gradient_x
+from moebius_addon.core.energies.moebius_dense import energy_gradient_x
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.tree import arc_field as af
+from moebius_addon.core.tree import moebius as bh
 from tests.conftest import ngon, out_here_and_in_one_thread
 
 
@@ -207,8 +207,8 @@ def test_tangent_point_tree_close_to_exact(name, ab, rng):
     # layouts: energy 3.8e-4 to 1.5e-3, gradient 1.2e-3 to 1.7e-2 (the closed FHW at 2 400
     # edges: 1.1e-3 and 2.5e-2); a small θ that leaves no far pair gives the exact sums (the
     # split leaves out or doubles no pair at the open ends)
-    from moebius_addon.core.tangent_point_dense import tp_energy_gradient_x
-    from moebius_addon.core.tangent_point_tree import TangentPointFrame
+    from moebius_addon.core.energies.tangent_point_dense import tp_energy_gradient_x
+    from moebius_addon.core.tree.tangent_point import TangentPointFrame
 
     parts, closed = _layouts(name, rng)
     X, layout = as_layout(parts, closed)
@@ -254,7 +254,7 @@ CODE = """
 import numpy as np
 from moebius_addon import core
 from moebius_addon.core import barnes_hut as bh
-from moebius_addon.core._layout import as_layout
+from moebius_addon.core.geometry.layout import as_layout
 rng = np.random.default_rng(7)
 t = np.linspace(0, 1, 801)[:, None]
 parts = [np.c_[t, 0.1 * k + 0.05 * np.sin(3 * t + k), 0.03 * np.cos(5 * t * k)]

@@ -7,16 +7,16 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import collision
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.banded import OpenBandedSaddle
-from moebius_addon.core.constraints import jacobian, make_constraints
-from moebius_addon.core.energy_choice import check_energy
-from moebius_addon.core.engine import DenseEngine, TreeEngine, make_engine
-from moebius_addon.core.hs_tree import HsOperator
-from moebius_addon.core.metrics import banded_parts, gram_x
-from moebius_addon.core.pinned_solve import TREE_MAX_PINS
-from moebius_addon.core.solvers import make_run
+from moebius_addon.core.energies.choice import check_energy
+from moebius_addon.core.geometry import collision
+from moebius_addon.core.geometry.constraints import jacobian, make_constraints
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.metrics.banded import OpenBandedSaddle
+from moebius_addon.core.metrics.gram import banded_parts, gram_x
+from moebius_addon.core.metrics.pinned_solve import TREE_MAX_PINS
+from moebius_addon.core.runs.engine import DenseEngine, TreeEngine, make_engine
+from moebius_addon.core.runs.methods import make_run
+from moebius_addon.core.tree.hs_metric import HsOperator
 from tests.conftest import ngon
 from tests.mesh_checks import segments_closest
 
@@ -44,7 +44,7 @@ def ends(parts):
 def test_the_band_in_blocks_gives_the_bits_of_one_band(metric, rng, monkeypatch):
     """The band of several components factored and solved block by block, in parallel
     (banded._BLOCKS), against one band: the same bits; a single component is one block."""
-    from moebius_addon.core import banded
+    from moebius_addon.core.metrics import banded
 
     parts = cables(6, 30) + [ngon(24) * 0.1 + [0.1, 0.1, 0.5]]
     X, layout = as_layout(parts, [False] * 6 + [True])
@@ -233,7 +233,7 @@ def test_the_size_check_takes_many_pins_on_open_curves():
     # the run takes them (above); the pre-check refused them above the dense size as for
     # closed curves, where they do need the dense solver
     from moebius_addon.core import check_size
-    from moebius_addon.core.solvers.base import DENSE_MAX_VERTICES
+    from moebius_addon.core.runs.base import DENSE_MAX_VERTICES
 
     n, pins = DENSE_MAX_VERTICES + 1000, 2 * TREE_MAX_PINS
     for metric in ("hs", "h1"):

@@ -6,8 +6,8 @@ import itertools
 import numpy as np
 import pytest
 
-from moebius_addon.core import invariants, jones, knots, pd
-from moebius_addon.core.pd import PlanarDiagram, from_braid, from_rows, parse_pd
+from moebius_addon.core.topology import invariants, jones, knots, pd
+from moebius_addon.core.topology.pd import PlanarDiagram, from_braid, from_rows, parse_pd
 
 knotinfo = pytest.importorskip("database_knotinfo")
 KNOTS = {r["name"]: r for r in knotinfo.link_list()[1:] if r["name"] != "0_1"

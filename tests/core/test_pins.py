@@ -8,29 +8,28 @@ import json
 import numpy as np
 import pytest
 
-from moebius_addon.core import (
-    check_size,
-    knots,
-    max_collision_free_step,
-    relax,
-    resample,
-)
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.banded import BandedSaddle
-from moebius_addon.core.constraints import (
+from moebius_addon.core import check_size, max_collision_free_step, relax, resample
+from moebius_addon.core.geometry.constraints import (
     TangentProjector,
     jacobian,
     make_constraints,
     residual,
     weighted_barycenters,
 )
-from moebius_addon.core.hs_solve import HsSaddle
-from moebius_addon.core.hs_tree import HsOperator
-from moebius_addon.core.linalg import Factorization
-from moebius_addon.core.metrics import banded_parts, gram_x
-from moebius_addon.core.pinned_solve import TREE_MAX_PINS, BorderedPins, unpinned_jacobian
-from moebius_addon.core.solvers import FEASIBLE, INFEASIBLE, METHOD_CLASSES, make_run
-from moebius_addon.core.solvers import base as solvers_base
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.metrics.banded import BandedSaddle
+from moebius_addon.core.metrics.gram import banded_parts, gram_x
+from moebius_addon.core.metrics.hs_solve import HsSaddle
+from moebius_addon.core.metrics.pinned_solve import (
+    TREE_MAX_PINS,
+    BorderedPins,
+    unpinned_jacobian,
+)
+from moebius_addon.core.metrics.saddle import Factorization
+from moebius_addon.core.runs import base as solvers_base
+from moebius_addon.core.runs.methods import FEASIBLE, INFEASIBLE, METHOD_CLASSES, make_run
+from moebius_addon.core.topology import knots
+from moebius_addon.core.tree.hs_metric import HsOperator
 from tests.core import _unchanged_runs as unchanged
 
 PINS = [0, 1, 17, 40]  # 0–1: an edge between two pins (its length row drops out)

@@ -12,8 +12,8 @@ from moebius_addon.core import (
     subdivide,
     suggest_edge_count,
 )
-from moebius_addon.core._tridiagonal import cyclic_tridiagonal_solve
-from moebius_addon.core.polygon import equalize
+from moebius_addon.core.geometry.polygon import equalize
+from moebius_addon.core.metrics._tridiagonal import cyclic_tridiagonal_solve
 from tests.conftest import ngon, trefoil
 
 

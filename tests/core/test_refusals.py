@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import _memory, knots, pd
-from moebius_addon.core.solvers import _interrupts
+from moebius_addon.core.runs import _interrupts
+from moebius_addon.core.runs import memory as _memory
+from moebius_addon.core.topology import knots, pd
 
 T = knots.named("3_1")  # 100 vertices
 N = T.copy()

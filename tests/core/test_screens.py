@@ -1,17 +1,18 @@
-"""The screens in front of the vertex checks (core._screens): never a pass where the numpy
+"""The screens in front of the vertex checks (core.geometry.prechecks): never a pass where the numpy
 checks refuse, and the refusals word for word those of the checks without their screens."""
 
 import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import _layout, knots
-from moebius_addon.core._screens import (
+from moebius_addon.core.geometry import layout as _layout
+from moebius_addon.core.geometry.prechecks import (
     _PART_ROWS,
     equal_rows_possible,
     extent,
     short_edge_possible,
 )
+from moebius_addon.core.topology import knots
 
 # below one part, several parts (of _PART_ROWS rows) of the screen's table
 SIZES = [4, 9, 100, 3 * _PART_ROWS + 17]

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from moebius_addon.core import _shipped_cache
+from moebius_addon.core.compilation import shipped_cache as _shipped_cache
 
 ROOT = Path(__file__).resolve().parents[2]
 #: what numba implements with BLAS or LAPACK, so through scipy

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.tangent_point_dense import tp_energy_gradient_x, tp_energy_x
-from moebius_addon.core.tangent_point_tree import THETA, TangentPointFrame
+from moebius_addon.core.energies.tangent_point_dense import tp_energy_gradient_x, tp_energy_x
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.tree.tangent_point import THETA, TangentPointFrame
 from tests.conftest import ROOT, out_here_and_in_one_thread, trefoil
 
 EXPONENTS = [(2.0, 4.0), (3.0, 6.0), (2.5, 5.0)]
@@ -199,9 +199,9 @@ def test_tree_gradient_is_the_derivative_of_the_tree_sum(alpha, beta):
 
 CODE = """
 import numpy as np
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.tangent_point_dense import tp_energy_gradient_x
-from moebius_addon.core.tangent_point_tree import TangentPointFrame
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.energies.tangent_point_dense import tp_energy_gradient_x
+from moebius_addon.core.tree.tangent_point import TangentPointFrame
 from tests.conftest import trefoil
 P = trefoil(900) + 0.002 * np.random.default_rng(6).standard_normal((900, 3))
 X, lay = as_layout(P)
@@ -220,8 +220,8 @@ def test_same_bits_for_one_and_two_threads():
 
 FRESH = """
 import hashlib, numpy as np
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.tangent_point_tree import TangentPointFrame, _cc_far, _near
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.tree.tangent_point import TangentPointFrame, _cc_far, _near
 from tests.conftest import trefoil
 P = trefoil(300) + 0.002 * np.random.default_rng(6).standard_normal((300, 3))
 X, lay = as_layout(P)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core.solvers import FEASIBLE, INFEASIBLE
+from moebius_addon.core.runs.methods import FEASIBLE, INFEASIBLE
 
 
 @pytest.fixture(scope="module")

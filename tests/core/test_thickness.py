@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core.engine import AUTO_TREE_FROM
+from moebius_addon.core.runs.engine import AUTO_TREE_FROM
 
 FEASIBLE = ("projected_gradient", "projected_gradient_implicit", "trust_region")
 ENERGIES = ("moebius", "tangent_point")

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import collision
-from moebius_addon.core._layout import as_layout
+from moebius_addon.core.geometry import collision
+from moebius_addon.core.geometry.layout import as_layout
 from tests.conftest import ngon, trefoil
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -144,7 +144,7 @@ CODE = """
 import json, numpy as np
 from moebius_addon import core
 from moebius_addon.core import collision
-from moebius_addon.core._layout import as_layout
+from moebius_addon.core.geometry.layout import as_layout
 rng = np.random.default_rng(3)
 P = core.resample(core.knots.named("8_17"), 6000)
 X, layout = as_layout(P)

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import barnes_hut as bh
-from moebius_addon.core._layout import as_layout
-from moebius_addon.core.engine import FRAME_REUSE, GRADIENT_REUSE, TreeEngine
-from moebius_addon.core.moebius_dense import energy_gradient_x
+from moebius_addon.core.energies.moebius_dense import energy_gradient_x
+from moebius_addon.core.geometry.layout import as_layout
+from moebius_addon.core.runs.engine import FRAME_REUSE, GRADIENT_REUSE, TreeEngine
+from moebius_addon.core.tree import moebius as bh
 from tests.conftest import ngon, out_here_and_in_one_thread, trefoil
 
 
@@ -203,7 +203,7 @@ def test_bad_engine_refused():
 
 
 def test_auto_switches_at_crossover():
-    from moebius_addon.core import engine
+    from moebius_addon.core.runs import engine
 
     # the energy alone, and runs (earlier): both thresholds in engine.py
     assert not engine.uses_tree("auto", engine.ENERGY_TREE_FROM - 1)
@@ -229,7 +229,7 @@ def test_same_function_as_exact_where_everything_is_near():
 CODE = """
 import json, numpy as np
 from moebius_addon.core import barnes_hut as bh
-from moebius_addon.core._layout import as_layout
+from moebius_addon.core.geometry.layout import as_layout
 rng = np.random.default_rng(5)
 # a (2, 5) torus knot made with numpy alone: only the tree's kernels run
 t = np.linspace(0, 2 * np.pi, 4000, endpoint=False)

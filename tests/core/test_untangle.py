@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import knots, tangle
+from moebius_addon.core.topology import knots, tangle
 from tests.core.test_adaptive import _min_gap_distance
 from tests.core.test_knots import table_jones, topoly_jones
 

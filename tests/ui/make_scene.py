@@ -17,7 +17,7 @@ import bpy
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from moebius_addon.core import knots  # noqa: E402
+from moebius_addon.core.topology import knots  # noqa: E402
 
 #: Edges of the converted polygon: small enough that a run of ~70 iterations takes tens of
 #: seconds in a software-rendered Blender, long enough to screenshot it mid-run.

@@ -24,7 +24,7 @@ import math
 
 import numba as nb
 
-from .._checks import check_number
+from ..runs.checks import check_number
 
 #: The name of the energy (``energies.ENERGIES``).
 NAME = "tangent_point"

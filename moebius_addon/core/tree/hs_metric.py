@@ -1,0 +1,625 @@
+"""The hs metric without a matrix: its product through a hierarchy of arcs (the tree engine's
+metric for ``hs`` and ``hs_pure``; :mod:`.hs_solve` solves with it).
+
+The metric of docs/design.md ("Metrics"; the paper's "Discrete inner product") is
+
+    A = 2 Dᵀ(diag(W1) − W)D + 2 Mᵀ(diag(V1) − V)M + N b bᵀ / L^(2s+1)
+
+with ``w_IJ = l_I l_J / |d|^(2s−1)`` and ``v_IJ = w_IJ (1/|d|² − 1/ρ²)`` over disjoint edge
+pairs (``d = m_I − m_J``, ρ the arc length between the midpoints, 1/ρ² = 0 between
+components), ``s`` the metric's order (3/2, the paper's: ``|d|²`` and ``L⁴``; :mod:`.metrics`
+says why these powers). Here ``W`` and ``V`` are replaced by ``W̃``, ``Ṽ``:
+
+* **near** pairs of edges (pairs of leaves of the hierarchy that are not admissible, which
+  always includes pairs close in space and pairs close along the curve) keep their exact
+  weights, computed once per iterate and stored;
+* **far** pairs of clusters ``(A, B)`` take one weight per cluster pair from the clusters'
+  length-weighted centres ``c`` and arc-length centres ``σ``: ``w = l_I l_J / |c_A −
+  c_B|^(2s−1)`` and ``v = w (1/|c_A − c_B|² − 1/ρ(σ_A, σ_B)²)`` (kept ≥ 0).
+
+The clusters are arcs (contiguous edges of one component, :func:`arc_tree`), so that ρ is
+smooth over a cluster pair; a pair is admissible when both boxes are small against their gap,
+``max(diam A, diam B) ≤ θ gap(A, B)``, and, on one component, both arcs are short against the
+arc length between them, ``max(len A, len B) ≤ θ ρ(A, B)``. The weights stay symmetric and
+non-negative, so ``Ã`` keeps the structure that makes ``A`` positive definite (graph Laplacians
+of non-negative weights plus the barycenter term): the metric of the tree path is ``Ã`` itself,
+a function of the polygon, the same in every product (docs/benchmarks.md: its products against
+the dense ``A``).
+
+Products cost O(near pairs + far pairs + N): the near field as stored rows, the far field by an
+upward pass (cluster sums of ``l f``), one weight per cluster pair, and a downward pass.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ..geometry.layout import Layout
+from ..metrics.banded import EdgeParts
+from ..metrics.gram import (
+    _PURE_L2,
+    PAPER_ORDER,
+    banded_parts_of_lengths,
+    barycenter_beta,
+    check_order,
+    kernel_exponent,
+    length_power,
+)
+from . import bvh
+from .moebius import _by_target
+
+#: Admissibility of the metric's far field (its own, coarser than the energy's: the metric
+#: is any positive definite matrix close to hs, while the energy must be accurate).
+THETA = 0.5
+#: Edges per leaf at most.
+LEAF_SIZE = 8
+#: Pairs whose arc length exceeds this many times their distance are "folded" (strands that
+#: come close again along the curve, or other components): the lower-order weights of those
+#: pairs alone enter the preconditioner's diagonal (see :meth:`HsOperator.preconditioner_parts`).
+FOLDED = 2.0
+#: The metrics this module computes.
+METRICS = ("hs_pure", "hs")
+
+
+# ------------------------------------------------------------------------------------------------
+# the hierarchy of arcs
+
+
+@nb.njit(cache=True)
+def _arc_tree(starts, leaf_size):
+    """Binary tree over the edges in index order: a range spanning several components is split
+    at the component boundary nearest its middle, a range of one component in halves, down to
+    ``leaf_size`` edges. Parents come before their children."""
+    n = starts[-1]
+    k = starts.shape[0] - 1
+    cap = 2 * (n // max(leaf_size // 2, 1) + k) + 2
+    lo = np.empty(cap, np.int64)
+    hi = np.empty(cap, np.int64)
+    left = np.full(cap, -1, np.int64)
+    right = np.full(cap, -1, np.int64)
+    comp_of = np.empty(n, np.int64)
+    for c in range(k):
+        for i in range(starts[c], starts[c + 1]):
+            comp_of[i] = c
+    lo[0] = 0
+    hi[0] = n
+    count = 1
+    stack = np.empty(128, np.int64)
+    stack[0] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        node = stack[top]
+        a, b = lo[node], hi[node]
+        ca, cb = comp_of[a], comp_of[b - 1]
+        if ca != cb:
+            mid2 = a + b  # twice the middle
+            m = starts[ca + 1]
+            for c in range(ca + 2, cb + 1):
+                if abs(2 * starts[c] - mid2) < abs(2 * m - mid2):
+                    m = starts[c]
+        elif b - a > leaf_size:
+            m = (a + b) // 2
+        else:
+            continue
+        for child in range(2):
+            lo[count] = a if child == 0 else m
+            hi[count] = m if child == 0 else b
+            if child == 0:
+                left[node] = count
+            else:
+                right[node] = count
+            if top == stack.shape[0]:
+                grown = np.empty(2 * top, np.int64)
+                grown[:top] = stack
+                stack = grown
+            stack[top] = count
+            top += 1
+            count += 1
+    perm = np.arange(n)
+    return perm, lo[:count].copy(), hi[:count].copy(), left[:count].copy(), right[:count].copy()
+
+
+def arc_tree(layout: Layout, leaf_size: int = LEAF_SIZE) -> bvh.Tree:
+    """The hierarchy of arcs over the edges of ``layout`` (``perm`` is the identity)."""
+    return bvh.Tree(*_arc_tree(layout.starts, int(leaf_size)))
+
+
+@nb.njit(cache=True)
+def _edge_data(X, nxt, starts):
+    """Edge lengths, midpoints, the arc position of every midpoint along its component and
+    the components' lengths."""
+    n = X.shape[0]
+    k = starts.shape[0] - 1
+    ln = np.empty(n)
+    mid = np.empty((n, 3))
+    arc = np.empty(n)
+    clen = np.empty(k)
+    for c in range(k):
+        s = 0.0
+        for i in range(starts[c], starts[c + 1]):
+            j = nxt[i]
+            e2 = 0.0
+            for d in range(3):
+                e = X[j, d] - X[i, d]
+                e2 += e * e
+                mid[i, d] = 0.5 * (X[i, d] + X[j, d])
+            ln[i] = np.sqrt(e2)
+            arc[i] = s + 0.5 * ln[i]
+            s += ln[i]
+        clen[c] = s
+    return ln, mid, arc, clen
+
+
+@nb.njit(cache=True)
+def _node_data(ln, mid, arc, starts, lo, hi, left, right):
+    """Per node: component (−1 when it spans several), total length, length-weighted centre,
+    arc-length start and end along its component."""
+    m = lo.shape[0]
+    nc = np.empty(m, np.int64)
+    L = np.zeros(m)
+    C = np.zeros((m, 3))
+    s0 = np.empty(m)
+    s1 = np.empty(m)
+    for node in range(m - 1, -1, -1):
+        a, b = lo[node], hi[node]
+        c = 0
+        while starts[c + 1] <= a:
+            c += 1
+        nc[node] = c if b <= starts[c + 1] else -1
+        if left[node] < 0:
+            for q in range(a, b):
+                L[node] += ln[q]
+                for d in range(3):
+                    C[node, d] += ln[q] * mid[q, d]
+            for d in range(3):
+                C[node, d] /= L[node]
+        else:
+            c1, c2 = left[node], right[node]
+            L[node] = L[c1] + L[c2]
+            for d in range(3):
+                C[node, d] = (L[c1] * C[c1, d] + L[c2] * C[c2, d]) / L[node]
+        s0[node] = arc[a] - 0.5 * ln[a]
+        s1[node] = arc[b - 1] + 0.5 * ln[b - 1]
+    return nc, L, C, s0, s1
+
+
+@nb.njit(cache=True, inline="always")
+def _arc_gap(s0a, s1a, s0b, s1b, length):
+    """Arc length between two disjoint arcs of a closed curve of ``length``."""
+    f1 = (s0b - s1a) % length
+    f2 = (s0a - s1b) % length
+    return min(f1, f2)
+
+
+@nb.njit(cache=True, inline="always")
+def _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, closed, theta2):
+    if nc[a] < 0 or nc[b] < 0:
+        return False
+    gap2 = bvh.box_gap2(bmin, bmax, a, b)
+    if gap2 <= 0.0 or max(diam2[a], diam2[b]) > theta2 * gap2:
+        return False
+    if nc[a] != nc[b]:
+        return True
+    span = max(s1[a] - s0[a], s1[b] - s0[b])
+    if closed[nc[a]]:
+        rho = _arc_gap(s0[a], s1[a], s0[b], s1[b], clen[nc[a]])
+    else:  # an open component: no way round its ends
+        rho = max(s0[b] - s1[a], s0[a] - s1[b])
+    return span * span <= theta2 * rho * rho
+
+
+@nb.njit(cache=True)
+def _split(left, right, bmin, bmax, nc, s0, s1, clen, closed, theta2):
+    """Dual traversal from (root, root): unordered far pairs of admissible clusters and near
+    pairs of leaves (self pairs included)."""
+    diam2 = bvh.node_diam2(bmin, bmax)
+    m = left.shape[0]
+    far = np.empty((max(64, 8 * m), 2), np.int64)
+    near = np.empty((max(64, 8 * m), 2), np.int64)
+    nf = 0
+    nn = 0
+    stack = np.empty((256, 2), np.int64)
+    stack[0, 0] = 0
+    stack[0, 1] = 0
+    top = 1
+    while top > 0:
+        top -= 1
+        a = stack[top, 0]
+        b = stack[top, 1]
+        if a != b and _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, closed, theta2):
+            if nf == far.shape[0]:
+                grown = np.empty((2 * nf, 2), np.int64)
+                grown[:nf] = far
+                far = grown
+            far[nf, 0], far[nf, 1] = a, b
+            nf += 1
+        elif left[a] >= 0 or left[b] >= 0:
+            stack, top = bvh.push_split(stack, top, a, b, left, right, diam2)
+        else:
+            if nn == near.shape[0]:
+                grown = np.empty((2 * nn, 2), np.int64)
+                grown[:nn] = near
+                near = grown
+            near[nn, 0], near[nn, 1] = a, b
+            nn += 1
+    return far[:nf].copy(), near[:nn].copy()
+
+
+# ------------------------------------------------------------------------------------------------
+# weights
+
+
+@nb.njit(cache=True, parallel=True)
+def _near_weights(ln, mid, arc, clen, closed, nxt, starts, comp, lo, hi, leaves, noff, npart,
+                  rowoff, low, expo, cross2, w, v, w1, v1, x1):
+    """Exact weights of every near pair, stored per target edge as one row over the edges of
+    its leaf's partner leaves (in partner order), their row sums, and the row sums of ``v``
+    over the folded pairs (other components, or ``ρ² ≥ cross2 · |d|²``). ``expo``:
+    :func:`.metrics.kernel_exponent` (None at order 3/2, pruned at compile time)."""
+    for kk in nb.prange(leaves.shape[0]):
+        a = leaves[np.int64(kk)]
+        width = 0
+        for p in range(noff[a], noff[a + 1]):
+            b = npart[p]
+            width += hi[b] - lo[b]
+        for q in range(lo[a], hi[a]):
+            pos = rowoff[a] + (q - lo[a]) * width
+            cq = comp[q]
+            sq = starts[cq + 1] - starts[cq]
+            sw = 0.0
+            sv = 0.0
+            sx = 0.0
+            for p in range(noff[a], noff[a + 1]):
+                b = npart[p]
+                for r in range(lo[b], hi[b]):
+                    wq = 0.0
+                    vq = 0.0
+                    same = comp[r] == cq
+                    if not closed[cq] and same:  # along an open polyline: no way round
+                        gap = abs(r - q)
+                    else:
+                        # (r − q) mod sq without a division: both on one component
+                        gap = (r - q if r >= q else r - q + sq) if same else 2
+                        if gap == sq - 1:
+                            gap = 1
+                    # an open component's dummy edge (length 0) is no edge
+                    if gap >= 2 and nxt[q] != q and nxt[r] != r:
+                        dx = mid[q, 0] - mid[r, 0]
+                        dy = mid[q, 1] - mid[r, 1]
+                        dz = mid[q, 2] - mid[r, 2]
+                        r2 = dx * dx + dy * dy + dz * dz
+                        inv = 1.0 / r2
+                        if expo is None:
+                            wq = ln[q] * ln[r] * inv
+                        else:
+                            wq = ln[q] * ln[r] * r2**-expo
+                        if same:
+                            fwd = abs(arc[r] - arc[q])
+                            rho = min(fwd, clen[cq] - fwd) if closed[cq] else fwd
+                            vq = low * wq * (inv - 1.0 / (rho * rho))
+                            if rho * rho * inv >= cross2:
+                                sx += vq
+                        else:
+                            vq = low * wq * inv
+                            sx += vq
+                    w[pos] = wq
+                    v[pos] = vq
+                    sw += wq
+                    sv += vq
+                    pos += 1
+            w1[q] = sw
+            v1[q] = sv
+            x1[q] = sx
+
+
+@nb.njit(cache=True, parallel=True)
+def _far_weights(L, C, nc, s0, s1, clen, closed, foff, fpart, low, expo, cross2, fw, fv, rw, rv,
+                 rx):
+    """One weight pair per ordered far pair of clusters (per unit length of both: ``w`` and
+    ``v`` divided by ``l_I l_J``), and per target cluster the sums ``Σ_B ω L_B`` (what its
+    edges' row sums receive, times their own length), those of ``v`` over folded pairs (see
+    :func:`_near_weights`) apart. ``expo`` as there."""
+    m = L.shape[0]
+    for aa in nb.prange(m):
+        a = np.int64(aa)
+        sw = 0.0
+        sv = 0.0
+        sx = 0.0
+        for p in range(foff[a], foff[a + 1]):
+            b = fpart[p]
+            dx = C[a, 0] - C[b, 0]
+            dy = C[a, 1] - C[b, 1]
+            dz = C[a, 2] - C[b, 2]
+            r2 = dx * dx + dy * dy + dz * dz
+            inv = 1.0 / r2
+            if expo is None:
+                ww = inv
+            else:
+                ww = r2**-expo
+            if nc[a] == nc[b]:
+                ca = 0.5 * (s0[a] + s1[a])
+                cb = 0.5 * (s0[b] + s1[b])
+                fwd = abs(ca - cb)
+                rho = min(fwd, clen[nc[a]] - fwd) if closed[nc[a]] else fwd
+                vv = low * ww * max(0.0, inv - 1.0 / (rho * rho))
+                if rho * rho * inv >= cross2:
+                    sx += vv * L[b]
+            else:
+                vv = low * ww * inv
+                sx += vv * L[b]
+            fw[p] = ww
+            fv[p] = vv
+            sw += ww * L[b]
+            sv += vv * L[b]
+        rw[a] = sw
+        rv[a] = sv
+        rx[a] = sx
+
+
+@nb.njit(cache=True)
+def _push_to_edges(acc, ln, lo, hi, left, right, out):
+    """``out[q] += l_q Σ_{A ∋ q} acc[A]`` (acc per node, any number of columns)."""
+    m = acc.shape[0]
+    tot = acc.copy()
+    for node in range(m):  # parents come first
+        if left[node] >= 0:
+            for c in (left[node], right[node]):
+                for d in range(acc.shape[1]):
+                    tot[c, d] += tot[node, d]
+        else:
+            for q in range(lo[node], hi[node]):
+                for d in range(acc.shape[1]):
+                    out[q, d] += ln[q] * tot[node, d]
+
+
+# ------------------------------------------------------------------------------------------------
+# the product
+
+
+@nb.njit(cache=True, parallel=True)
+def _edge_fields(U, nxt, ln):
+    """``(D U, M U)`` per edge: ``(U[nxt] − U) / l`` and ``(U + U[nxt]) / 2``, as (N, 3) each."""
+    n = U.shape[0]
+    F = np.empty((n, 3))
+    G = np.empty((n, 3))
+    for ii in nb.prange(n):
+        i = np.int64(ii)
+        j = nxt[i]
+        for d in range(3):
+            # an open component's dummy edge (j = i, length 0) has no difference
+            F[i, d] = (U[j, d] - U[i, d]) / ln[i] if j != i else 0.0
+            G[i, d] = 0.5 * (U[i, d] + U[j, d])
+    return F, G
+
+
+@nb.njit(cache=True, parallel=True, fastmath={"reassoc", "contract", "nsz", "arcp"})
+def _near_product(F, G, w, v, lo, hi, leaves, noff, npart, rowoff, Y):
+    """``Y[q, :3] = Σ w_qr F[r]``, ``Y[q, 3:] = Σ v_qr G[r]`` over the stored near rows."""
+    for kk in nb.prange(leaves.shape[0]):
+        a = leaves[np.int64(kk)]
+        width = 0
+        for p in range(noff[a], noff[a + 1]):
+            b = npart[p]
+            width += hi[b] - lo[b]
+        for q in range(lo[a], hi[a]):
+            pos = rowoff[a] + (q - lo[a]) * width
+            f0 = f1 = f2 = g0 = g1 = g2 = 0.0
+            for p in range(noff[a], noff[a + 1]):
+                b = npart[p]
+                for r in range(np.uint64(lo[b]), np.uint64(hi[b])):  # unsigned: no wraparound
+                    wq = w[np.uint64(pos)]
+                    vq = v[np.uint64(pos)]
+                    f0 += wq * F[r, 0]
+                    f1 += wq * F[r, 1]
+                    f2 += wq * F[r, 2]
+                    g0 += vq * G[r, 0]
+                    g1 += vq * G[r, 1]
+                    g2 += vq * G[r, 2]
+                    pos += 1
+            Y[q, 0], Y[q, 1], Y[q, 2] = f0, f1, f2
+            Y[q, 3], Y[q, 4], Y[q, 5] = g0, g1, g2
+
+
+@nb.njit(cache=True, parallel=True)
+def _assemble(U, F, G, Y, w1, v1, ln, prv, comp, starts, beta, mass):
+    """``2 Dᵀ(W̃1 ∘ F − Y_F) + 2 Mᵀ(Ṽ1 ∘ G − Y_G)`` per vertex, the barycenter term
+    ``β (βᵀU)`` per component and ``mass`` times the P1 mass matrix applied to ``U``."""
+    n = U.shape[0]
+    k = starts.shape[0] - 1
+    bu = np.zeros((k, 3))
+    for c in range(k):
+        for i in range(starts[c], starts[c + 1]):
+            for d in range(3):
+                bu[c, d] += beta[i] * U[i, d]
+    out = np.empty((n, 3))
+    for pp in nb.prange(n):
+        p = np.int64(pp)
+        q = prv[p]
+        c = comp[p]
+        for d in range(3):
+            hp = 2.0 * (w1[p] * F[p, d] - Y[p, d]) / ln[p] if ln[p] > 0.0 else 0.0
+            hq = 2.0 * (w1[q] * F[q, d] - Y[q, d]) / ln[q] if ln[q] > 0.0 else 0.0
+            gp = 2.0 * (v1[p] * G[p, d] - Y[p, 3 + d])
+            gq = 2.0 * (v1[q] * G[q, d] - Y[q, 3 + d])
+            o = hq - hp + 0.5 * (gp + gq) + beta[p] * bu[c, d]
+            if mass != 0.0:  # edges p and q: l/3 at this vertex, l/6 at the other end
+                o += mass * (ln[p] * (U[p, d] / 3 + F[p, d] * ln[p] / 6 + U[p, d] / 6)
+                             + ln[q] * (U[p, d] / 3 + (U[p, d] - F[q, d] * ln[q]) / 6))
+            out[p, d] = o
+    return out
+
+
+@nb.njit(cache=True)
+def _cluster_sums(F, G, ln, lo, hi, left, right):
+    """Per node ``(Σ l F, Σ l G)`` over its edges (6 columns), bottom-up."""
+    m = lo.shape[0]
+    S = np.zeros((m, 6))
+    for node in range(m - 1, -1, -1):
+        if left[node] < 0:
+            for q in range(lo[node], hi[node]):
+                for d in range(3):
+                    S[node, d] += ln[q] * F[q, d]
+                    S[node, 3 + d] += ln[q] * G[q, d]
+        else:
+            for d in range(6):
+                S[node, d] = S[left[node], d] + S[right[node], d]
+    return S
+
+
+@nb.njit(cache=True, parallel=True)
+def _far_product(S, foff, fpart, fw, fv):
+    """Per target node ``Σ_B (ω_W S_F[B], ω_V S_G[B])``."""
+    m = S.shape[0]
+    acc = np.zeros((m, 6))
+    for aa in nb.prange(m):
+        a = np.int64(aa)
+        for p in range(foff[a], foff[a + 1]):
+            b = fpart[p]
+            for d in range(3):
+                acc[a, d] += fw[p] * S[b, d]
+                acc[a, 3 + d] += fv[p] * S[b, 3 + d]
+    return acc
+
+
+class HsOperator:
+    """``Ã`` of the polygon ``X`` (stacked, see ``_layout``) for ``metric`` "hs" or "hs_pure":
+    the hierarchy, the split and the weights, built once; :meth:`product` applies it.
+
+    Parameters
+    ----------
+    X : (N, 3) array
+    layout : Layout
+    metric : {"hs", "hs_pure"}
+    order : float in (1, 2)
+        The metric's order s (3/2: the paper's; :func:`.metrics.gram_matrix`).
+    theta : float
+        Admissibility of the far field (see the module's text).
+    leaf_size : int
+    single : bool
+        The near pairs' weights stored in single precision (the products still sum in
+        double; the row sums, the diagonal and :meth:`preconditioner_parts` are the same):
+        half of the operator's memory, 0.42 GB at 10⁶ vertices, for a change of the metric
+        of the order of 1e-7 relative, far below the far field's.
+    """
+
+    def __init__(self, X: np.ndarray, layout: Layout, metric: str = "hs",
+                 order: float = PAPER_ORDER, theta: float = THETA,
+                 leaf_size: int = LEAF_SIZE, single: bool = False):
+        if metric not in ("hs", "hs_pure"):
+            raise ValueError(f"{metric!r} is not computed by the tree's metric (hs, hs_pure)")
+        self.layout = layout
+        self.metric = metric
+        self.order = check_order(order)
+        expo = kernel_exponent(self.order)
+        self.low = 1.0 if metric == "hs" else 0.0
+        lay = layout
+        tree = arc_tree(lay, leaf_size)
+        self.tree = tree
+        ln, mid, arc, clen = _edge_data(X, lay.nxt, lay.starts)
+        self.ln = ln
+        self.total = float(ln.sum())
+        nc, L, C, s0, s1 = _node_data(ln, mid, arc, lay.starts, tree.lo, tree.hi, tree.left,
+                                      tree.right)
+        bmin, bmax = bvh.segment_boxes(tree, X, lay)
+        closed = np.ones(lay.k, np.bool_) if lay.closed is None else lay.closed
+        far, near = _split(tree.left, tree.right, bmin, bmax, nc, s0, s1, clen, closed,
+                           float(theta) ** 2)
+        m = tree.size
+        self.far_pairs, self.near_pairs = far.shape[0], near.shape[0]
+        self.foff, self.fpart = _by_target(far, m)
+        self.noff, self.npart = _by_target(near, m)
+        self.leaves = np.flatnonzero(tree.left < 0).astype(np.int64)
+        size = tree.hi - tree.lo
+        # near row width of every leaf: the edges of its partner leaves
+        owner = np.repeat(np.arange(m), np.diff(self.noff))
+        width = np.bincount(owner, weights=size[self.npart], minlength=m).astype(np.int64)
+        cells = np.where(tree.left < 0, size * width, 0)
+        self.rowoff = np.concatenate(([0], np.cumsum(cells)[:-1])).astype(np.int64)
+        total = int(cells.sum())
+        self.w = np.empty(total, np.float32 if single else np.float64)
+        self.v = np.empty(total, self.w.dtype)
+        rows = np.empty((3, lay.n))
+        cross2 = FOLDED**2
+        _near_weights(ln, mid, arc, clen, closed, lay.nxt, lay.starts, lay.comp, tree.lo,
+                      tree.hi, self.leaves,
+                      self.noff, self.npart, self.rowoff, self.low, expo, cross2, self.w, self.v,
+                      rows[0], rows[1], rows[2])
+        self.fw = np.empty(self.fpart.shape[0])
+        self.fv = np.empty(self.fpart.shape[0])
+        rfar = np.empty((3, m))
+        _far_weights(L, C, nc, s0, s1, clen, closed, self.foff, self.fpart, self.low, expo,
+                     cross2,
+                     self.fw, self.fv, rfar[0], rfar[1], rfar[2])
+        rows = np.ascontiguousarray(rows.T)
+        _push_to_edges(np.ascontiguousarray(rfar.T), ln, tree.lo, tree.hi, tree.left,
+                       tree.right, rows)
+        self.w1 = np.ascontiguousarray(rows[:, 0])
+        self.v1 = np.ascontiguousarray(rows[:, 1])
+        self.x1 = np.ascontiguousarray(rows[:, 2])  # v's row sums over folded pairs
+        # the barycenter term N b bᵀ / L^(2s+1) as β βᵀ per component (as in metrics.gram_x)
+        self.beta = barycenter_beta(ln, lay, self.total, self.order)
+        # hs_pure's small L² term, scaled like the metric (metrics._gram_hs_pure)
+        self._mass = (_PURE_L2 / self.total**length_power(self.order)
+                      if metric == "hs_pure" else 0.0)
+        if lay.has_open:  # and the L² term that keeps it definite on straight polylines
+            self._mass += 1.0 / self.total**length_power(self.order)  # (metrics._hs_family)
+
+    @property
+    def nbytes(self) -> int:
+        """Memory held by the stored weights."""
+        return int(self.w.nbytes + self.v.nbytes + self.fw.nbytes + self.fv.nbytes)
+
+    def product(self, U: np.ndarray) -> np.ndarray:
+        """``Ã U`` for a field ``U`` (N, 3)."""
+        lay, ln, tree = self.layout, self.ln, self.tree
+        U = np.ascontiguousarray(U, dtype=np.float64)
+        F, G = _edge_fields(U, lay.nxt, ln)
+        Y = np.empty((lay.n, 6))
+        _near_product(F, G, self.w, self.v, tree.lo, tree.hi, self.leaves, self.noff,
+                      self.npart, self.rowoff, Y)
+        S = _cluster_sums(F, G, ln, tree.lo, tree.hi, tree.left, tree.right)
+        acc = _far_product(S, self.foff, self.fpart, self.fw, self.fv)
+        _push_to_edges(acc, ln, tree.lo, tree.hi, tree.left, tree.right, Y)
+        return _assemble(U, F, G, Y, self.w1, self.v1, ln, lay.prv, lay.comp, lay.starts,
+                         self.beta, self._mass)
+
+    def diagonal(self) -> np.ndarray:
+        """The diagonal of ``Ã`` (N,): ``2 Σ_{I ∋ p} W̃1_I / l_I² + ½ Σ_{I ∋ p} Ṽ1_I + β_p²``
+        (the off-diagonal parts vanish there: edges through one vertex are not disjoint)."""
+        lay, ln = self.layout, self.ln
+        # 0 at an open component's dummy edge (length 0)
+        e = 2.0 * np.divide(self.w1, ln**2, out=np.zeros_like(ln), where=ln > 0) + 0.5 * self.v1
+        d = e + e[lay.prv] + self.beta**2
+        if self._mass != 0.0:
+            d += self._mass * (ln + ln[lay.prv]) / 3
+        return d
+
+    def preconditioner_parts(self):
+        """``H = s·h1 + 2 Mᵀ diag(Ṽ1) M`` as :func:`metrics.banded_parts` gives a banded
+        metric: ``(rows, cols, vals, beta)`` (β: this metric's barycenter term), with ``s``
+        the ratio of the traces of ``Ã``'s and h1's banded parts."""
+        lay = self.layout
+        rows, cols, vals, _ = banded_parts_of_lengths("h1", self.ln, lay)
+        diag = rows == cols
+        s = float((self.diagonal() - self.beta**2).sum() / vals[diag].sum())
+        i = np.arange(lay.n)
+        j = lay.nxt
+        h = 0.5 * self.x1
+        return (np.concatenate([rows, i, i, j, j]), np.concatenate([cols, i, j, i, j]),
+                np.concatenate([s * vals, h, h, h, h]), self.beta)
+
+    def preconditioner_edges(self):
+        """The metric of :meth:`preconditioner_parts` as one 2 × 2 block per edge
+        (:class:`.banded.EdgeParts`; closed components): no triplets to build, and the band is
+        filled in parallel. FHW at 10⁶ edges, 2 threads, setup and one iteration: the triplets'
+        build and fill took 3.6 s, the fill from edges 0.2 s (docs/benchmarks.md, session 17)."""
+        ln = self.ln
+        total = float(ln.sum())
+        m = ln / 3 * (1.0 / total**3)  # h1's mass and stiffness, as banded_parts_of_lengths
+        k = (1.0 / ln) * (1.0 / total)
+        s = float((self.diagonal() - self.beta**2).sum() / np.concatenate([m, m, k, k]).sum())
+        h = 0.5 * self.x1
+        mo = ln / 6 * (1.0 / total**3)
+        return EdgeParts(s * m + s * k + h, s * mo - s * k + h, self.beta)

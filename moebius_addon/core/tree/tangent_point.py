@@ -1,0 +1,1056 @@
+"""The tangent-point energy and its exact derivative by Barnes–Hut on the edge hierarchy (the tree
+engine; docs/design.md, "Tangent-point energy"; docs/api.md, "Tangent-point energy").
+
+The ordered pairs of edges are split as for the Möbius energy (:class:`.barnes_hut.Frame`:
+the same hierarchy, the same dual traversal, the same near and far lists), and summed with
+:func:`.energies.tangent_point.pair`:
+
+* **near pairs** (leaves close to each other): every ordered pair of edges exactly, except an
+  edge with itself and its neighbours along the curve, both orders of a pair at once;
+* **far pairs** ``(A, B)`` (clusters apart, ``max(diam) ≤ θ · gap``), for ``α = 2``: **cluster
+  against cluster**, one kernel per ordered pair of clusters (O(N) kernels). With ``α = 2``,
+  ``f_IJ = l_I l_J dᵀ P_I d / |d|^β`` (``P_I = 1 − T_I T_Iᵀ``), so ``A`` enters through its
+  projector moments ``G = Σ e eᵀ/l`` and ``W = Σ (e eᵀ/l) ⊗ δ`` (``δ = m − c_A``), ``B`` through
+  ``L_B``, ``c_B``; the pair sum is expanded to first order on both sides around ``d = c_A −
+  c_B`` (B's first order vanishes), error second order in ``diam / |d|`` on both sides (the
+  formula in the block comment above :func:`_cc_node`).
+* far pairs for other ``α`` (``|T × d|^α`` is no polynomial in ``T``, no moments make it
+  separable): every *edge* ``I`` of ``A`` against ``B`` as one point, the pair kernel with
+  ``l_J = L_B`` and ``m_J = c_B`` (the monopole of ``B``, its first order vanishes; the
+  target side exact), one kernel per edge of ``A``, O(N log N).
+
+Errors and times of both measured in docs/benchmarks.md ("Tangent-point energy: cluster
+against cluster").
+
+The gradient is the exact derivative of this approximated sum for the fixed split: the far
+field's derivatives in the clusters' moments go to their edges by the chain rule
+(``∂L/∂l_J = 1``, ``∂c/∂m_J = l_J/L``, ``∂c/∂l_J = (m_J − c)/L``, ``G`` and ``W`` through
+``e eᵀ/l`` and ``δ``, ``∂W_abk/∂c_k = −G_ab``): for ``α = 2`` summed down the tree once
+(:func:`_cc_push`), for other ``α`` each edge walking up its ancestors. Every edge's and
+every target cluster's own sums are sequential; what a pair gives its second edge or source
+cluster goes to rows of the same fixed piece of the leaves or to fixed buffers per piece,
+added in a fixed order: the same bits for every thread count.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ..energies.tangent_point import (
+    DEFAULT_ALPHA,
+    DEFAULT_BETA,
+    KIND_2,
+    KIND_2_4,
+    KIND_2_45,
+    KIND_GENERAL,
+    check_exponents,
+    kind_of,
+    pair,
+    pair_both_2,
+    pair_radial,
+    radial,
+)
+from ..geometry.layout import Layout
+from .far_field import _kind, _levels
+from .moebius import Frame, _edge_arrays, _neighbours, check_theta
+from .near_field import _lane_store, _load_lanes, _to_vertices
+
+#: Default admissibility of the tangent-point tree (with leaves of :data:`LEAF_SIZE` edges):
+#: relative errors (energy / gradient) at most 1.4e-3 / 2.5e-2 on FHW at 2 400–10 000 edges,
+#: about 6–7× / 24–40× below Repulsor's at its default. With leaves of four edges, 0.3 gave
+#: errors 0.9–2.5× those of 0.3 with leaves of eight; 0.25 gives about the same
+#: (docs/benchmarks.md, "Tangent-point energy: cluster against cluster" and session 13).
+THETA = 0.25
+#: Edges per leaf of the tangent-point tree (the near field's lanes, below).
+LEAF_SIZE = 4
+# Fixed pieces of the parallel loops over leaves: the per-edge sums are their own (any split,
+# the same bits); what the pairs give their second edge (near) or source cluster (far) goes to
+# one buffer per piece, so their number is fixed.
+_FAR_CHUNKS = 16
+
+
+# The near field's lanes (the idea of ``_near_field``): up to this many edges of a leaf against
+# one partner edge at a time, both orders of each pair at once (the distance, |d|^−β and the
+# masks are shared). One work array per parallel piece: lane j's edge at W[_LANES k + j] (k:
+# midpoint, edge vector, length, then its tree position and neighbours' as floats, position −1
+# past the leaf's end, then 1 / length), its sums at W[_NW_SUMS + _LANES k + j] (f, ∂/∂e,
+# ∂/∂m, ∂/∂l) and what its pairs give the partner at W[_NW_OUT + _LANES k + j] (∂/∂e, ∂/∂m,
+# ∂/∂l), added over the lanes in lane order. Constant offsets plus j: the lane loop
+# vectorizes. The first ten rows as in ``_near_field``, by its _load_lanes.
+# Of fast-math only "contract" (fused multiply–adds), here and in the far field's kernels
+# (_cc_moments, _cc_far, _cc_to_edges): about 8 % off the sums. Only while the code compiled in
+# a first process and the code numba's cache loads give the same bits
+# (tests/core/test_tangent_point.py); in the Möbius near and far fields they did not
+# (docs/benchmarks.md, session 21).
+# For α = 2 the partner edges go two at a time: the radial parts of both (1 / |d|², |d|^−β,
+# the masks) first, each in its own rows (_NW_INV, and _NW_INV + _LANES for the second;
+# |d|^−β _NW_RB further on), so that their divisions overlap (one at a time, the pairs waited
+# for each division: the near field's gradient pass at 10⁵ edges 43 → 37 ms, at the price of
+# _near_leaves compiling in 35 s instead of 15 s; one loop over twice the lanes for both kept
+# scalar divisions and gave nothing; docs/benchmarks.md, session 19).
+# Four lanes on leaves of four edges (:data:`LEAF_SIZE`): the finer split leaves about half the
+# near pairs, and the far field, cluster against cluster, is cheap per pair. The energy-only
+# pass loops over ``lanes``, a run-time argument equal to _LANES: a constant trip count of four
+# was unrolled fully and left scalar (times in docs/benchmarks.md, session 13).
+_LANES = 4
+_NW_ID = 7 * _LANES
+_NW_IL = 10 * _LANES
+_NW_SUMS = 11 * _LANES
+_NW_OUT = 19 * _LANES
+_NW_INV = 26 * _LANES
+_NW_RB = 2 * _LANES
+_NW_SIZE = 30 * _LANES
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _near_radial_k(W, ri, rx, ry, rz, r, lim, beta, kind, lanes):
+    """Per lane ``1 / |d|²`` and ``|d|^−β`` (:func:`.energies.tangent_point.radial`) of the
+    lane's edge and partner edge ``r`` (midpoint, tree position as a float), to rows ``ri``
+    and ``ri + _NW_RB`` (``ri`` a constant at each call). The edge itself, its neighbours,
+    the lanes past the leaf's end and lanes at positions ≥ ``lim`` (a leaf against itself:
+    each pair once) count zero: ``|d|² = ∞`` by a select, no branch."""
+    for j in range(lanes):
+        dx = W[j] - rx
+        dy = W[_LANES + j] - ry
+        dz = W[2 * _LANES + j] - rz
+        q = W[_NW_ID + j]
+        r2 = dx * dx + dy * dy + dz * dz
+        # one select per test: a compound condition branches, and the loop does not vectorize
+        # (the energy alone took 2.6–3.2× the time at 10⁵ edges, docs/benchmarks.md)
+        r2 = np.inf if r == q else r2
+        r2 = np.inf if r == W[_NW_ID + _LANES + j] else r2
+        r2 = np.inf if r == W[_NW_ID + 2 * _LANES + j] else r2
+        r2 = np.inf if q < 0.0 else r2
+        r2 = np.inf if q >= lim else r2
+        inv, rb = radial(r2, beta, kind)
+        W[ri + j] = inv
+        W[ri + _NW_RB + j] = rb
+
+
+@nb.njit(cache=True, inline="always")
+def _near_radial(W, ri, rx, ry, rz, r, lim, beta, kind, lanes):
+    """:func:`_near_radial_k` with ``kind`` a constant in each branch."""
+    if kind == KIND_2_4:
+        _near_radial_k(W, ri, rx, ry, rz, r, lim, beta, KIND_2_4, lanes)
+    elif kind == KIND_2_45:
+        _near_radial_k(W, ri, rx, ry, rz, r, lim, beta, KIND_2_45, lanes)
+    else:
+        _near_radial_k(W, ri, rx, ry, rz, r, lim, beta, KIND_2, lanes)
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _near_lanes(W, ri, rx, ry, rz, sx, sy, sz, lr, ir, alpha, beta, grad, lanes):
+    """Partner edge ``r`` (midpoint, edge vector, length and its inverse) against every lane's
+    edge, both ordered pairs, with the lanes' :func:`_near_radial` in rows ``ri``: added to the
+    lane's sums, what they give ``r`` in the lane's ``_NW_OUT`` slots. Any ``α``
+    (:func:`_near_lanes_2` for ``α = 2``)."""
+    for j in range(_LANES if grad else lanes):
+        dx = W[j] - rx
+        dy = W[_LANES + j] - ry
+        dz = W[2 * _LANES + j] - rz
+        inv = W[ri + j]
+        rb = W[ri + _NW_RB + j]
+        lq = W[6 * _LANES + j]
+        # (I, J) = (lane, r) and (r, lane)
+        f, fax, fay, faz, fdx, fdy, fdz, fl = pair_radial(
+            dx, dy, dz, W[3 * _LANES + j], W[4 * _LANES + j], W[5 * _LANES + j],
+            lq, W[_NW_IL + j], lr, inv, rb, alpha, beta, True)
+        g, gax, gay, gaz, gdx, gdy, gdz, gl = pair_radial(
+            -dx, -dy, -dz, sx, sy, sz, lr, ir, lq, inv, rb, alpha, beta, True)
+        _lane_store(W, j, _NW_SUMS, _NW_OUT, _LANES, f + g, fax, fay, faz, gax, gay, gaz,
+                    fdx - gdx, fdy - gdy, fdz - gdz, gl, fl, grad)
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _near_lanes_2(W, ri, rx, ry, rz, sx, sy, sz, lr, ir, beta, grad, lanes):
+    """:func:`_near_lanes` for ``α = 2``: both orders of each pair at once
+    (:func:`.energies.tangent_point.pair_both_2`)."""
+    for j in range(_LANES if grad else lanes):
+        (F, eix, eiy, eiz, ejx, ejy, ejz, mx, my, mz, gli, glj) = pair_both_2(
+            W[j] - rx, W[_LANES + j] - ry, W[2 * _LANES + j] - rz,
+            W[3 * _LANES + j], W[4 * _LANES + j], W[5 * _LANES + j],
+            W[6 * _LANES + j], W[_NW_IL + j], sx, sy, sz, lr, ir,
+            W[ri + j], W[ri + _NW_RB + j], beta)
+        _lane_store(W, j, _NW_SUMS, _NW_OUT, _LANES, F, eix, eiy, eiz, ejx, ejy, ejz, mx, my, mz,
+                    gli, glj, grad)
+
+
+@nb.njit(cache=True, inline="always")
+def _near_out(W, acc, row):
+    """What the pairs gave the partner edge (the lanes' ``_NW_OUT`` slots, in lane order) added
+    to its columns 1–7 of row ``row`` of ``acc``."""
+    for k in range(7):
+        t = 0.0
+        for j in range(_LANES):
+            t += W[_NW_OUT + k * _LANES + j]
+        acc[row, 1 + k] += t
+
+
+@nb.njit(cache=True, inline="always")
+def _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width, alpha, beta, kind,
+                general, grad, lanes):
+    """The loaded lanes of leaf ``a`` against every edge ``r`` of the leaf itself (each pair
+    once) and of its partners after it: what the pairs give ``r`` (edge vector, midpoint,
+    length; the lanes in order) added to its columns 1–7 of ``acc``: its own row for a leaf of
+    the same piece, else the partner's slot (rows ``n + width · slot …``). ``general`` and ``grad``
+    constants at each call site, ``kind`` only in the small loop of :func:`_near_radial`: a
+    copy of the pairs' loop per kind took minutes to compile."""
+    for p in range(uoff[a] - 1, uoff[a + 1]):
+        b = a if p < uoff[a] else upart[p]
+        s = -1 if p < uoff[a] else uslot[p]
+        # one array, not a choice of two: that counted a reference per partner, atomically
+        off = 0 if s < 0 else n + width * s - lo[b]
+        if general:  # one partner edge at a time (kind: the general power)
+            for r in range(lo[b], hi[b]):
+                fr = float(r)
+                _near_radial_k(W, _NW_INV, M[r, 0], M[r, 1], M[r, 2], fr,
+                               fr if b == a else np.inf, beta, KIND_2, lanes)
+                _near_lanes(W, _NW_INV, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
+                            ln[r], 1.0 / ln[r], alpha, beta, grad, lanes)
+                if grad:
+                    _near_out(W, acc, r + off)
+            continue
+        # two partner edges at a time (see the lanes' comment). An odd last edge goes with
+        # itself as the second, every lane off (lim −∞), and is not added to acc.
+        for r in range(lo[b], hi[b], 2):
+            r1 = min(r + 1, hi[b] - 1)
+            fr = float(r)
+            fr1 = float(r1)
+            _near_radial(W, _NW_INV, M[r, 0], M[r, 1], M[r, 2], fr, fr if b == a else np.inf,
+                         beta, kind, lanes)
+            _near_radial(W, _NW_INV + _LANES, M[r1, 0], M[r1, 1], M[r1, 2], fr1,
+                         -np.inf if r1 == r else (fr1 if b == a else np.inf), beta, kind,
+                         lanes)
+            _near_lanes_2(W, _NW_INV, M[r, 0], M[r, 1], M[r, 2], E[r, 0], E[r, 1], E[r, 2],
+                          ln[r], 1.0 / ln[r], beta, grad, lanes)
+            if grad:
+                _near_out(W, acc, r + off)
+            _near_lanes_2(W, _NW_INV + _LANES, M[r1, 0], M[r1, 1], M[r1, 2], E[r1, 0],
+                          E[r1, 1], E[r1, 2], ln[r1], 1.0 / ln[r1], beta, grad, lanes)
+            if grad and r1 != r:
+                _near_out(W, acc, r1 + off)
+
+
+@nb.njit(cache=True, error_model="numpy", fastmath={"contract"})
+def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, uoff, upart, uslot, nbr, width, alpha,
+                 beta, kind, grad, acc, n, lanes):
+    """The leaves ``leaves[t0:t1]`` of :func:`_near` (one piece): the sums of their edges and
+    what their pairs give other edges to ``acc`` (:func:`_near_group`). A function
+    of its own, called from the parallel loop: in a copy of a variant, compiled without
+    ``parallel``, the gradient pass took 0.28 s against 0.33 s inside the loop's body (10⁵
+    edges); in place the difference was in the noise (docs/benchmarks.md, session 11)."""
+    W = np.zeros(_NW_SIZE)
+    for t in range(t0, t1):
+        a = leaves[t]
+        for q0 in range(lo[a], hi[a], _LANES):
+            count = min(_LANES, hi[a] - q0)
+            _load_lanes(W, E, M, ln, nbr, q0, count, True, _LANES)  # past the leaf's end: off
+            for j in range(_LANES):
+                W[_NW_IL + j] = 1.0 / W[6 * _LANES + j]
+            W[_NW_SUMS:_NW_INV] = 0.0
+            # general and grad constants at each call (the branches fold away)
+            if grad:
+                if kind == KIND_GENERAL:
+                    _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, kind, True, True, lanes)
+                else:
+                    _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, kind, False, True, lanes)
+            else:
+                if kind == KIND_GENERAL:
+                    _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, kind, True, False, lanes)
+                else:
+                    _near_group(W, acc, n, E, M, ln, lo, hi, a, uoff, upart, uslot, width,
+                                alpha, beta, kind, False, False, lanes)
+            for j in range(count):
+                q = q0 + j
+                acc[q, 0] += W[_NW_SUMS + j]
+                if grad:
+                    for k in range(1, 8):
+                        acc[q, k] += W[_NW_SUMS + k * _LANES + j]
+
+
+@nb.njit(cache=True)
+def _near_pieces(leaves, pairs, m, nchunks):
+    """Each unordered pair of near leaves (``pairs``, :func:`.barnes_hut._split`'s) once, by
+    the first in tree order: per leaf its partners after it (CSR ``uoff``, ``upart``, in the
+    order of ``pairs``) and the slot each takes in the buffer of what the pairs give partners
+    beyond the leaf's piece (``uslot``, −1 for a partner in the same piece; one slot per piece
+    and partner leaf, ``slot_leaf``), the pieces ``nchunks`` fixed ranges of ``leaves``."""
+    nl = leaves.shape[0]
+    pos = np.full(m, -1, np.int64)
+    for t in range(nl):
+        pos[leaves[t]] = t
+    uoff = np.zeros(m + 1, np.int64)
+    for p in range(pairs.shape[0]):
+        if pairs[p, 0] != pairs[p, 1]:
+            uoff[min(pairs[p, 0], pairs[p, 1]) + 1] += 1
+    for k in range(m):
+        uoff[k + 1] += uoff[k]
+    upart = np.empty(uoff[m], np.int64)
+    fill = uoff[:m].copy()
+    for p in range(pairs.shape[0]):
+        a, b = pairs[p, 0], pairs[p, 1]
+        if a != b:
+            lo_ = min(a, b)
+            upart[fill[lo_]] = max(a, b)
+            fill[lo_] += 1
+    uslot = np.empty(uoff[m], np.int64)
+    slot_leaf = np.empty(uoff[m], np.int64)
+    stamp = np.full(m, -1, np.int64)
+    slot = np.empty(m, np.int64)
+    ns = 0
+    for ch in range(nchunks):
+        t1 = (ch + 1) * nl // nchunks
+        for t in range(ch * nl // nchunks, t1):
+            a = leaves[t]
+            for k in range(uoff[a], uoff[a + 1]):
+                b = upart[k]
+                if pos[b] < t1:
+                    uslot[k] = -1
+                else:
+                    if stamp[b] != ch:
+                        stamp[b] = ch
+                        slot[b] = ns
+                        slot_leaf[ns] = b
+                        ns += 1
+                    uslot[k] = slot[b]
+    return uoff, upart, uslot, slot_leaf[:ns].copy()
+
+
+@nb.njit(cache=True, parallel=True)
+def _lc_data(M, ln, cp, lo, hi, left, right):
+    """Per node what the tangent-point far field and the split read: total length ``L``,
+    length-weighted centre ``c`` and kind (:func:`._far_field._cluster_data`'s, without the
+    Möbius energy's higher moments). One depth at a time from the deepest."""
+    m = lo.shape[0]
+    L = np.empty(m)
+    C = np.empty((m, 3))
+    nc = np.empty(m, np.int64)
+    order, offsets = _levels(left, right)
+    for d in range(offsets.shape[0] - 2, -1, -1):
+        for tt in nb.prange(offsets[d], offsets[d + 1]):
+            node = order[tt]
+            a0, b0 = left[node], right[node]
+            if a0 < 0:
+                tot = cx = cy = cz = 0.0
+                c0 = cp[lo[node]]
+                for q in range(lo[node], hi[node]):
+                    w = ln[q]
+                    tot += w
+                    cx += w * M[q, 0]
+                    cy += w * M[q, 1]
+                    cz += w * M[q, 2]
+                    c0 = _kind(c0, cp[q])
+                L[node] = tot
+                C[node, 0] = cx / tot
+                C[node, 1] = cy / tot
+                C[node, 2] = cz / tot
+                nc[node] = c0
+            else:
+                tot = L[a0] + L[b0]
+                L[node] = tot
+                for k in range(3):
+                    C[node, k] = (L[a0] * C[a0, k] + L[b0] * C[b0, k]) / tot
+                nc[node] = _kind(nc[a0], nc[b0])
+    return L, C, nc
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _near(E, M, ln, lo, hi, leaves, uoff, upart, uslot, slot_leaf, nbr, alpha, beta, kind, grad,
+          lanes):
+    """Per edge (tree order): row 0 ``Σ_J f(I, J)`` over its near partners and, with ``grad``,
+    the partials of every near pair it is part of (as ``I`` or as ``J``) in its edge vector
+    (rows 1–3, without the length term), midpoint (4–6) and length (7). Each unordered pair of
+    edges is evaluated once, both orders (:func:`_near_lanes`), by the first leaf in tree order
+    (:func:`_near_pieces`); the pieces of the leaves in parallel, each writing its own edges'
+    rows, what its pairs give edges beyond it to their slots, added in slot order: the same
+    bits for any thread count. ``lanes``: always :data:`_LANES`, passed at run time (see the
+    lanes' comment above)."""
+    n = ln.shape[0]
+    nl = leaves.shape[0]
+    width = 0
+    for t in range(nl):
+        width = max(width, hi[leaves[t]] - lo[leaves[t]])
+    slots = slot_leaf.shape[0] if grad else 0
+    # an edge's sums in one cache line; the slots after the edges
+    acc = np.zeros((n + width * slots, 8 if grad else 1))
+    nchunks = min(nl, _FAR_CHUNKS)
+    for cc in nb.prange(nchunks):
+        ch = np.int64(cc)
+        _near_leaves(E, M, ln, lo, hi, leaves, ch * nl // nchunks, (ch + 1) * nl // nchunks,
+                     uoff, upart, uslot, nbr, width, alpha, beta, kind, grad, acc, n, lanes)
+    for s in range(slots):  # in slot order: the same bits for any thread count
+        b = slot_leaf[s]
+        for i in range(hi[b] - lo[b]):
+            for k in range(1, 8):
+                acc[lo[b] + i, k] += acc[n + width * s + i, k]
+    rows = np.empty((acc.shape[1], n))
+    for qq in nb.prange(n):
+        q = np.int64(qq)
+        for k in range(acc.shape[1]):
+            rows[k, q] = acc[q, k]
+    return rows
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy")
+def _far(E, M, ln, L, C, lo, hi, leaves, parent, foff, fpart, alpha, beta, grad, rows):
+    """For ``α ≠ 2`` (``α = 2`` takes :func:`_cc_far`): every edge against the far partners of
+    its leaf and of the leaf's ancestors, each partner ``B`` as one point of weight ``L_B`` at
+    ``c_B``: added to ``rows`` (row 0 the energy, 1–3 the edge vector, 4–6 the midpoint;
+    :func:`_near`'s layout). Returns, per fixed piece of the leaves, the derivatives of the sum
+    in every cluster's ``L`` (column 0) and ``c`` (1–3)."""
+    m = L.shape[0]
+    nl = leaves.shape[0]
+    nchunks = _FAR_CHUNKS
+    gnode = np.zeros((nchunks, m if grad else 0, 4))
+    for cc in nb.prange(nchunks):
+        ch = np.int64(cc)
+        g = gnode[ch]
+        for t in range(ch * nl // nchunks, (ch + 1) * nl // nchunks):
+            leaf = leaves[t]
+            for q in range(lo[leaf], hi[leaf]):
+                px, py, pz = M[q, 0], M[q, 1], M[q, 2]
+                ax, ay, az, li = E[q, 0], E[q, 1], E[q, 2], ln[q]
+                il = 1.0 / li
+                s = gax = gay = gaz = gmx = gmy = gmz = 0.0
+                a = leaf
+                while a >= 0:
+                    for p in range(foff[a], foff[a + 1]):
+                        b = fpart[p]
+                        dx = px - C[b, 0]
+                        dy = py - C[b, 1]
+                        dz = pz - C[b, 2]
+                        f, fax, fay, faz, fdx, fdy, fdz, fl = pair(
+                            dx, dy, dz, ax, ay, az, li, il, L[b], dx * dx + dy * dy + dz * dz,
+                            alpha, beta, KIND_GENERAL)
+                        s += f
+                        if grad:
+                            gax += fax
+                            gay += fay
+                            gaz += faz
+                            gmx += fdx
+                            gmy += fdy
+                            gmz += fdz
+                            g[b, 0] += fl
+                            g[b, 1] -= fdx
+                            g[b, 2] -= fdy
+                            g[b, 3] -= fdz
+                    a = parent[a]
+                rows[0, q] += s
+                if grad:
+                    rows[1, q] += gax
+                    rows[2, q] += gay
+                    rows[3, q] += gaz
+                    rows[4, q] += gmx
+                    rows[5, q] += gmy
+                    rows[6, q] += gmz
+    return gnode
+
+
+@nb.njit(cache=True, parallel=True)
+def _far_sources(M, ln, L, C, lo, hi, leaves, parent, gnode, rows):
+    """The clusters' derivatives ``gnode`` (in ``L``, ``c``) passed to their edges: per edge
+    and every cluster holding it, ``∂/∂l += g_L + <g_c, m − c>/L`` (row 7) and
+    ``∂/∂m += g_c l/L`` (rows 4–6)."""
+    nl = leaves.shape[0]
+    for tt in nb.prange(nl):
+        leaf = leaves[np.int64(tt)]
+        for q in range(lo[leaf], hi[leaf]):
+            gl = gmx = gmy = gmz = 0.0
+            b = leaf
+            while b >= 0:
+                il = 1.0 / L[b]
+                gl += gnode[b, 0] + il * (gnode[b, 1] * (M[q, 0] - C[b, 0])
+                                          + gnode[b, 2] * (M[q, 1] - C[b, 1])
+                                          + gnode[b, 3] * (M[q, 2] - C[b, 2]))
+                w = ln[q] * il
+                gmx += gnode[b, 1] * w
+                gmy += gnode[b, 2] * w
+                gmz += gnode[b, 3] * w
+                b = parent[b]
+            rows[7, q] += gl
+            rows[4, q] += gmx
+            rows[5, q] += gmy
+            rows[6, q] += gmz
+
+
+# ------------------------------------------------------------------------------------------------
+# the cluster–cluster far field (α = 2)
+#
+# For α = 2, f_IJ = l_I l_J dᵀ P_I d / |d|^β with P_I = 1 − T_I T_Iᵀ, so a cluster's edges enter
+# a far pair through projector moments. Per node: L and c (as the Möbius tree), G = Σ e eᵀ/l
+# (Σ l P = L·1 − G) and the first projector moment W = Σ (e eᵀ/l) ⊗ δ (δ = m − c). A far pair
+# (A, B) is Σ_IJ l_I l_J φ_I(d + δ_I − δ_J), d = c_A − c_B, expanded to first order on both
+# sides; B's first order vanishes (Σ l δ = 0), A's is −W (Σ l P ⊗ δ = −W):
+#
+#   F(A, B) = L_B [L_A |d|^(2−β) − |d|^−β dᵀG_A d − 2 |d|^−β <v_A, d> + β |d|^(−β−2) W_A(d, d, d)]
+#
+# with v_a = Σ_b W_abb: one kernel per pair of clusters (O(N) kernels, not one per edge and
+# cluster), error of second order in diam / |d| on both sides (docs/benchmarks.md,
+# "Tangent-point energy: cluster against cluster").
+
+
+@nb.njit(cache=True, inline="always")
+def _cc_node(node, E, M, ln, lo, hi, left, right, C, G, Wm):
+    """``G`` and ``W`` of one node about its centre ``C[node]``, both symmetric in ``a, b``
+    and stored by the pair ``ab`` (:data:`_SYM_W`): ``G`` six entries, ``W`` eighteen (index
+    3 ab + c). A leaf from its edges, a parent from its children's moved to its centre
+    (``W = W_l + W_r + G_l ⊗ (c_l − c) + G_r ⊗ (c_r − c)``), each entry written once."""
+    if left[node] < 0:
+        c0, c1, c2 = C[node, 0], C[node, 1], C[node, 2]
+        g00 = g01 = g02 = g11 = g12 = g22 = 0.0
+        w000 = w001 = w002 = w010 = w011 = w012 = w020 = w021 = w022 = 0.0
+        w110 = w111 = w112 = w120 = w121 = w122 = w220 = w221 = w222 = 0.0
+        for q in range(lo[node], hi[node]):
+            il = 1.0 / ln[q]
+            e0, e1, e2 = E[q, 0], E[q, 1], E[q, 2]
+            d0, d1, d2 = M[q, 0] - c0, M[q, 1] - c1, M[q, 2] - c2
+            f0, f1, f2 = e0 * il, e1 * il, e2 * il
+            t00, t01, t02, t11, t12, t22 = e0 * f0, e0 * f1, e0 * f2, e1 * f1, e1 * f2, e2 * f2
+            g00 += t00
+            g01 += t01
+            g02 += t02
+            g11 += t11
+            g12 += t12
+            g22 += t22
+            w000 += t00 * d0
+            w001 += t00 * d1
+            w002 += t00 * d2
+            w010 += t01 * d0
+            w011 += t01 * d1
+            w012 += t01 * d2
+            w020 += t02 * d0
+            w021 += t02 * d1
+            w022 += t02 * d2
+            w110 += t11 * d0
+            w111 += t11 * d1
+            w112 += t11 * d2
+            w120 += t12 * d0
+            w121 += t12 * d1
+            w122 += t12 * d2
+            w220 += t22 * d0
+            w221 += t22 * d1
+            w222 += t22 * d2
+        G[node, 0], G[node, 1], G[node, 2] = g00, g01, g02
+        G[node, 3], G[node, 4], G[node, 5] = g11, g12, g22
+        Wm[node, 0], Wm[node, 1], Wm[node, 2] = w000, w001, w002
+        Wm[node, 3], Wm[node, 4], Wm[node, 5] = w010, w011, w012
+        Wm[node, 6], Wm[node, 7], Wm[node, 8] = w020, w021, w022
+        Wm[node, 9], Wm[node, 10], Wm[node, 11] = w110, w111, w112
+        Wm[node, 12], Wm[node, 13], Wm[node, 14] = w120, w121, w122
+        Wm[node, 15], Wm[node, 16], Wm[node, 17] = w220, w221, w222
+    else:
+        a0, b0 = left[node], right[node]
+        u0, u1, u2 = C[a0, 0] - C[node, 0], C[a0, 1] - C[node, 1], C[a0, 2] - C[node, 2]
+        v0, v1, v2 = C[b0, 0] - C[node, 0], C[b0, 1] - C[node, 1], C[b0, 2] - C[node, 2]
+        for k in range(6):
+            ga = G[a0, k]
+            gb = G[b0, k]
+            G[node, k] = ga + gb
+            Wm[node, 3 * k] = Wm[a0, 3 * k] + Wm[b0, 3 * k] + ga * u0 + gb * v0
+            Wm[node, 3 * k + 1] = Wm[a0, 3 * k + 1] + Wm[b0, 3 * k + 1] + ga * u1 + gb * v1
+            Wm[node, 3 * k + 2] = Wm[a0, 3 * k + 2] + Wm[b0, 3 * k + 2] + ga * u2 + gb * v2
+
+
+@nb.njit(cache=True, parallel=True, fastmath={"contract"})
+def _cc_moments(E, M, ln, lo, hi, left, right, C):
+    """Per node ``G`` and ``W`` (:func:`_cc_node`), bottom-up one depth at a time (each node
+    writes its own row)."""
+    m = lo.shape[0]
+    G = np.empty((m, 6))
+    Wm = np.empty((m, 18))
+    order, offsets = _levels(left, right)
+    for d in range(offsets.shape[0] - 2, -1, -1):
+        if offsets[d + 1] - offsets[d] >= 256:
+            for t in nb.prange(offsets[d], offsets[d + 1]):
+                _cc_node(order[t], E, M, ln, lo, hi, left, right, C, G, Wm)
+        else:
+            for t in range(offsets[d], offsets[d + 1]):
+                _cc_node(order[t], E, M, ln, lo, hi, left, right, C, G, Wm)
+    return G, Wm
+
+
+# The cluster–cluster far field's lanes (the idea of ``_near_field``): up to this many partners
+# of one target at a time. One work array per parallel piece: lane j's partner at W[_CL k + j]
+# (k: L, c), its sums at W[_CW_SUMS + _CL k + j] (energy; ∂/∂L_A, ∂/∂c_A; −2 L ρ d; −L ρ d dᵀ,
+# six; β L ρ₂ d ⊗ d ⊗ d, ten) and what the pair gives the partner at W[_CW_OUT + _CL k + j]
+# (∂/∂L_B, ∂/∂c_B), added over the lanes in lane order. Lanes past the last partner repeat it
+# with L = 0: every term is a multiple of L_B.
+_CL = 4
+_CW_RHO = 4 * _CL
+_CW_SUMS = 5 * _CL
+_CW_OUT = 29 * _CL
+_CW_SIZE = 33 * _CL
+# G, W and their derivatives are symmetric in their first two indices (Σ e eᵀ/l): stored by
+# the pair ab in the order 00, 01, 02, 11, 12, 22 (six of nine entries, 18 of 27: the far
+# field's per-node arrays a third smaller); a sum over a, b takes the pairs off the diagonal
+# twice (_SYM_W)
+_SYM_W = np.array([1.0, 2.0, 2.0, 1.0, 2.0, 1.0])
+
+
+@nb.njit(cache=True, inline="always")
+def _cc_radial_k(W, cax, cay, caz, beta, kind, lanes):
+    """Per lane ``|d|^−β`` (:func:`.energies.tangent_point.radial`) to ``W[_CW_RHO + j]``."""
+    for j in range(lanes):
+        dx = cax - W[_CL + j]
+        dy = cay - W[2 * _CL + j]
+        dz = caz - W[3 * _CL + j]
+        W[_CW_RHO + j] = radial(dx * dx + dy * dy + dz * dz, beta, kind)[1]
+
+
+@nb.njit(cache=True, inline="always")
+def _cc_radial(W, cax, cay, caz, beta, kind, lanes):
+    """:func:`_cc_radial_k` with ``kind`` a constant in each branch: the pairs' loop is one for
+    every kind (a copy per kind took minutes to compile)."""
+    if kind == KIND_2_4:
+        _cc_radial_k(W, cax, cay, caz, beta, KIND_2_4, lanes)
+    elif kind == KIND_2_45:
+        _cc_radial_k(W, cax, cay, caz, beta, KIND_2_45, lanes)
+    else:
+        _cc_radial_k(W, cax, cay, caz, beta, KIND_2, lanes)
+
+
+@nb.njit(cache=True)
+def _cc_slots(foff, fpart, m, nchunks):
+    """The far field's rows of what targets give their partners as sources: one row per piece
+    (a fixed range of ``nchunks`` of the targets) and partner it meets, numbered piece by
+    piece; ``fslot`` the row of each far pair (``fpart``'s order), ``soff``/``sidx`` per node
+    its rows, in piece order (CSR). At 10⁵ edges (θ 0.7) 58 582 rows against 16 × 50 000 for
+    a row per piece and node, whose scattered writes faulted in 25 MB of pages per evaluation
+    (docs/benchmarks.md, session 20)."""
+    fslot = np.empty(fpart.shape[0], np.int32)
+    stamp = np.full(m, -1, np.int64)
+    slot = np.empty(m, np.int64)
+    count = np.zeros(m + 1, np.int64)
+    node = np.empty(fpart.shape[0], np.int64)  # the partner of each row (at most one per pair)
+    ns = 0
+    for ch in range(nchunks):
+        for a in range(ch * m // nchunks, (ch + 1) * m // nchunks):
+            for p in range(foff[a], foff[a + 1]):
+                b = fpart[p]
+                if stamp[b] != ch:
+                    stamp[b] = ch
+                    slot[b] = ns
+                    node[ns] = b
+                    count[b + 1] += 1
+                    ns += 1
+                fslot[p] = slot[b]
+    soff = np.cumsum(count)
+    sidx = np.empty(ns, np.int32)
+    fill = soff[:m].copy()
+    for r in range(ns):  # in row order, so in piece order per node
+        b = node[r]
+        sidx[fill[b]] = r
+        fill[b] += 1
+    return fslot, soff, sidx
+
+
+@nb.njit(cache=True, error_model="numpy", inline="always")
+def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, eF, gt,
+               gG, gW, lanes):
+    """Target ``a`` against its far partners, by lanes (see above); ``S`` scratch for the
+    lanes' sums; ``gs[fslot[p]]`` the source row of pair ``p`` (:func:`_cc_slots`). Rows are
+    indexed in place, not taken as views: a view per partner counted its reference up and
+    down, atomically (docs/benchmarks.md, session 19)."""
+    la = L[a]
+    cax, cay, caz = C[a, 0], C[a, 1], C[a, 2]
+    g00, g01, g02, g11, g12, g22 = G[a, 0], G[a, 1], G[a, 2], G[a, 3], G[a, 4], G[a, 5]
+    a000, a001, a002 = Wm[a, 0], Wm[a, 1], Wm[a, 2]
+    a010, a011, a012 = Wm[a, 3], Wm[a, 4], Wm[a, 5]
+    a020, a021, a022 = Wm[a, 6], Wm[a, 7], Wm[a, 8]
+    a110, a111, a112 = Wm[a, 9], Wm[a, 10], Wm[a, 11]
+    a120, a121, a122 = Wm[a, 12], Wm[a, 13], Wm[a, 14]
+    a220, a221, a222 = Wm[a, 15], Wm[a, 16], Wm[a, 17]
+    v0 = a000 + a011 + a022
+    v1 = a010 + a111 + a122
+    v2 = a020 + a121 + a222
+    W[_CW_SUMS:_CW_OUT] = 0.0
+    p1 = foff[a + 1]
+    for p0 in range(foff[a], p1, _CL):
+        cnt = min(_CL, p1 - p0)
+        for j in range(_CL):
+            b = fpart[p0 + min(j, cnt - 1)]
+            W[j] = L[b] if j < cnt else 0.0
+            W[_CL + j] = C[b, 0]
+            W[2 * _CL + j] = C[b, 1]
+            W[3 * _CL + j] = C[b, 2]
+        _cc_radial(W, cax, cay, caz, beta, kind, lanes)
+        # a run-time count for the energy alone (as the near field's: a constant was unrolled)
+        for j in range(_CL if grad else lanes):
+            lb = W[j]
+            dx = cax - W[_CL + j]
+            dy = cay - W[2 * _CL + j]
+            dz = caz - W[3 * _CL + j]
+            r2 = dx * dx + dy * dy + dz * dz
+            rho = W[_CW_RHO + j]
+            rho2 = rho / r2
+            gdx = g00 * dx + g01 * dy + g02 * dz
+            gdy = g01 * dx + g11 * dy + g12 * dz
+            gdz = g02 * dx + g12 * dy + g22 * dz
+            dgd = dx * gdx + dy * gdy + dz * gdz
+            vd = v0 * dx + v1 * dy + v2 * dz
+            # Wd_ab = Σ_c W_abc d_c; w_a = Σ_b Wd_ab d_b; s = dᵀ Wd d
+            d00 = a000 * dx + a001 * dy + a002 * dz
+            d01 = a010 * dx + a011 * dy + a012 * dz
+            d02 = a020 * dx + a021 * dy + a022 * dz
+            d11 = a110 * dx + a111 * dy + a112 * dz
+            d12 = a120 * dx + a121 * dy + a122 * dz
+            d22 = a220 * dx + a221 * dy + a222 * dz
+            w0 = d00 * dx + d01 * dy + d02 * dz
+            w1 = d01 * dx + d11 * dy + d12 * dz
+            w2 = d02 * dx + d12 * dy + d22 * dz
+            s = w0 * dx + w1 * dy + w2 * dz
+            inner = la * r2 * rho - rho * dgd - 2.0 * rho * vd + beta * rho2 * s
+            W[_CW_SUMS + j] += lb * inner
+            if grad:
+                # u_c = Σ_ab W_abc d_a d_b
+                xx = dx * dx
+                yy = dy * dy
+                zz = dz * dz
+                xy = 2.0 * dx * dy
+                xz = 2.0 * dx * dz
+                yz = 2.0 * dy * dz
+                u0 = a000 * xx + a110 * yy + a220 * zz + a010 * xy + a020 * xz + a120 * yz
+                u1 = a001 * xx + a111 * yy + a221 * zz + a011 * xy + a021 * xz + a121 * yz
+                u2 = a002 * xx + a112 * yy + a222 * zz + a012 * xy + a022 * xz + a122 * yz
+                # ∂/∂d of inner (docs: the derivation beside this kernel)
+                c1 = (la * rho * (2.0 - beta) + beta * rho2 * dgd + 2.0 * beta * rho2 * vd
+                      - beta * (beta + 2.0) * rho2 / r2 * s)
+                hx = lb * (c1 * dx - 2.0 * rho * gdx - 2.0 * rho * v0
+                           + beta * rho2 * (2.0 * w0 + u0))
+                hy = lb * (c1 * dy - 2.0 * rho * gdy - 2.0 * rho * v1
+                           + beta * rho2 * (2.0 * w1 + u1))
+                hz = lb * (c1 * dz - 2.0 * rho * gdz - 2.0 * rho * v2
+                           + beta * rho2 * (2.0 * w2 + u2))
+                k = -lb * rho
+                k3 = beta * lb * rho2
+                kx = k3 * xx
+                ky = k3 * yy
+                kz = k3 * zz
+                W[_CW_SUMS + _CL + j] += lb * r2 * rho
+                W[_CW_SUMS + 2 * _CL + j] += hx
+                W[_CW_SUMS + 3 * _CL + j] += hy
+                W[_CW_SUMS + 4 * _CL + j] += hz
+                W[_CW_SUMS + 5 * _CL + j] += 2.0 * k * dx
+                W[_CW_SUMS + 6 * _CL + j] += 2.0 * k * dy
+                W[_CW_SUMS + 7 * _CL + j] += 2.0 * k * dz
+                W[_CW_SUMS + 8 * _CL + j] += k * xx
+                W[_CW_SUMS + 9 * _CL + j] += k * dx * dy
+                W[_CW_SUMS + 10 * _CL + j] += k * dx * dz
+                W[_CW_SUMS + 11 * _CL + j] += k * yy
+                W[_CW_SUMS + 12 * _CL + j] += k * dy * dz
+                W[_CW_SUMS + 13 * _CL + j] += k * zz
+                W[_CW_SUMS + 14 * _CL + j] += kx * dx
+                W[_CW_SUMS + 15 * _CL + j] += kx * dy
+                W[_CW_SUMS + 16 * _CL + j] += kx * dz
+                W[_CW_SUMS + 17 * _CL + j] += ky * dx
+                W[_CW_SUMS + 18 * _CL + j] += k3 * dx * dy * dz
+                W[_CW_SUMS + 19 * _CL + j] += kz * dx
+                W[_CW_SUMS + 20 * _CL + j] += ky * dy
+                W[_CW_SUMS + 21 * _CL + j] += ky * dz
+                W[_CW_SUMS + 22 * _CL + j] += kz * dy
+                W[_CW_SUMS + 23 * _CL + j] += kz * dz
+                W[_CW_OUT + j] = inner
+                W[_CW_OUT + _CL + j] = hx
+                W[_CW_OUT + 2 * _CL + j] = hy
+                W[_CW_OUT + 3 * _CL + j] = hz
+        if grad:
+            for j in range(cnt):
+                r = fslot[p0 + j]
+                gs[r, 0] += W[_CW_OUT + j]
+                gs[r, 1] -= W[_CW_OUT + _CL + j]
+                gs[r, 2] -= W[_CW_OUT + 2 * _CL + j]
+                gs[r, 3] -= W[_CW_OUT + 3 * _CL + j]
+    e = 0.0
+    for j in range(_CL):
+        e += W[_CW_SUMS + j]
+    eF[a] = e
+    if grad:
+        for k in range(1, 24):
+            t = 0.0
+            for j in range(_CL):
+                t += W[_CW_SUMS + k * _CL + j]
+            S[k] = t
+        for k in range(4):
+            gt[a, k] = S[1 + k]
+        for k in range(6):  # ∂/∂G_ab (= ∂/∂G_ba), by the pair ab
+            gG[a, k] = S[8 + k]
+        # ∂/∂W_abc, symmetric in a, b, by (ab, c): the entry of the sorted index triple (xxx …
+        # zzz at S[14 …]), and of −2ρ<v, d> (v_a = Σ_b W_abb) −2ρ d_a δ_bc made symmetric,
+        # ½ (d_a δ_bc + d_b δ_ac)
+        h5, h6, h7 = 0.5 * S[5], 0.5 * S[6], 0.5 * S[7]
+        gW[a, 0], gW[a, 1], gW[a, 2] = S[14] + S[5], S[15], S[16]
+        gW[a, 3], gW[a, 4], gW[a, 5] = S[15] + h6, S[17] + h5, S[18]
+        gW[a, 6], gW[a, 7], gW[a, 8] = S[16] + h7, S[18], S[19] + h5
+        gW[a, 9], gW[a, 10], gW[a, 11] = S[17], S[20] + S[6], S[21]
+        gW[a, 12], gW[a, 13], gW[a, 14] = S[18], S[21] + h7, S[22] + h6
+        gW[a, 15], gW[a, 16], gW[a, 17] = S[19], S[22], S[23] + S[7]
+
+
+@nb.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
+def _cc_far(L, C, G, Wm, foff, fpart, fslot, rows, beta, kind, grad, lanes):
+    """Every node ``A`` against its far partners ``B`` (:func:`_cc_node`'s moments): per node
+    the energy of its pairs as target; with ``grad`` the derivatives of the sum in its own
+    ``L`` (column 0 of ``gt``), ``c`` (1–3), ``G`` (``gG``) and ``W`` (``gW``) as a target,
+    and, per fixed piece of the targets, in every partner's ``L`` and ``c`` as a source
+    (``gs``, ``rows`` rows of :func:`_cc_slots`, ``fslot`` the row of each pair). Each
+    target's sums are its own: the same bits for any thread count. ``lanes``: always
+    :data:`_CL`, passed at run time."""
+    m = L.shape[0]
+    nchunks = min(m, _FAR_CHUNKS)
+    # every row written below (a target's own, zeros where it has no partner): np.zeros
+    # cleared the 16 MB of these at 10⁵ edges once more (docs/benchmarks.md, session 19)
+    eF = np.empty(m)
+    gt = np.empty((m if grad else 0, 4))
+    gG = np.empty((m if grad else 0, 6))
+    gW = np.empty((m if grad else 0, 18))
+    gs = np.zeros((rows if grad else 0, 4))
+    for cc in nb.prange(nchunks):
+        ch = np.int64(cc)
+        W = np.zeros(_CW_SIZE)
+        S = np.zeros(24)
+        for a in range(ch * m // nchunks, (ch + 1) * m // nchunks):
+            if foff[a + 1] == foff[a]:
+                eF[a] = 0.0
+                if grad:
+                    gt[a] = 0.0
+                    gG[a] = 0.0
+                    gW[a] = 0.0
+                continue
+            if grad:  # a constant at each call (the branches fold away)
+                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, True, gs,
+                           fslot, eF, gt, gG, gW, lanes)
+            else:
+                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, False, gs,
+                           fslot, eF, gt, gG, gW, lanes)
+    return eF, gt, gG, gW, gs
+
+
+@nb.njit(cache=True, parallel=True)
+def _cc_node_grad(L, G, gt, gs, soff, sidx, gG, gW):
+    """Per node, the derivatives the edges need: ``∂/∂L`` (target and source parts) and
+    ``∂/∂c`` with ``W``'s dependence on ``c`` (``∂W_abk/∂c_k = −G_ab``) folded in."""
+    m = L.shape[0]
+    out = np.empty((m, 4))  # every row written
+    nchunks = min(m, _FAR_CHUNKS)
+    for bb in nb.prange(m):
+        b = np.int64(bb)
+        s0 = gt[b, 0]
+        s1 = gt[b, 1]
+        s2 = gt[b, 2]
+        s3 = gt[b, 3]
+        for k in range(soff[b], soff[b + 1]):  # in piece order: the same bits for any thread count
+            r = sidx[k]
+            s0 += gs[r, 0]
+            s1 += gs[r, 1]
+            s2 += gs[r, 2]
+            s3 += gs[r, 3]
+        if soff[b + 1] - soff[b] < nchunks:
+            # the zeros of the pieces that never met b (a −0.0 sum becomes +0.0, as before)
+            s0 += 0.0
+            s1 += 0.0
+            s2 += 0.0
+            s3 += 0.0
+        for ab in range(6):  # Σ over a, b: the pairs off the diagonal twice
+            w = G[b, ab] * _SYM_W[ab]
+            s1 -= gW[b, 3 * ab] * w
+            s2 -= gW[b, 3 * ab + 1] * w
+            s3 -= gW[b, 3 * ab + 2] * w
+        out[b, 0] = s0
+        out[b, 1] = s1
+        out[b, 2] = s2
+        out[b, 3] = s3
+    return out
+
+
+@nb.njit(cache=True)
+def _cc_push(L, C, parent, gn, gG, gW):
+    """The nodes' derivatives summed down to the leaves, in place, each node's sum about its
+    own centre: the terms :func:`_cc_to_edges` adds per edge and ancestor are affine in the
+    edge's midpoint (``L`` and ``c`` through ``m − c``, ``G`` and ``W`` through ``δ = m −
+    c``), so a parent's sum moves to a child's centre by ``h = c_child − c``. After it, per
+    node: ``gn`` column 0 the ``∂/∂l`` constant, 1–3 ``Σ g_c / L``; ``gG`` ``Σ gG + gW · h``,
+    ``gW`` ``Σ gW``. Parents first (a parent's index is below its children's)."""
+    for b in range(L.shape[0]):
+        il = 1.0 / L[b]
+        for k in range(1, 4):
+            gn[b, k] *= il
+        p = parent[b]
+        if p < 0:
+            continue
+        h0 = C[b, 0] - C[p, 0]
+        h1 = C[b, 1] - C[p, 1]
+        h2 = C[b, 2] - C[p, 2]
+        gn[b, 0] += gn[p, 0] + gn[p, 1] * h0 + gn[p, 2] * h1 + gn[p, 3] * h2
+        for k in range(1, 4):
+            gn[b, k] += gn[p, k]
+        for ab in range(6):
+            gG[b, ab] += (gG[p, ab] + gW[p, 3 * ab] * h0 + gW[p, 3 * ab + 1] * h1
+                          + gW[p, 3 * ab + 2] * h2)
+        for k in range(18):
+            gW[b, k] += gW[p, k]
+
+
+@nb.njit(cache=True, parallel=True, fastmath={"contract"})
+def _cc_to_edges(E, M, ln, C, lo, hi, leaves, gn, gG, gW, rows):
+    """The nodes' derivatives, summed to the leaves (:func:`_cc_push`), passed to their edges:
+    ``L`` and ``c`` as in :func:`_far_sources`; ``G`` and ``W`` through ``e eᵀ / l`` (edge
+    vector rows 1–3, length row 7) and ``δ = m − c`` (midpoint rows 4–6). Last, the length
+    row's part of the edge vector's rows (``∂l/∂e = e/l``): ``rows`` is then complete."""
+    nl = leaves.shape[0]
+    for tt in nb.prange(nl):
+        b = leaves[np.int64(tt)]
+        for q in range(lo[b], hi[b]):
+            e0, e1, e2 = E[q, 0], E[q, 1], E[q, 2]
+            il = 1.0 / ln[q]
+            x0 = M[q, 0] - C[b, 0]
+            x1 = M[q, 1] - C[b, 1]
+            x2 = M[q, 2] - C[b, 2]
+            gl = gn[b, 0] + gn[b, 1] * x0 + gn[b, 2] * x1 + gn[b, 3] * x2
+            gm0 = gn[b, 1] * ln[q]
+            gm1 = gn[b, 2] * ln[q]
+            gm2 = gn[b, 3] * ln[q]
+            # H = gG + gW·δ (symmetric, by the pair ab): ∂(eᵀHe/l)/∂e = 2 H e / l,
+            # ∂/∂l = −eᵀHe/l², ∂/∂m_c = Σ_ab gW_abc e_a e_b / l
+            h0 = gG[b, 0] + gW[b, 0] * x0 + gW[b, 1] * x1 + gW[b, 2] * x2
+            h1 = gG[b, 1] + gW[b, 3] * x0 + gW[b, 4] * x1 + gW[b, 5] * x2
+            h2 = gG[b, 2] + gW[b, 6] * x0 + gW[b, 7] * x1 + gW[b, 8] * x2
+            h3 = gG[b, 3] + gW[b, 9] * x0 + gW[b, 10] * x1 + gW[b, 11] * x2
+            h4 = gG[b, 4] + gW[b, 12] * x0 + gW[b, 13] * x1 + gW[b, 14] * x2
+            h5 = gG[b, 5] + gW[b, 15] * x0 + gW[b, 16] * x1 + gW[b, 17] * x2
+            he0 = h0 * e0 + h1 * e1 + h2 * e2
+            he1 = h1 * e0 + h3 * e1 + h4 * e2
+            he2 = h2 * e0 + h4 * e1 + h5 * e2
+            ehe = e0 * he0 + e1 * he1 + e2 * he2
+            ga0 = 2.0 * he0 * il
+            ga1 = 2.0 * he1 * il
+            ga2 = 2.0 * he2 * il
+            t00 = e0 * e0 * il
+            t01 = 2.0 * e0 * e1 * il
+            t02 = 2.0 * e0 * e2 * il
+            t11 = e1 * e1 * il
+            t12 = 2.0 * e1 * e2 * il
+            t22 = e2 * e2 * il
+            gm0 += (gW[b, 0] * t00 + gW[b, 3] * t01 + gW[b, 6] * t02 + gW[b, 9] * t11
+                    + gW[b, 12] * t12 + gW[b, 15] * t22)
+            gm1 += (gW[b, 1] * t00 + gW[b, 4] * t01 + gW[b, 7] * t02 + gW[b, 10] * t11
+                    + gW[b, 13] * t12 + gW[b, 16] * t22)
+            gm2 += (gW[b, 2] * t00 + gW[b, 5] * t01 + gW[b, 8] * t02 + gW[b, 11] * t11
+                    + gW[b, 14] * t12 + gW[b, 17] * t22)
+            gl -= ehe * il * il
+            rows[4, q] += gm0
+            rows[5, q] += gm1
+            rows[6, q] += gm2
+            rows[7, q] += gl
+            # and the length row's part of the edge vector's, ∂l/∂e = e/l (the last sums)
+            t = rows[7, q] / ln[q]
+            rows[1, q] = (rows[1, q] + ga0) + t * e0
+            rows[2, q] = (rows[2, q] + ga1) + t * e1
+            rows[3, q] = (rows[3, q] + ga2) + t * e2
+
+
+class TangentPointFrame(Frame):
+    """The hierarchy and far/near split of :class:`.barnes_hut.Frame` with the tangent-point
+    energy's sums; reusable at nearby polygons (a line search sees one smooth function).
+
+    Parameters
+    ----------
+    X : (N, 3) array
+        Stacked vertices of closed and open components (see ``_layout``).
+    layout : Layout
+    alpha, beta : float
+        The exponents (:func:`.energies.tangent_point.check_exponents`).
+    theta : float
+        Admissibility: clusters are far when ``max(diam) ≤ theta · gap`` of their boxes.
+    leaf_size : int
+        Edges per leaf at most.
+    """
+
+    # open components: the same kernel as closed ones (pairs of neighbours along the curve left
+    # out; the first and last edge are none) and no arc-length part; pairs of clusters that may
+    # share one take θ · OPEN_THETA as for the Möbius energy (a single bent cable of 2 000
+    # edges, (2, 4): gradient error 1.1e-2 against 6.5e-2 with θ alone; docs/benchmarks.md)
+    arc_part = False
+
+    def __init__(self, X: np.ndarray, layout: Layout, alpha: float = DEFAULT_ALPHA,
+                 beta: float = DEFAULT_BETA,
+                 theta: float = THETA, leaf_size: int = LEAF_SIZE):
+        self.alpha, self.beta = check_exponents(alpha, beta)
+        self.kind = kind_of(self.alpha, self.beta)
+        super().__init__(X, layout, check_theta(theta), leaf_size)
+        left, right = self.tree.left, self.tree.right
+        parent = np.full(left.shape[0], -1, np.int64)
+        inner = np.flatnonzero(left >= 0)
+        parent[left[inner]] = inner
+        parent[right[inner]] = inner
+        self.parent = parent
+        self._cc_own = None
+        m = left.shape[0]
+        self._cc_slots = (_cc_slots(self.foff, self.fpart, m, min(m, _FAR_CHUNKS))
+                          if self.kind != KIND_GENERAL else None)
+
+    def _clusters(self, edges):
+        tree = self.tree
+        return _lc_data(edges[1], edges[2], edges[3], tree.lo, tree.hi, tree.left, tree.right)
+
+    def _near_setup(self, near: np.ndarray, m: int):
+        tree, layout = self.tree, self.layout
+        self._nbr, self._at = _neighbours(tree.perm, layout.nxt, layout.prv)
+        self._pieces = _near_pieces(self.leaves, near, m, min(self.leaves.shape[0], _FAR_CHUNKS))
+
+    def _evaluate(self, X: np.ndarray, grad: bool):
+        lay, tree = self.layout, self.tree
+        X0, edges, clusters = self._own
+        own = np.array_equal(X, X0)
+        if not own:
+            edges = _edge_arrays(X, lay.nxt, lay.comp, lay.starts, tree.perm)
+            clusters = self._clusters(edges)
+        E, M, ln = edges[0], edges[1], edges[2]
+        L, C = clusters[0], clusters[1]
+        args = (self.alpha, self.beta, self.kind, grad)
+        rows = _near(E, M, ln, tree.lo, tree.hi, self.leaves, *self._pieces, self._nbr, *args,
+                     _LANES)
+        if self.kind == KIND_GENERAL:
+            # |T × d|^α is no polynomial in T for α ≠ 2: every edge against the cluster
+            gnode = _far(E, M, ln, L, C, tree.lo, tree.hi, self.leaves, self.parent, self.foff,
+                         self.fpart, self.alpha, self.beta, grad, rows)
+            energy = float(np.sum(rows[0]))
+            if not grad:
+                return energy, None
+            _far_sources(M, ln, L, C, tree.lo, tree.hi, self.leaves, self.parent,
+                         gnode.sum(axis=0), rows)
+            rows[1:4] += rows[7] / ln * E.T  # ∂l/∂e = e/l
+        else:
+            if own and self._cc_own is not None:
+                G, Wm = self._cc_own
+            else:
+                G, Wm = _cc_moments(E, M, ln, tree.lo, tree.hi, tree.left, tree.right, C)
+                if own:
+                    self._cc_own = (G, Wm)
+            fslot, soff, sidx = self._cc_slots
+            eF, gt, gG, gW, gs = _cc_far(L, C, G, Wm, self.foff, self.fpart, fslot,
+                                         sidx.shape[0], self.beta, self.kind, grad, _CL)
+            energy = float(np.sum(rows[0])) + float(np.sum(eF))
+            if not grad:
+                return energy, None
+            gn = _cc_node_grad(L, G, gt, gs, soff, sidx, gG, gW)
+            _cc_push(L, C, self.parent, gn, gG, gW)
+            # with ∂l/∂e = e/l of every sum (numpy's three temporaries took about 1 ms at 10⁵)
+            _cc_to_edges(E, M, ln, C, tree.lo, tree.hi, self.leaves, gn, gG, gW, rows)
+        return energy, _to_vertices(rows, lay.prv, self._at)
+
+
+def tp_tree_energy(X: np.ndarray, layout: Layout, alpha: float = DEFAULT_ALPHA,
+                   beta: float = DEFAULT_BETA,
+                   theta: float = THETA) -> float:
+    """Barnes–Hut tangent-point energy of the stacked vertex array, split built at ``X``."""
+    return TangentPointFrame(X, layout, alpha, beta, theta).energy(X)
+
+
+def tp_tree_energy_gradient(X: np.ndarray, layout: Layout, alpha: float = DEFAULT_ALPHA,
+                            beta: float = DEFAULT_BETA, theta: float = THETA):
+    """Barnes–Hut tangent-point energy and its exact gradient, split built at ``X``."""
+    return TangentPointFrame(X, layout, alpha, beta, theta).energy_gradient(X)
