@@ -138,7 +138,7 @@ def write_doc(rows: list[dict], sheets: list) -> None:
              "(`bench/energy_gallery.py`); each tile is labelled with the extrapolated Möbius "
              "energy (the round circle has 4). Numbers and method: "
              "[data/energy_table.csv](data/energy_table.csv) and "
-             "[benchmarks.md](benchmarks.md#the-möbius-energy-table-benchenergy_tablepy-issue-16).",
+             "[lab/knot-table.md](lab/knot-table.md#the-möbius-energy-table-benchenergy_tablepy).",
              "",
              "The polygons themselves are in "
              "[data/energy_table_curves.npz](data/energy_table_curves.npz) (one float32 array "

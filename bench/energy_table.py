@@ -3,11 +3,11 @@ convergence at two resolutions, the energy extrapolated in the edge count.
 
 For each knot: ``core.knots.named(name)`` at its default edge count ``n1`` is relaxed by the
 implicit projected gradient (``projected_gradient_implicit``: it converges on knots where the
-explicit method stalls, docs/benchmarks.md) until the metric gradient norm falls below
-``--tol`` (or ``--max-iter`` iterations, or ``--max-seconds``); the relaxed polygon is then
-resampled to ``n2 = 2 n1`` edges and relaxed again from there. The discretization error of the
-energy of a relaxed polygon falls as ``n^-p``; with ``p`` from ``--order`` (measured on the
-trefoil by ``--order-study``) Richardson extrapolation gives
+explicit method stalls, docs/lab/flows-and-methods.md, "Knots of the table") until the metric
+gradient norm falls below ``--tol`` (or ``--max-iter`` iterations, or ``--max-seconds``); the
+relaxed polygon is then resampled to ``n2 = 2 n1`` edges and relaxed again from there. The
+discretization error of the energy of a relaxed polygon falls as ``n^-p``; with ``p`` from
+``--order`` (measured on the trefoil by ``--order-study``) Richardson extrapolation gives
 ``E_∞ = E(n2) + (E(n2) − E(n1)) / (2^p − 1)``. The relaxed curve is identified
 (``core.identify``) to check it is still the knot it started as.
 

@@ -12,9 +12,14 @@
                                                             # allocator: as in a flow)
     python bench/repulsor_compare.py --core-from DIR        # our side imported from DIR (e.g. an
                                                             # export of another branch)
+    python bench/repulsor_compare.py --driver PATH          # Repulsor's driver binary (default
+                                                            # $REPULSOR_BUILD/driver/driver, else
+                                                            # build/repulsor/driver/driver here)
+    python bench/repulsor_compare.py --curve knot.obj       # another curve (one closed polyline)
 
-The curve is the Freedman–He–Wang unknot (/work/shared/data/repulsive-curves/
-freedman_unknot_1184.obj) resampled with ``core.resample(P, n)``. Per size and thread count,
+The curve is the Freedman–He–Wang unknot shipped with the package
+(``moebius_addon/core/data/freedman_unknot_1184.obj``; ``--curve`` for another OBJ polyline)
+resampled with ``core.resample(P, n)``. Per size and thread count,
 one round runs four processes in turn, k rounds: Repulsor E+g, our E+g, Repulsor iteration, our
 iteration; each process times one measurement with its own clock (Repulsor: std::chrono::
 steady_clock; ours: time.perf_counter, after a warm-up on a small curve so that no numba compile
@@ -47,21 +52,24 @@ same energy (best of each). Our iteration lines give the Krylov iterations of ea
 (``krylov=``).
 
 Repulsor is never a dependency of the add-on and nothing of it is in this repository: the driver
-binary (``--driver``, default /work/repulsor-build/driver/driver) is a small C++ program of ours
-that calls Repulsor's API (``bench/repulsor_driver/driver.cpp``; ``bench/repulsor_driver/
-build.sh`` fetches Repulsor and builds the driver outside the repository), built against
+binary (``--driver``) is a small C++ program of ours that calls Repulsor's API
+(``bench/repulsor_driver/driver.cpp``). ``bench/repulsor_driver/build.sh [DIR]`` fetches
+Repulsor into DIR and builds DIR/driver/driver; DIR defaults to ``$REPULSOR_BUILD``, else to
+``build/repulsor`` in this checkout (git ignores it; ``make clean`` removes it), which is where
+``--driver`` looks by default too. The driver is built against
 Repulsor 5db79ff19cd8bbd17dafdd256017aa690d70b392 (submodules Tensors 6de11784d4d54403091410d9
 b622281c28e5f211, Tools dfa339a6d599fb166d543329a6b718a328a0d384, with upstream's later fix of
 ``Tools::Accumulate``, Tools 0525a91, applied: without it the block cluster tree reads
-uninitialised memory and the energy comes out NaN in most runs); docs/benchmarks.md,
-"Tangent-point energy against Repulsor", says with what it was compiled and what was
-measured. Without the binary, only our side runs.
+uninitialised memory and the energy comes out NaN in most runs); docs/performance.md,
+"Tangent-point energy against Repulsor", gives the figures, docs/lab/repulsor.md how the
+driver was compiled and every run. Without the binary, only our side runs.
 Results also go to ``out/repulsor_compare.json``.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import itertools
 import json
 import os
@@ -76,8 +84,10 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-FHW = Path("/work/shared/data/repulsive-curves/freedman_unknot_1184.obj")
-DRIVER = Path("/work/repulsor-build/driver/driver")
+# the curve shipped with the package (its data folder stays where it is)
+FHW = ROOT / "moebius_addon" / "core" / "data" / "freedman_unknot_1184.obj"
+# where bench/repulsor_driver/build.sh puts the driver: $REPULSOR_BUILD, else build/repulsor
+DRIVER = Path(os.environ.get("REPULSOR_BUILD") or ROOT / "build" / "repulsor") / "driver" / "driver"
 CACHE = ROOT / "out" / "repulsor_curves"
 EXACT_UP_TO = 10000
 ALPHA, BETA = 2.0, 4.0
@@ -148,7 +158,7 @@ def forget_warm_up() -> float:
 def worker(args) -> None:
     """One measurement of ours; prints one ``ours ...`` line and one ``ours memory`` line."""
     core = _core(args.core_from)
-    P = np.fromfile(args.curve, dtype=np.float64).reshape(-1, 3)
+    P = np.fromfile(args.raw_curve, dtype=np.float64).reshape(-1, 3)
     n = len(P)
     theta = args.theta
     # warm-up: load (or compile) every kernel used below. A 600-edge curve alone misses the
@@ -217,13 +227,18 @@ def worker(args) -> None:
 
 # -- the curves, the mapping check, the driver -----------------------------------------------------
 
-def curve(core, n: int) -> Path:
-    """The FHW unknot resampled to n edges, as raw float64 (N, 3) for both sides."""
+def curve(core, obj: Path, n: int) -> Path:
+    """The curve of the OBJ file (the FHW unknot by default) resampled to n edges, as raw
+    float64 (N, 3) for both sides; cached under out/, keyed by the file's content."""
     CACHE.mkdir(parents=True, exist_ok=True)
-    path = CACHE / f"fhw_{n}.bin"
+    digest = hashlib.sha1(obj.read_bytes()).hexdigest()[:10]
+    path = CACHE / f"{obj.stem}-{digest}_{n}.bin"
     if not path.exists():
-        (P,) = core.read_obj(FHW)
-        np.ascontiguousarray(core.resample(P, n), dtype=np.float64).tofile(path)
+        polygons = core.read_obj(obj)
+        if len(polygons) != 1:
+            sys.exit(f"{obj} holds {len(polygons)} polylines; --curve needs a file with one "
+                     "closed polyline (Repulsor's driver takes one curve)")
+        np.ascontiguousarray(core.resample(polygons[0], n), dtype=np.float64).tofile(path)
     return path
 
 
@@ -316,7 +331,13 @@ def main() -> None:
     ap.add_argument("--million", action="store_true", help="add 10^6 edges (slow)")
     ap.add_argument("--threads", type=int, nargs="*", default=[1, 2])
     ap.add_argument("--reps", type=int, default=5, help="alternated rounds k per size")
-    ap.add_argument("--driver", default=str(DRIVER))
+    ap.add_argument("--driver", default=str(DRIVER),
+                    help="Repulsor's driver, built by bench/repulsor_driver/build.sh (default "
+                         "%(default)s: $REPULSOR_BUILD/driver/driver, else build/repulsor in "
+                         "this checkout)")
+    ap.add_argument("--curve", default=str(FHW),
+                    help="OBJ file of one closed polyline, resampled to each size (default: the "
+                         "FHW unknot shipped in moebius_addon/core/data)")
     ap.add_argument("--theta", type=float, default=None,
                     help="our tree's admissibility (default: the core's)")
     ap.add_argument("--repulsor-theta", type=float, default=0.5,
@@ -333,7 +354,7 @@ def main() -> None:
     ap.add_argument("--worker", choices=("eg", "eg_parts", "iter", "eg_moebius", "iter_moebius",
                                          "error"),
                     help=argparse.SUPPRESS)
-    ap.add_argument("--curve", help=argparse.SUPPRESS)
+    ap.add_argument("--raw-curve", help=argparse.SUPPRESS)
     ap.add_argument("--threads-of-worker", type=int, dest="worker_threads", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker:
@@ -346,6 +367,9 @@ def main() -> None:
     from paper import machine
 
     sizes = args.sizes + ([1000000] if args.million else [])
+    obj = Path(args.curve).resolve()
+    if not obj.is_file():
+        sys.exit(f"no curve at {obj}: give an OBJ file with --curve")
     driver = Path(args.driver)
     have_driver = driver.exists()
     out: dict = {"machine": machine(), "driver": str(driver) if have_driver else None,
@@ -373,7 +397,7 @@ def main() -> None:
             rows.append(r)
 
     for n in sizes:
-        path = curve(core, n)
+        path = curve(core, obj, n)
         if n <= EXACT_UP_TO:
             total, disjoint = tp_sums(np.fromfile(path).reshape(-1, 3))
             row = {"side": "numpy", "mode": "mapping", "edges": n, "threads": 0,
@@ -390,21 +414,21 @@ def main() -> None:
                                  if mode == "eg" and args.parts and args.again else [])
                         measure([str(driver), str(path), mode, str(t), "--theta",
                                  str(args.repulsor_theta)] + again, env)
-                    measure(me + ["--worker", mode, "--curve", str(path), "--threads-of-worker",
+                    measure(me + ["--worker", mode, "--raw-curve", str(path), "--threads-of-worker",
                                   str(t)] + extra, env)
                 if args.parts:
-                    measure(me + ["--worker", "eg_parts", "--curve", str(path),
+                    measure(me + ["--worker", "eg_parts", "--raw-curve", str(path),
                                   "--threads-of-worker", str(t), "--again", str(args.again)]
                             + extra, env)
                 if args.moebius:
                     for mode in ("eg_moebius", "iter_moebius"):
-                        measure(me + ["--worker", mode, "--curve", str(path),
+                        measure(me + ["--worker", mode, "--raw-curve", str(path),
                                       "--threads-of-worker", str(t)] + extra, env)
             if n <= EXACT_UP_TO:  # both sides' all-pairs sums (Repulsor's: 300 s at 10^5)
                 if have_driver:
                     measure([str(driver), str(path), "error", str(t), "--theta",
                              str(args.repulsor_theta)], env)
-                measure(me + ["--worker", "error", "--curve", str(path), "--threads-of-worker",
+                measure(me + ["--worker", "error", "--raw-curve", str(path), "--threads-of-worker",
                               str(t)] + extra, env)
             best = {}
             for side in ("repulsor", "ours"):

@@ -22,8 +22,9 @@ KD-tree of scipy and an exact segment distance, independent of the core's contac
 and the final energy against the table's at the final edge count (for knots; from ``n1`` and
 ``n2 = 2 n1`` the table's ``E(n) = E∞ + (E1 − E∞)(n1/n)²``). Rows go to
 ``out/untangle/results.jsonl`` (resumable: done tasks are skipped) and relaxed polygons to
-``out/untangle/<task>.npz``; ``--report`` prints the summary tables of docs/benchmarks.md
-and writes ``docs/data/untangle.csv``::
+``out/untangle/<task>.npz``; ``--report`` prints the summary tables of docs/performance.md
+("Untangling") and docs/lab/flows-and-methods.md ("Untangling benchmark") and writes
+``docs/data/untangle.csv``::
 
     .venv/bin/python bench/untangle.py --jobs 2               # everything, hours
     .venv/bin/python bench/untangle.py --only 6_2 9_13        # some tasks (by knot name)

@@ -2,7 +2,11 @@
 # Fetch Repulsor at the pinned commits and build the benchmark driver (bench only: Repulsor is
 # never a dependency of the add-on, and none of its code is in this repository).
 #
-#     bench/repulsor_driver/build.sh [DIR]      # default DIR: /work/repulsor-build
+#     bench/repulsor_driver/build.sh [DIR]
+#
+# DIR defaults to $REPULSOR_BUILD, else to build/repulsor in this checkout (git ignores build/;
+# `make clean` removes it), which is where bench/repulsor_compare.py looks for the driver
+# unless --driver says otherwise. A relative DIR is taken from the current directory.
 #
 # DIR/Repulsor gets Repulsor 5db79ff with its submodules Tensors 6de1178 and (inside Tensors)
 # Tools dfa339a, plus upstream Tools 0525a91's change to src/ParallelAlgorithms.hpp ("Fixed a
@@ -14,7 +18,8 @@
 # takes 2-14 minutes here; run it under nice while anything else is measured.
 set -eu
 HERE=$(cd "$(dirname "$0")" && pwd)
-DIR=${1:-/work/repulsor-build}
+ROOT=$(cd "$HERE/../.." && pwd)
+DIR=${1:-${REPULSOR_BUILD:-$ROOT/build/repulsor}}
 BASE=${GIT_BASE:-https://github.com/HenrikSchumacher}
 CXX=${CXX:-clang++-19}
 mkdir -p "$DIR/driver"
