@@ -1,5 +1,5 @@
 """Seconds per iteration of a run on open cables with pinned ends on the tree engine, and the
-energy with its gradient tree against exact (issue 28): ``n`` cables of ``m`` edges between two
+energy with its gradient tree against exact: ``n`` cables of ``m`` edges between two
 parallel plates (z = 0 and z = 1, ends on a square grid, pinned), each bent by a few random
 sines so that no two are parallel.
 

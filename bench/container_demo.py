@@ -1,4 +1,4 @@
-"""A knot relaxed inside a container that is tight enough to matter (issue 28): the trefoil of
+"""A knot relaxed inside a container that is tight enough to matter: the trefoil of
 docs/design.md (largest radius 3.0), ``--edges`` equal edges, inside a UV sphere of radius
 ``--radius`` (the free flow's relaxed trefoil does not fit in 2.4), exact engine. Prints the
 iterations, seconds, energies, the least distance of a vertex to the wall, and checks every

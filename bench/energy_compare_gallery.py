@@ -1,5 +1,5 @@
 """Two energies side by side: a few knots of the table relaxed by the Möbius and by the
-tangent-point energy from the same start, rendered as one contact sheet (issue 26).
+tangent-point energy from the same start, rendered as one contact sheet.
 
 For each knot the catalogue curve (``core.knots.named``) is resampled to ``--edges`` edges and
 relaxed once per energy (``projected_gradient_implicit``, engine "auto"). Each result is

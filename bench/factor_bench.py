@@ -8,7 +8,7 @@ something). Prints measurements; not a test.
 ``triu_indices``, the edge Schur block from numpy temporaries, ``np.linalg.cholesky`` of S and
 a LAPACK triangular inverse. "current" is ``linalg.Factorization``: tiled numba mirror, one-pass
 numba Schur block, LAPACK potrf of S (applied by blocked substitution, whose diagonal-block
-inverses are part of the factorization since session 3).
+inverses are part of the factorization).
 """
 
 from __future__ import annotations

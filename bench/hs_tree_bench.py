@@ -1,4 +1,4 @@
-"""The hs metric on the tree engine (issue "Tree engine, part 2"): accuracy of the matrix-free
+"""The hs metric on the tree engine: accuracy of the matrix-free
 operator, Krylov iterations against N, and the flow at large N. Prints measurements and writes
 JSON to out/; not a test.
 

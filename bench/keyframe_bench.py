@@ -1,4 +1,4 @@
-"""How fast the flow's keys are written and played in Blender (issue 14). Prints; not a test.
+"""How fast the flow's keys are written and played in Blender. Prints; not a test.
 
     .venv/bin/python bench/keyframe_bench.py                       # 5 000 and 20 000 points
     .venv/bin/python bench/keyframe_bench.py --sizes 1000 --iterates 100 --repeats 3

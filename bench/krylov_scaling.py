@@ -1,4 +1,4 @@
-"""Krylov iterations of the hs solves against N (issue 27, "a preconditioner whose Krylov count
+"""Krylov iterations of the hs solves against N ("a preconditioner whose Krylov count
 does not grow with N or with the curve"). Prints a table, writes JSON to out/ and a plot to
 docs/img/krylov_scaling.png; not a test.
 

@@ -1,4 +1,4 @@
-"""Krylov iterations of the tree's hs solves against the metric's order (issue 26): short
+"""Krylov iterations of the tree's hs solves against the metric's order: short
 tree-engine runs of the Möbius energy (order 3/2) and of the tangent-point energy with
 exponents of order (β − 1)/α = 3/2, 5/3, 7/5 from the same start. Prints measurements; not a
 test.

@@ -1,4 +1,4 @@
-"""Headless Blender demo of pins and obstacles (issue 18): ``--scene trefoil``, a trefoil wound
+"""Headless Blender demo of pins and obstacles: ``--scene trefoil``, a trefoil wound
 around the tube of a torus, two of its points pinned; ``--scene cable``, an open cable
 threaded through the torus' hole with both ends pinned and coils that untangle; each relaxed
 with the torus as an obstacle.

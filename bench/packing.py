@@ -1,4 +1,4 @@
-"""Curve packing by length growth (issue 28): a trefoil (``--edges`` equal edges) inside a UV
+"""Curve packing by length growth: a trefoil (``--edges`` equal edges) inside a UV
 sphere (or ``--box``: a cube) grows to ``--factor`` times its length at ``--rate`` per
 iteration (``length_target=``, ``length_growth=``), exact engine, adaptive resolution on (edges
 grown past twice their start are split). Prints length, energy (Möbius plus the wall's),

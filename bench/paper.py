@@ -1,4 +1,4 @@
-"""The paper's optimizer comparison (Reiter & Schumacher, Figs. 3 and 4; issue 5): every method
+"""The paper's optimizer comparison (Reiter & Schumacher, Figs. 3 and 4): every method
 of ``core.runs.methods`` with every metric on the Freedman–He–Wang unknot, a fixed wall-time budget
 per run, plus iterations-to-round (E ≤ 4.01) against the edge count for the explicit projected
 gradient with hs, h1 and l2.

@@ -1,4 +1,4 @@
-"""Cost of pinned vertices (issue 18): seconds per iteration of the explicit method on the FHW
+"""Cost of pinned vertices: seconds per iteration of the explicit method on the FHW
 unknot with 0, 10 and 50 pins (evenly spaced), on the exact and the tree engine.
 
     python bench/pins_bench.py                        # 1 000 (exact, tree) and 5 000 (tree)

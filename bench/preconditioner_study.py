@@ -1,4 +1,4 @@
-"""Design study for the cost-ratio target of the core (issue 2): how well would a *sparse*
+"""Design study for the cost-ratio target of the core: how well would a *sparse*
 preconditioner built from the geometric near field of the hs Gram matrix work, in place of the
 dense factorization of every iterate? Prints measurements; not a test. Uses scipy (dense
 eigenvalues, null spaces, a sparse LU for the fill) — fine for a study, not for the add-on.

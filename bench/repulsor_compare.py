@@ -1,4 +1,4 @@
-"""Same-energy comparison with Henrik Schumacher's Repulsor (issue 26). Prints measurements.
+"""Same-energy comparison with Henrik Schumacher's Repulsor. Prints measurements.
 
     python bench/repulsor_compare.py                        # 2 400 and 10 000 edges, 1 and 2
                                                             # threads, 5 alternated rounds
@@ -46,7 +46,7 @@ engine="tree")``, the seconds of its one iteration from the run's history (``his
 projected Sobolev (hs) gradient under edge-length and barycenter constraints, Armijo line
 search with a collision-free step bound, back-projection onto the constraints, and the next
 energy, gradient and solve. With ``--moebius`` also our Möbius energy's E+g (``eg_moebius``)
-and the same iteration of our Möbius-energy flow (``iter_moebius``; issue 27 compares it with
+and the same iteration of our Möbius-energy flow (``iter_moebius``, to compare with
 Repulsor's tangent-point iteration); ``ratio`` lines give each side's iteration ÷ E+g of the
 same energy (best of each). Our iteration lines give the Krylov iterations of each hs solve
 (``krylov=``).
@@ -345,7 +345,7 @@ def main() -> None:
     ap.add_argument("--core-from", default=None)
     ap.add_argument("--json", default=str(ROOT / "out" / "repulsor_compare.json"))
     ap.add_argument("--moebius", action="store_true",
-                    help="also time our Möbius E+g and one iteration of its flow (issue 27)")
+                    help="also time our Möbius E+g and one iteration of its flow")
     ap.add_argument("--parts", action="store_true",
                     help="also time our E+g in two parts: frame built, sums on it")
     ap.add_argument("--again", type=int, default=0,
@@ -448,7 +448,7 @@ def main() -> None:
                     print(f"summary side={side} mode={mode} edges={n} threads={t} "
                           f"build_best={parts[0]['best']:.4f} kernel_best={parts[1]['best']:.4f} "
                           f"k={parts[1]['k']}", flush=True)
-            # iteration ÷ E+g of the same energy, best of each (issue 27's "iteration ≤ 6 E+g")
+            # iteration ÷ E+g of the same energy, best of each ("iteration ≤ 6 E+g")
             for side, it, eg in (("repulsor", "iter", "eg"), ("ours", "iter", "eg"),
                                  ("ours", "iter_moebius", "eg_moebius")):
                 if (side, it) in best and (side, eg) in best:

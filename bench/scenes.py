@@ -1,4 +1,4 @@
-"""Scenes artists make (issue 28): Repulsive Curves' public scenes *CableUntangle* (earbuds),
+"""Scenes artists make: Repulsive Curves' public scenes *CableUntangle* (earbuds),
 *RingsPacking* and *BunnyCurvePacking* in our terms, and 100 cables between two plates with a
 torus in the way. Prints sizes, iterations, seconds per iteration, energy and length, and
 checks every accepted iterate and the straight move between consecutive iterates with an

@@ -1,4 +1,4 @@
-"""Benchmark of the tangent-point energy's tree (issue 26). Prints measurements; not a test.
+"""Benchmark of the tangent-point energy's tree. Prints measurements; not a test.
 
     python bench/tp_tree_bench.py --errors 5000 20000    # relative errors against the exact sum
     python bench/tp_tree_bench.py --timings 2400 10000 100000   # E+g: tangent-point tree

@@ -1,4 +1,4 @@
-"""The flow's accuracy on the tree (issue 27). Prints measurements.
+"""The flow's accuracy on the tree. Prints measurements.
 
     python bench/tree_accuracy.py                 # FHW 1 648 edges to E <= 4.01, 4 rotations,
                                                   # theta 0.175, 0.125, 0.1; the round n-gon

@@ -1,4 +1,4 @@
-"""Benchmark of the tree engine (issue: "Tree engine, part 1"). Prints measurements; not a test.
+"""Benchmark of the tree engine. Prints measurements; not a test.
 
     python bench/tree_bench.py                      # sizes 1 000 .. 100 000 (and errors)
     python bench/tree_bench.py --sizes 1000 5000    # some sizes only
@@ -223,7 +223,7 @@ def main() -> None:
         Path(args.json).write_text(json.dumps(out, indent=1))
         return
 
-    print("\nresample to 100 000 edges (issue 'Tree engine, part 2': <= 2 s), seconds:", flush=True)
+    print("\nresample to 100 000 edges (<= 2 s), seconds:", flush=True)
     out["resample"] = {}
     for name in ("3_1", "7_2"):
         P = core.knots.named(name)

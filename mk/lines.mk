@@ -1,4 +1,4 @@
-# The Blender lines users run (issue 17); included from the main Makefile, whose PY, STAMP and
+# The Blender lines users run; included from the main Makefile, whose PY, STAMP and
 # PYTHON it uses.
 #
 # Every line has a venv of its own, with its own Python: bpy, the numpy that line runs on,

@@ -62,7 +62,7 @@ EXPLICIT_METHOD = "projected_gradient"
 #: The implicit projected gradient: best on knots.
 KNOT_METHOD = "projected_gradient_implicit"
 #: Default: :data:`KNOT_METHOD` for a curve its knot determinant proves knotted, else
-#: :data:`EXPLICIT_METHOD` (``choose_method``; measured in docs/benchmarks.md, "The
+#: :data:`EXPLICIT_METHOD` (``choose_method``; measured in docs/lab/flows-and-methods.md, "The
 #: automatic method": the implicit one ended lower on 32 of the 36 table knots in the same
 #: seconds, the explicit one is faster on the FHW unknot).
 AUTO_METHOD = "auto"

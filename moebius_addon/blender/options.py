@@ -138,7 +138,7 @@ PRESETS = {
 # Untangle Cables' θ 0.3 (default 0.175): on the 100 cables with the torus its energy and
 # gradient err 1.9e-5 / 5.4e-4 against the exact sums (default: 1.4e-6 / 1.0e-4; on knots the
 # default errs up to 1e-5 / 7e-4), for 0.86-0.91 s against 1.04-1.20 s per iteration
-# (docs/benchmarks.md, alternated in one run).
+# (docs/lab/cables-and-obstacles.md, alternated in one run).
 #: The settings the presets set: Relax Knot puts each back to its default.
 PRESET_SETTINGS = tuple(sorted({k for _, _, d in PRESETS.values() for k in d}
                                | {"obstacles", "container"}))

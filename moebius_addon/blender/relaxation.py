@@ -74,7 +74,7 @@ def choose_method(method: str, polygons: Sequence[np.ndarray]) -> tuple[str, str
     knotted), else :data:`EXPLICIT_METHOD` (unknots and the rare knots of determinant 1).
     Links: the implicit method converged on all ten links of the untangling benchmark in
     1.5–77 s of CPU, where the explicit one stopped at 5 000 iterations on five
-    (docs/benchmarks.md, "The automatic method")."""
+    (docs/lab/flows-and-methods.md, "The automatic method")."""
     if method != AUTO_METHOD:
         return method, ""
     if len(polygons) != 1:
@@ -92,9 +92,9 @@ def method_hint(method: str, result, polygons: Sequence[np.ndarray],
                 closed: bool = True, grows: bool = False) -> str:
     """Advice appended to the report of an explicit run that hit its iteration limit on a
     knotted curve (``polygons``: its start): the explicit flow's last stretch on a knot is
-    slow (docs/benchmarks.md, "Knots of the table"). Decided by ``result.status``, never by
-    the words of the message; unknots and links get none (the explicit method is the faster
-    one on unknots; Automatic gives links the implicit one), nor a run that grows the curve
+    slow (docs/lab/flows-and-methods.md, "Knots of the table"). Decided by ``result.status``,
+    never by the words of the message; unknots and links get none (the explicit method is the
+    faster one on unknots; Automatic gives links the implicit one), nor a run that grows the curve
     (``grows``: the implicit method cannot)."""
     if (method != EXPLICIT_METHOD or result.status != core.Status.MAX_ITER or not closed
             or (grows and KNOT_METHOD not in core.runs.methods.GROWING)):

@@ -1,4 +1,4 @@
-"""A container (issue 28): a closed mesh object the curve stays inside, set in the panel."""
+"""A container: a closed mesh object the curve stays inside, set in the panel."""
 
 from importlib import import_module
 

@@ -230,7 +230,8 @@ def test_panel_and_run_agree_on_which_settings_act(scene, mb):
 
 
 def test_automatic_method_follows_the_knot_type(scene, mb, core, trefoil):
-    # measured (docs/benchmarks.md): the implicit method is faster to the relaxed shape on
+    # measured (docs/lab/flows-and-methods.md): the implicit method is faster to the relaxed shape
+    # on
     # knots, the explicit one on the FHW unknot
     s = scene.moebius
     s.max_iterations = 2

@@ -1,5 +1,5 @@
-"""Pins from the points selected in Edit Mode and obstacles from a collection of meshes
-(issue 18), through the panel's settings and the script functions."""
+"""Pins from the points selected in Edit Mode and obstacles from a collection of meshes,
+through the panel's settings and the script functions."""
 
 from importlib import import_module
 

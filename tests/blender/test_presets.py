@@ -1,4 +1,4 @@
-"""Presets of the panel and length growth in Blender (issue 28): each preset sets what it says;
+"""Presets of the panel and length growth in Blender: each preset sets what it says;
 a growth run inside a container keys frames that stay inside and whose length grows; bad input
 is refused with the scene unchanged."""
 

@@ -161,7 +161,7 @@ def test_link_relaxes_both_components(scene, mb):
 
 @pytest.mark.lines
 def test_new_user_relaxes_the_fhw_unknot_into_keyframes(scene, mb):
-    # issue 17's new user: Add Knot ▸ Freedman–He–Wang (its default edges), Relax
+    # new user: Add Knot ▸ Freedman–He–Wang (its default edges), Relax
     assert bpy.ops.moebius.add_knot(kind="fhw") == {"FINISHED"}
     fhw = bpy.context.active_object
     n = len(spline_points(fhw))

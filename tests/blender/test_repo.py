@@ -1,4 +1,4 @@
-"""A repository users can add (issue 17): the static repository of ``make repo`` added to Blender
+"""A repository users can add: the static repository of ``make repo`` added to Blender
 as a Remote Repository, the extension installed through it, then a newer version published to
 it, offered as an update in a later session and installed.
 

@@ -1,4 +1,4 @@
-"""Blender at scale (issue 14): the engine and θ in every door, an edge limit that follows the
+"""Blender at scale: the engine and θ in every door, an edge limit that follows the
 engine (no size may crash the process), and the flow of large curves."""
 
 from importlib import import_module

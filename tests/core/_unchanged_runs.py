@@ -1,5 +1,5 @@
 """Short runs whose every iterate must stay bit-for-bit what it was before pinned vertices
-existed (issue 18): the reference ``data/unchanged_runs.json`` was written by this module's
+existed: the reference ``data/unchanged_runs.json`` was written by this module's
 ``main()`` on the commit before pins (run it there to regenerate; it uses nothing newer).
 
 Each case records, per accepted iterate, the history (energy, step, grad_norm,

@@ -1,4 +1,4 @@
-"""Containers (issue 28): a closed mesh the curve stays inside."""
+"""Containers: a closed mesh the curve stays inside."""
 
 import numpy as np
 import pytest

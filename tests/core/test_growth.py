@@ -1,4 +1,4 @@
-"""Length growth (issue 28): ``length_target=`` reached at ``length_growth=`` per iteration,
+"""Length growth: ``length_target=`` reached at ``length_growth=`` per iteration,
 monotonically, then held; inside a container never left (independent numpy checks of every
 iterate and every straight move between iterates)."""
 

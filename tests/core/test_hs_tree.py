@@ -165,7 +165,7 @@ def test_operator_against_the_dense_gram_matrix(name, rng):
     assert op.far_pairs == 0
     assert np.allclose(op.product(U), exact, rtol=0, atol=1e-11 * np.abs(exact).max())
     # the default far field: relative errors of products below 2e-2 (measured at most 1.0e-2
-    # on random fields, docs/benchmarks.md), falling with theta
+    # on random fields, docs/lab/tree-engine.md), falling with theta
     errors = []
     for theta in (hs_tree.THETA, 0.25):
         op = hs_tree.HsOperator(X, lay, "hs", theta=theta)

@@ -1,4 +1,4 @@
-"""Obstacles (issue 18): meshes the curve is repelled from and never crosses."""
+"""Obstacles: meshes the curve is repelled from and never crosses."""
 
 import re
 
@@ -373,7 +373,7 @@ def test_triangle_tree_holds_every_triangle_once(rng):
         assert np.all(box >= bmin[i]) and np.all(box <= bmax[i])
 
 
-# -- the energy through the hierarchy (issue 28) ----------------------------------------------
+# -- the energy through the hierarchy ----------------------------------------------
 
 
 def _fine_torus_and_ring():
@@ -397,7 +397,7 @@ def test_the_hierarchy_energy_is_within_its_bound_of_all_pairs(tol):
     E, G = tree.energy_gradient(X, layout.nxt, layout.prv)
     assert abs(E - E0) <= bound * E0
     assert E == pytest.approx(tree.energy(X, layout.nxt), rel=1e-14)
-    # the gradient has no proven bound; measured (docs/benchmarks.md) well within tol
+    # the gradient has no proven bound; measured (docs/lab/cables-and-obstacles.md) well within tol
     assert np.linalg.norm(G - G0) <= tol * np.linalg.norm(G0)
 
 

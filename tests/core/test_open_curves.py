@@ -1,4 +1,4 @@
-"""Open curves (``closed=False``, issue 18): O'Hara's regularized energy of an open polygon, its
+"""Open curves (``closed=False``): O'Hara's regularized energy of an open polygon, its
 exact gradient, the metrics, and runs with pinned or free ends, a mixed link and an obstacle.
 The closed runs' reference histories are in test_pins.py."""
 

@@ -1,4 +1,4 @@
-"""Open curves on the tree engine (issue 28): the arc-length part (core/_arc_field.py) against
+"""Open curves on the tree engine: the arc-length part (core/_arc_field.py) against
 numpy sums over all pairs, the tree's energy and gradient of layouts with open components
 against an independent numpy version and the exact sums (core/open_energy.py), its gradient as
 the derivative of the approximated sum, and the same bits for any thread count."""

@@ -1,4 +1,4 @@
-"""Runs with open components on the tree engine (issue 28): the banded saddle-point solver with
+"""Runs with open components on the tree engine: the banded saddle-point solver with
 dummy edges and pins eliminated against a dense numpy solve, "auto" and the refusals, short runs
 on pinned cables against the exact engine, with the pins kept to the bit and no two edges
 meeting (tests/mesh_checks.py), and the contact queries' hierarchy on open curves."""

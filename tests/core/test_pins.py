@@ -1,4 +1,4 @@
-"""Pinned vertices (issue 18): pinned vertices keep their bits on every iterate of every
+"""Pinned vertices: pinned vertices keep their bits on every iterate of every
 feasible method and engine, the energy still decreases on the constraints, the pinned solve is
 the saddle-point system with explicit pin rows, runs without pins are bit-for-bit what they
 were before pins, and every bad ``pinned=`` is refused before anything runs."""

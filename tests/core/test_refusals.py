@@ -1,4 +1,4 @@
-"""The public functions of the core refuse bad input before any work (issue 30, part 4).
+"""The public functions of the core refuse bad input before any work.
 
 One table: each case is a call a user could make, what it used to do (in the comment), and
 the exception and words it must raise now. Every refusal happens before a kernel runs, so

@@ -1,4 +1,4 @@
-"""bench/scenes.py (issue 28): its independent path check, and two small scenes run through
+"""bench/scenes.py: its independent path check, and two small scenes run through
 the same code as the demos — cables past a torus, a loop grown inside a sphere — with every
 move between consecutive iterates certified free of contact."""
 

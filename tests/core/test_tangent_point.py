@@ -111,7 +111,7 @@ def test_scaling_law_and_rigid_motions():
 def test_moebius_is_unchanged_through_the_new_door():
     P = trefoil(200)
     assert core.energy(P) == core.moebius_energy(P) == 75.99452256688987
-    # one frame for both (a change of session 11): the same values as the two doors apart, on
+    # one frame for both : the same values as the two doors apart, on
     # both engines, for a link and for a curve scaled far beyond 2^64
     link = [P, P + np.array([3.0, 0.0, 0.0])]
     for Q in (P, link, P * 2.0**80):
@@ -127,7 +127,7 @@ def test_moebius_is_unchanged_through_the_new_door():
 
 @pytest.mark.parametrize("alpha, beta", [(2.0, 4.0), (2.5, 5.0)])
 def test_tree_against_exact(alpha, beta):
-    # the tolerances documented in docs/benchmarks.md ("Tangent-point energy: cluster against
+    # the tolerances documented in docs/lab/tangent-point.md ("Tangent-point energy: cluster against
     # cluster"): at the default theta (0.25) relative errors below 1e-3 (energy) and 2e-3
     # (gradient, 2-norm) on this trefoil; at 0.1 below 3e-4 and 1e-3, at 0.5 5e-3 and 1e-2;
     # smaller theta, smaller error. alpha = 2 is the cluster-cluster far field, 2.5 the

@@ -13,7 +13,8 @@ meet, another CPU) go to the user's cache as before; nothing is written to :data
 
 Kernels loaded from it are the generic CPU's code, which may differ in the last bits from
 code compiled for this CPU where a kernel allows fast-math reassociation (vector widths
-differ); docs/benchmarks.md ("Compile time") has the speed measured.
+differ); docs/performance.md ("First contact: compiling, and the shipped kernels") has the
+speed measured.
 """
 
 from __future__ import annotations

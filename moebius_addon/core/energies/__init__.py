@@ -1,4 +1,4 @@
-"""The energies the flow can minimize, one module each (private; issue 26).
+"""The energies the flow can minimize, one module each (private).
 
 A module here is one energy: its name, which inputs it supports (open curves, links), how it
 scales, and its pair kernels, the only place its integrand is written. Every sum of the core

@@ -159,8 +159,8 @@ def pair_both_2(dx, dy, dz, ax, ay, az, li, il, sx, sy, sz, lj, jl, inv, rb, bet
     the prefactors' lengths ``∂F/∂l_I = (f_JI − f_IJ)/l_I``, ``∂F/∂l_J = (f_IJ − f_JI)/l_J``
     (the edge-vector derivatives without their length terms). Cross products, not
     ``l²|d|² − (e·d)²``: no cancellation where ``d`` is nearly parallel to an edge. Less
-    arithmetic than :func:`pair_radial` twice (one radial term, one ``d``; docs/benchmarks.md,
-    session 18).
+    arithmetic than :func:`pair_radial` twice (one radial term, one ``d``; docs/lab/repulsor.md,
+    "The tangent-point near field's pair in one piece, the moments of a leaf in registers").
 
     Returns ``(F, ∂e_I (3), ∂e_J (3), ∂d (3), ∂l_I, ∂l_J)``."""
     cx = ay * dz - az * dy

@@ -50,7 +50,8 @@ Rc)⁶)·((D − Rc)/(D − Rc − gain))³``. Visiting the nearer box first, a 
 sum so far)``, and counts ``G``: ``T`` with its nearest points ``GAIN_GUESS`` (0.5) times
 ``hbar sin ψ`` nearer (``hbar`` the mean triangle radius), clipped to ``[L, U]``, so off by
 at most ``U − L``: each edge's sum is then within ``4 tol / (1 − tol)`` of its exact value,
-relatively (proven; measured far below, docs/benchmarks.md). The gradient of an accepted box
+relatively (proven; measured far below, docs/lab/cables-and-obstacles.md). The gradient of an
+accepted box
 is its Taylor value's, scaled to ``G``: no proven bound, measured. The previous bounds (a
 first-order Taylor bound and the gain ``h`` in every direction, counting ``(L + U)/2``)
 summed 3.5 times as many triangles exactly on the 100 cables with the torus.
@@ -67,7 +68,8 @@ from .layout import unit_exponent
 _MAX_ADVANCE = 100_000
 # An accepted box's value: its Taylor value with the nearest points this fraction of hbar sin ψ
 # nearer (the mean triangle radius, ψ the angle to the box's axis), clipped to the proven
-# bounds. Fractions 0.3 to 0.8 measured on two scenes (docs/benchmarks.md): 0.5 erred least in
+# bounds. Fractions 0.3 to 0.8 measured on two scenes (docs/lab/cables-and-obstacles.md): 0.5 erred
+# least in
 # energy overall, 3 to 8 times less than the bounds' midpoint.
 GAIN_GUESS = 0.5
 
@@ -253,7 +255,7 @@ def _segment_triangle_distance2(p0x, p0y, p0z, p1x, p1y, p1z, T, k):
 #: ``OBSTACLE_TREE_FROM`` edge–triangle pairs on, every pair exactly below.
 AUTO_OBSTACLE_TOL = 0.1
 #: All pairs cost about 12 ms per pass there; the hierarchy paid 1.6x at 0.37M pairs, 5x at
-#: 2.9M (docs/benchmarks.md, "obstacle energy through the triangle hierarchy").
+#: 2.9M (docs/lab/cables-and-obstacles.md, "obstacle energy through the triangle hierarchy").
 OBSTACLE_TREE_FROM = 1_000_000
 
 
@@ -890,7 +892,8 @@ class ObstacleField:
                 ) -> tuple[int, int, float]:
         """``(edge, triangle, distance)`` of the closest edge–triangle pair (0: they meet);
         ``search`` "tree" (the triangles' hierarchy; 100 cables of 200 edges and 2 048
-        triangles: 0.43 s against 2.7 s for all pairs, docs/benchmarks.md) or "pairs": the
+        triangles: 0.43 s against 2.7 s for all pairs, docs/lab/cables-and-obstacles.md) or
+        "pairs": the
         same value."""
         if search == "pairs":
             which, dist2 = _nearest(X, nxt, self.T, self._skip(nxt))

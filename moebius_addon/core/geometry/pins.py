@@ -1,4 +1,4 @@
-"""Pinned vertices (issue 18): the caller's ``pinned=`` checked and turned into stacked vertex
+"""Pinned vertices: the caller's ``pinned=`` checked and turned into stacked vertex
 indices, before anything runs.
 
 A pinned vertex keeps its position exactly: the feasible methods eliminate its coordinates

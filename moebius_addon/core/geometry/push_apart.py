@@ -4,7 +4,7 @@ adaptive run: ``refine=`` of :func:`.flow.relax`, docs/api.md "Adaptive resoluti
 A start whose strands pass within a small fraction of an edge is too coarse for the discrete
 energy, and splitting its edges does not help quickly: two edges 0.05 edge lengths apart stay
 that far apart when split, so only a polygon of some 20× the edges passes the contact check
-(a braid-tangled trefoil of 111 edges needed 3 552, docs/benchmarks.md "Untangling
+(a braid-tangled trefoil of 111 edges needed 3 552, docs/lab/flows-and-methods.md "Untangling
 benchmark"). :func:`separate` moves such strands apart instead, by the least it takes:
 descent on a barrier of the *segment* distances of edges at least :data:`CONTACT_GAP` apart
 (so edges that nearly cross between their vertices are seen), the motion smoothed along the

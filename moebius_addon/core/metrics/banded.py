@@ -42,7 +42,8 @@ _BLOCKS = 64
 #: From this many vertices on, a solver's band keeps only its packed factors (:func:`pack_factors`)
 #: and is not taken over by the next iterate's: the fine band of the hs preconditioner holds
 #: 0.70 GB at 10⁶ vertices, its packed U 0.31 GB; below, the reuse saves a fresh array's page
-#: faults (docs/benchmarks.md, session 15).
+#: faults (docs/lab/repulsor.md, "A new machine, the bench's warm-up, unsigned places, the band
+#: compacted").
 COMPACT_FROM = 200_000
 # Vertices per piece of the low-rank correction's parallel sums (:func:`_correction`).
 _CHUNK = 4096
@@ -178,7 +179,7 @@ def pack_factors(ab, mult, kl, ku, cuts):
     multipliers, the rows' kept widths, and where each block's rows begin (then the end).
     FHW at 100 000 edges (hs, kl = ku = 11): U's rows keep 10.1 of 23 entries on average, the
     multipliers 8.6 of 11, so the solves, which stream the factors from memory, read 55 % of
-    the bytes (docs/benchmarks.md, session 12)."""
+    the bytes (docs/lab/repulsor.md, "Fewer bytes per band solve, fewer contact searches")."""
     nb_ = cuts.shape[0] - 1
     wide = kl + ku + 1 >= 65536
     uw = np.empty(ab.shape[0], np.int64 if wide else np.uint16)
@@ -244,7 +245,7 @@ def _solve_range(U, L, uw, lw, uo, lo_, piv, x, lo, n):
     # before, subtracted last. One running sum is a chain of dependent additions whose latency
     # bounded the solve; with eight the row waits only for its neighbour's result. Other
     # rounding than one sum in column order (5.96e-16 of the solution's largest entry on a
-    # random band); measured in docs/benchmarks.md, session 11
+    # random band); measured in docs/lab/repulsor.md, "Vectorized masking, faster band solves"
     for k in range(n - 1, lo - 1, -1):
         uo -= uw[k]
         w = uw[k] - 1  # the columns k + 1 … k + w
@@ -498,8 +499,8 @@ def _fill_edges(p, q, pos, spring, T, ln, nxt, prv, kl, ku, ab):
 def _zero(ab):
     """``ab[:] = 0`` by rows in parallel: a fresh array's first touch (its page faults, the
     kernel clearing the pages) on every thread. FHW at 10⁶ vertices, 2 threads: the fine band's
-    736 MB took 0.9-1.3 s to clear in one thread, 0.6-1.0 s in two (docs/benchmarks.md,
-    session 17)."""
+    736 MB took 0.9-1.3 s to clear in one thread, 0.6-1.0 s in two (docs/lab/repulsor.md,
+    "The band solver's correction without BLAS, its band filled in parallel")."""
     for r in nb.prange(ab.shape[0]):
         for t in range(ab.shape[1]):
             ab[r, t] = 0.0
@@ -674,7 +675,8 @@ class BandedSaddle:
             # array of the 4N unknowns (32 MB at 10⁶ vertices, past glibc's mmap threshold)
             # came as new pages from the kernel at every solve: 616 000-646 000 page faults in
             # the 158 solves of relax(max_iter=1) at 10⁶, 268 000-283 000 with this, and
-            # 3-4 % less time in them (docs/benchmarks.md, session 16)
+            # 3-4 % less time in them (docs/lab/repulsor.md, "The same machine with transparent
+            # huge pages on `madvise`, …")
             work = getattr(self, "_work", None)
             if work is None:
                 work = self._work = np.empty((1, rows))
@@ -737,7 +739,7 @@ class BandedSaddle:
 
 
 # ------------------------------------------------------------------------------------------------
-# layouts with open components, and pins by elimination (issue 28)
+# layouts with open components, and pins by elimination
 
 
 @nb.njit(cache=True, parallel=True)

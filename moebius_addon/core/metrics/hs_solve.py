@@ -18,7 +18,7 @@ update) preconditioned by
   its count grew with N and the curve, to the cap of 200 at 10⁶ on FHW.)
 
 Every iterate stays on ``C u = r`` to rounding, whatever the tolerance. Measured iterations
-(docs/benchmarks.md, "Krylov iterations against N"): 4–15 per solve below 2·10⁴ vertices
+(docs/lab/tree-engine.md, "Krylov iterations against N"): 4–15 per solve below 2·10⁴ vertices
 on the banded ``H`` alone, 5–15 with the levels from 2·10⁴ to 10⁵, 9 at 10⁶ (FHW).
 """
 
@@ -52,7 +52,7 @@ PRECONDITIONERS = ("two_level", "multilevel")
 #: "multilevel" from ``MULTILEVEL_FROM`` vertices on: with a level at every second halving it
 #: took 5-15 iterations per solve where two_level took 9-38 at 2·10⁴-10⁵, 1.3-1.9x faster
 #: per iteration from 5·10⁴ on and mixed at 2·10⁴ (alternated, 27 November 2026); at 10⁶
-#: 9-25 on four curves where two_level hit its cap of 200 on FHW (docs/benchmarks.md,
+#: 9-25 on four curves where two_level hit its cap of 200 on FHW (docs/lab/tree-engine.md,
 #: "Krylov iterations against N").
 PRECONDITIONER = "multilevel"
 #: "multilevel" from this many vertices on (below, the banded constraint preconditioner alone).
@@ -162,7 +162,7 @@ DENSE_MAX = 1200
 #: Levels at every ``STRIDE``-th halving (the curve quartered from level to level), the
 #: coarsest always: at 10⁵ vertices every second level left out took FHW's count per solve
 #: from 8 to 7-8 and the Borromean rings' from 17 to 15, and a level's set-up and solve cost
-#: about its vertices (docs/benchmarks.md, "Krylov iterations against N").
+#: about its vertices (docs/lab/tree-engine.md, "Krylov iterations against N").
 STRIDE = 2
 
 
@@ -276,7 +276,7 @@ class Multilevel:
     the correction stays symmetric positive semi-definite, into ``ker C``. The Euclidean
     projection of :class:`CoarseLevel` instead made coarse levels far below the fine one correct
     wrongly (5_2 at 8 000 vertices, one dense level of 63 vertices: 200 iterations, the cap,
-    against 10 with ``Π_H``; docs/benchmarks.md).
+    against 10 with ``Π_H``; docs/lab/tree-engine.md).
     Pins are not supported (the caller leaves it out). Levels stop at the first whose strands
     come too close (``MIN_CONTACT``); none (:attr:`levels` 0) when that is the first or the
     curve has at most ``COARSEST`` vertices.

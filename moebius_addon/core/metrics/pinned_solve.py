@@ -1,5 +1,5 @@
 """Saddle-point solves with pinned vertices for the tree engine's O(N) solvers, by bordering
-the solver of the same system without pins (issue 18).
+the solver of the same system without pins.
 
 The system with pins (:mod:`.pins`) differs from the one without in a few rows: the pin rows
 ``u_p = 0`` (three per pinned vertex) are added, and the rows of edges between two pins and

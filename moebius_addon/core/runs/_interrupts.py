@@ -5,7 +5,7 @@ last iterate has been set aside for its memory to be recycled and the new one is
 yet (the next step then failed with ``'NoneType' object has no attribute 'pseudo_inverse'``),
 or inside a numba kernel, where CPython reports the ``KeyboardInterrupt`` that arrives as the
 kernel returns as ``SystemError: ... returned a result with an exception set`` (2 of 13
-interrupts of a relaxation, issue 30). The runs commit an accepted iterate whole (position,
+interrupts of a relaxation). The runs commit an accepted iterate whole (position,
 energy, gradient, direction) only after its preparation finished, so the state they hold is
 always the last accepted iterate's; what an interruption can leave half-made is the engine,
 and :func:`resumable` rebuilds it there before the next step.

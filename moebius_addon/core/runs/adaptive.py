@@ -40,12 +40,12 @@ from .base import IterationState, RelaxResult, Status, check_number
 from .checks import check_flag
 
 #: Edges a refinement makes of every edge (a split in two: the flow doubles its resolution
-#: where it jammed and everywhere else; the examples of docs/benchmarks.md that jammed at
+#: where it jammed and everywhere else; the examples of docs/lab/flows-and-methods.md that jammed at
 #: n edges relaxed at 2n).
 FACTOR = 2
 #: A start too coarse is split up to this many times its edges before strands that nearly
 #: touch are pushed apart instead (edges 0.05 edge lengths apart need some 20× the edges to
-#: pass the start check by splitting alone; docs/benchmarks.md "Untangling benchmark").
+#: pass the start check by splitting alone; docs/lab/flows-and-methods.md "Untangling benchmark").
 SPLIT_FIRST = 4
 #: Fewest edges ``max_edges`` allows by default, whatever the start (a coarse drawn curve of
 #: 50 points may need several refinements).
@@ -66,14 +66,14 @@ CHECKPOINT_RATIO = 0.75
 #: Fresh starts of the method after stalls with the strands apart, at most: 9_3 from a tangled
 #: braid (700 edges) stalled at 257.59 with the projected gradient's norm still 0.31 and no two
 #: strands closer than 0.88 edge lengths; the implicit method started again from that polygon
-#: went on to the table's 250.9956 (docs/benchmarks.md, "Untangling benchmark").
+#: went on to the table's 250.9956 (docs/lab/flows-and-methods.md, "Untangling benchmark").
 FRESH_STARTS = 3
 #: A fresh start of a run on the tree engine takes this many times its admissibility θ (and
 #: keeps it for the rest of the path): a stall with the strands apart there is mostly the
 #: tree's error outgrowing the energy's fall per step (the tangent-point energy (2, 4.5) of
 #: 7_4 at 2 000 edges stalled at θ 0.3 after 49 iterations and at 0.5 after 25, at 220.0 and
 #: 222.6, while θ 0.1 and the exact engine went on to 218.2 and 218.1 in 300;
-#: docs/benchmarks.md, "A stall on the tree tightens θ").
+#: docs/lab/flows-and-methods.md, "A stall on the tree tightens θ").
 FRESH_THETA = 0.5
 #: ... but not below this many times the path's first θ (7_4 above at θ 0.0375 from its third
 #: fresh start: 252 iterations in 216 s, stopped by a 200 s budget; with this floor, 0.075,

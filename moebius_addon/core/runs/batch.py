@@ -60,7 +60,7 @@ from .batch_folder import read_log as _read_log
 from .methods import METHODS
 
 #: the energy table's optimizer: it converges where the explicit method stalls
-#: (docs/benchmarks.md, "Energy table")
+#: (docs/lab/knot-table.md, "The Möbius-energy table")
 DEFAULT_METHOD = "projected_gradient_implicit"
 MISSING_DASK = ("Dask is not installed; batch runs on workers need it: "
                 "pip install moebius_addon[batch]  (or: pip install 'dask[distributed]')")

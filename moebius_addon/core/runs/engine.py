@@ -56,7 +56,7 @@ from .memory import available_memory, check_memory, give_back
 # ~1.1 s against ~15 ms per iteration).
 _FACTOR_PER_ITER = 40.0
 # From this many vertices on, a single-precision factorization refined by GMRES pays (FHW flow,
-# ms per iteration single/double, session 3: 500: 28/21–23, 600: 27–34/32–34, 700: 42/49).
+# ms per iteration single/double: 500: 28/21–23, 600: 27–34/32–34, 700: 42/49).
 _AUTO_SINGLE_FROM = 600
 
 
@@ -306,21 +306,23 @@ class DenseEngine:
 
 #: Up to this many vertices a run on the tree reports its result's exact energy
 #: (:meth:`TreeEngine.result_energy`): the all-pairs sum took 0.02 s at 1 648 edges and 1.8 s
-#: at 20 000 (one thread, load 6; docs/benchmarks.md), under 3 % of such a run.
+#: at 20 000 (one thread, load 6; docs/lab/cables-and-obstacles.md), under 3 % of such a run.
 EXACT_RESULT_MAX = 20000
 
 
 #: How far (in mean edge lengths, largest vertex displacement) a trial of the line search may
 #: be from the polygon of the last frame and still be evaluated with its split
 #: (:meth:`TreeEngine.trial_energy`): one leaf's length. A split kept for moved clusters is less
-#: admissible; at the trials the cable runs took (0.8–4.4 edge lengths, docs/benchmarks.md,
+#: admissible; at the trials the cable runs took (0.8–4.4 edge lengths,
+#: docs/lab/cables-and-obstacles.md,
 #: "Open cables on the tree engine") the kept split's energy was as close to the exact one as a
 #: fresh split's (1.1–1.5e-6 both), and differed from it by 2e-8 to 2.6e-7.
 FRAME_REUSE = 8.0
 #: How far (as :data:`FRAME_REUSE`) a polygon may be from the last frame's and still have its
 #: energy and gradient evaluated with that split: a trial of the line search then comes with
 #: its gradient, and an accepted trial is the next iterate without a second pass or a new
-#: frame. Against the exact sum (FHW 5 000 edges, 100 open cables of 200; docs/benchmarks.md),
+#: frame. Against the exact sum (FHW 5 000 edges, 100 open cables of 200;
+#: docs/lab/cables-and-obstacles.md),
 #: the kept split's gradient erred within 25 % of a fresh split's after smooth moves of up to
 #: 16 edge lengths (5e-4 and 1e-4), and after random ones (every vertex its own way) of 4 about
 #: twice as much (3e-7 to 5e-7 against 2e-7); at 8 about 4 times as much.
@@ -330,7 +332,7 @@ GRADIENT_REUSE = 4.0
 #: iteration with the test on / off, alternated (two rounds, FHW, two threads, load 0.8–2):
 #: 1 648 edges 0.039, 0.053 / 0.047, 0.061; the (2, 5) torus knot at 5 000 edges 0.143, 0.192
 #: / 0.160, 0.185; FHW 10 000 0.295, 0.328 / 0.231, 0.269; 100 cables of 200 (off) 1.7×
-#: faster than before (docs/benchmarks.md).
+#: faster than before (docs/lab/cables-and-obstacles.md).
 EARLY_TEST_BELOW = 5000
 #: From this many vertices on, a run on the tree that is short of memory is *lean*
 #: (:func:`lean_run`): it keeps only what each phase of an iteration needs
@@ -340,7 +342,8 @@ EARLY_TEST_BELOW = 5000
 #: FHW at 10⁶ vertices, 2 threads: peak 4.54–4.59 → 3.84–3.87 GB, but 1.17× the seconds
 #: per iteration here (32.2 against 27.6 s, three alternated pairs: memory let go early
 #: comes back without the transparent huge pages the full run reuses; with numpy's huge
-#: pages off both took 28.3–31.5 s). Docs: docs/benchmarks.md, "Memory at 10⁶ edges".
+#: pages off both took 28.3–31.5 s). Docs: docs/lab/tree-engine.md, "Memory at 10⁶ edges: where it
+#: goes, and what was tried".
 LEAN_FROM = 200_000
 #: Peak resident memory per vertex of a run on the tree that is not lean (FHW at 10⁶
 #: vertices, 2 threads: 4.54–4.59 GB for the whole process).
@@ -350,12 +353,13 @@ FULL_BYTES_PER_VERTEX = 4_600
 LEAN_SHARE = 0.5
 #: From this many vertices on the hs operator stores its near weights in single precision
 #: (``HsOperator(single=True)``): 0.42 GB less at 10⁶ vertices and faster products; the
-#: iterates change at rounding level (docs/benchmarks.md, "Memory at 10⁶ edges").
+#: iterates change at rounding level (docs/lab/tree-engine.md, "Memory at 10⁶ edges: where it goes,
+#: and what was tried").
 SINGLE_WEIGHTS_FROM = 200_000
 #: The tree's budget of back-projection steps for hs, times the run's ``backproject_iter``
 #: (rounded up): its steps are in the preconditioner's banded metric, which contracts more
 #: slowly than hs's own, so the same budget rejected trials that hs accepts
-#: (docs/benchmarks.md, "Session 22").
+#: (docs/lab/repulsor.md, "The tree's back-projection gets a fifth more steps").
 BANDED_NEWTON = Fraction(6, 5)
 
 
@@ -401,7 +405,7 @@ class TreeEngine(DenseEngine):
     coarse level); with more pins, or without one kind of constraint, the saddle-point
     systems are solved as in the exact engine (dense; sizes are bounded).
 
-    Layouts with open components (issue 28): the Möbius energy as above (O'Hara's regularized
+    Layouts with open components: the Möbius energy as above (O'Hara's regularized
     kernel, :mod:`._arc_field`); every metric, the banded ones solved by
     :class:`banded.OpenBandedSaddle` with any number of pins eliminated in the band, ``hs``
     and ``hs_pure`` by conjugate gradients preconditioned with it (no coarse level)."""
@@ -412,7 +416,7 @@ class TreeEngine(DenseEngine):
     _saddle = None  # the solver of the current iterate (BandedSaddle or HsSaddle)
     #: Peak memory of a run per vertex: measured 5.3–7.4 kB over its first steps (7_2 at
     #: 20 000, 50 000 and 100 000 vertices, hs and h2, explicit and implicit; docs/api.md),
-    #: 4.6 kB (3.9 lean) for the whole process at 10⁶ (docs/benchmarks.md).
+    #: 4.6 kB (3.9 lean) for the whole process at 10⁶ (docs/lab/cables-and-obstacles.md).
     BYTES_PER_VERTEX = 8_000
 
     @classmethod
@@ -600,7 +604,7 @@ ENGINE_NAMES = ("auto", "exact", "tree")
 # "auto" takes the tree from a size on, and the size depends on what is evaluated: a run pays
 # for the whole iteration, where the tree's metric (no dense matrix) wins early; the energy
 # alone (moebius_energy, moebius_gradient) pays for the energy, where the frame's build costs
-# more than the exact sum up to a few thousand edges. Measurements: docs/benchmarks.md
+# more than the exact sum up to a few thousand edges. Measurements: docs/lab/cables-and-obstacles.md
 # ("Tree engine").
 
 #: From this many vertices on, "auto" runs on the tree engine: its whole iteration (energy,
@@ -611,7 +615,8 @@ AUTO_TREE_FROM = 1000
 #: From this many edges on, "auto" evaluates the energy alone with the tree: at the default
 #: theta (frame included, 7_2, alternated on a shared machine) the energy alone measured
 #: 0.5-0.8x the exact speed at 1 000 edges, 0.7-1.2x at 2 000, 1.6-2.2x at 3 000,
-#: energy+gradient 1.4-2.3x at 1 000, 2.9-3.9x at 2 000, 4.5-6.0x at 3 000. (Before issue 26:
+#: energy+gradient 1.4-2.3x at 1 000, 2.9-3.9x at 2 000, 4.5-6.0x at 3 000. (Before the
+#: tangent-point energy:
 #: ``barnes_hut.TREE_FROM``.)
 ENERGY_TREE_FROM = 3000
 

@@ -1,6 +1,6 @@
 """Length growth (``length_target=``, ``length_growth=``): a curve whose total length grows
 during the run to a target, a little every iteration (curve packing; Repulsive Curves' length
-constraint with a growth scale, issue 28).
+constraint with a growth scale).
 
 A feasible run holds every edge at a target length (:mod:`..constraints`). Growth scales those
 targets up by a factor ``1 + length_growth`` per iteration, capped so that the target length is

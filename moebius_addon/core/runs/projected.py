@@ -92,7 +92,7 @@ class Relaxation(Run):
         First trial step, Armijo constant σ (paper: 1/2), cap on the step growth per iteration:
         the first trial is ``min(growth · τ_prev, 2/3 τ*)``. The paper starts at ``2/3 τ*``
         alone; a cap of 8 keeps the contact search bounded and measured fewer iterations
-        than 1.5 or 4 on the FHW unknot (docs/benchmarks.md).
+        than 1.5 or 4 on the FHW unknot (docs/lab/exact-engine.md).
     backproject_iter, backproject_tol : int, float
         Modified Newton iterations and tolerance on ``max |Φ|`` (dimensionless). The tree
         engine's hs allows a fifth more iterations (``engine.BANDED_NEWTON``): its steps are
@@ -106,7 +106,7 @@ class Relaxation(Run):
         Run :func:`check_polygon` on the start (disable only for inputs checked already).
     reuse_factorization : bool
         Reuse the saddle-point factorization as a GMRES preconditioner across iterations
-        instead of factoring every iterate (pays only late in a flow, see docs/benchmarks.md).
+        instead of factoring every iterate (pays only late in a flow, see docs/lab/exact-engine.md).
     precision : {"auto", "double", "single"}
         Precision of the factorization; "single" is refined to double precision by GMRES on
         the exact system (same iterates up to the solver tolerance, cheaper factorization);

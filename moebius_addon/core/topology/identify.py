@@ -19,7 +19,7 @@ Equal invariants do not prove equal knots: mutants (the Conway and Kinoshita–T
 images (an amphicheiral knot counted once), 1 260 share their Alexander and Jones polynomials
 with another and 1 180 share the signature too; the chiral knots these tell from their mirror
 images rise from all but 37 to all but 23 (the HOMFLY-PT polynomial would part none of the
-1 180 further: docs/benchmarks.md, "Identification"). :func:`identify` then names them all,
+1 180 further: docs/lab/knot-table.md, "Identification"). :func:`identify` then names them all,
 and a curve whose invariants match no entry is not in the table (a composite knot, a split
 link, or more crossings than the table holds) or was too tangled for the Jones polynomial.
 """

@@ -22,7 +22,7 @@ import numpy as np
 from ..geometry.layout import Layout
 
 # Edges per leaf: the near field's SIMD width (``_near_field._LANES``); leaves of 4, 12 and 16
-# edges measured slower (docs/benchmarks.md, "Tree engine").
+# edges measured slower (docs/lab/tree-engine.md, "Where the time goes now").
 LEAF_SIZE = 8
 
 

@@ -23,7 +23,7 @@ smooth over a cluster pair; a pair is admissible when both boxes are small again
 arc length between them, ``max(len A, len B) ≤ θ ρ(A, B)``. The weights stay symmetric and
 non-negative, so ``Ã`` keeps the structure that makes ``A`` positive definite (graph Laplacians
 of non-negative weights plus the barycenter term): the metric of the tree path is ``Ã`` itself,
-a function of the polygon, the same in every product (docs/benchmarks.md: its products against
+a function of the polygon, the same in every product (docs/lab/tree-engine.md: its products against
 the dense ``A``).
 
 Products cost O(near pairs + far pairs + N): the near field as stored rows, the far field by an
@@ -614,7 +614,8 @@ class HsOperator:
         """The metric of :meth:`preconditioner_parts` as one 2 × 2 block per edge
         (:class:`.banded.EdgeParts`; closed components): no triplets to build, and the band is
         filled in parallel. FHW at 10⁶ edges, 2 threads, setup and one iteration: the triplets'
-        build and fill took 3.6 s, the fill from edges 0.2 s (docs/benchmarks.md, session 17)."""
+        build and fill took 3.6 s, the fill from edges 0.2 s (docs/lab/repulsor.md, "The band
+        solver's correction without BLAS, its band filled in parallel")."""
         ln = self.ln
         total = float(ln.sum())
         m = ln / 3 * (1.0 / total**3)  # h1's mass and stiffness, as banded_parts_of_lengths

@@ -8,7 +8,7 @@ hierarchy (:mod:`bvh`) into
   ``max(diam A, diam B) ≤ θ · gap(A, B)``, summed by the expansion of the kernel to second
   order in the clusters' moments (:mod:`._far_field`). At the default θ the relative errors
   measured at most 8.2e-6 (energy) and 5.0e-4 (gradient) on 7_2, FHW, a link of three rings
-  and a non-equilateral 7_2 of 5 000 and 20 000 edges (docs/benchmarks.md); the gradient's
+  and a non-equilateral 7_2 of 5 000 and 20 000 edges (docs/lab/tree-engine.md); the gradient's
   falls about like θ³. Open components (docs/api.md, "Open curves"): their pairs take
   O'Hara's kernel ``l_I l_J/|d|²``, so clusters of open components only are far whatever
   components they hold (θ times :data:`OPEN_THETA` where they may share one); the arc-length

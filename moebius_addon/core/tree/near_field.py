@@ -36,7 +36,8 @@ _NEAR_PIECES = 64
 # array, constant offsets plus j: the loop over lanes vectorizes (an index array beside it kept
 # it scalar). No fast-math: a lane's sums are sequential, nothing to reassociate, and with
 # "contract" alone the compiling process and numba's cache gave different last bits (the
-# tangent-point near field has it: there they agree; docs/benchmarks.md, session 21).
+# tangent-point near field has it: there they agree; docs/lab/repulsor.md, "Fused multiply–adds and
+# symmetric moments in the tangent-point tree").
 _LANES = 8
 assert _LANES == 8  # _near_out's pairwise sum over the lanes is written out for eight
 _NW_ID = 7 * _LANES

@@ -19,7 +19,7 @@ the same hierarchy, the same dual traversal, the same near and far lists), and s
   ``l_J = L_B`` and ``m_J = c_B`` (the monopole of ``B``, its first order vanishes; the
   target side exact), one kernel per edge of ``A``, O(N log N).
 
-Errors and times of both measured in docs/benchmarks.md ("Tangent-point energy: cluster
+Errors and times of both measured in docs/lab/tangent-point.md ("Tangent-point energy: cluster
 against cluster").
 
 The gradient is the exact derivative of this approximated sum for the fixed split: the far
@@ -60,7 +60,8 @@ from .near_field import _lane_store, _load_lanes, _to_vertices
 #: relative errors (energy / gradient) at most 1.4e-3 / 2.5e-2 on FHW at 2 400–10 000 edges,
 #: about 6–7× / 24–40× below Repulsor's at its default. With leaves of four edges, 0.3 gave
 #: errors 0.9–2.5× those of 0.3 with leaves of eight; 0.25 gives about the same
-#: (docs/benchmarks.md, "Tangent-point energy: cluster against cluster" and session 13).
+#: (docs/lab/tangent-point.md, "Tangent-point energy: cluster against cluster";
+#: docs/lab/repulsor.md, "The tangent-point tree on leaves of four edges").
 THETA = 0.25
 #: Edges per leaf of the tangent-point tree (the near field's lanes, below).
 LEAF_SIZE = 4
@@ -82,17 +83,19 @@ _FAR_CHUNKS = 16
 # (_cc_moments, _cc_far, _cc_to_edges): about 8 % off the sums. Only while the code compiled in
 # a first process and the code numba's cache loads give the same bits
 # (tests/core/test_tangent_point.py); in the Möbius near and far fields they did not
-# (docs/benchmarks.md, session 21).
+# (docs/lab/repulsor.md, "Fused multiply–adds and symmetric moments in the tangent-point tree").
 # For α = 2 the partner edges go two at a time: the radial parts of both (1 / |d|², |d|^−β,
 # the masks) first, each in its own rows (_NW_INV, and _NW_INV + _LANES for the second;
 # |d|^−β _NW_RB further on), so that their divisions overlap (one at a time, the pairs waited
 # for each division: the near field's gradient pass at 10⁵ edges 43 → 37 ms, at the price of
 # _near_leaves compiling in 35 s instead of 15 s; one loop over twice the lanes for both kept
-# scalar divisions and gave nothing; docs/benchmarks.md, session 19).
+# scalar divisions and gave nothing; docs/lab/repulsor.md, "The near field's divisions overlap, no
+# reference counting in the loops, …").
 # Four lanes on leaves of four edges (:data:`LEAF_SIZE`): the finer split leaves about half the
 # near pairs, and the far field, cluster against cluster, is cheap per pair. The energy-only
 # pass loops over ``lanes``, a run-time argument equal to _LANES: a constant trip count of four
-# was unrolled fully and left scalar (times in docs/benchmarks.md, session 13).
+# was unrolled fully and left scalar (times in docs/lab/repulsor.md, "The tangent-point tree on
+# leaves of four edges").
 _LANES = 4
 _NW_ID = 7 * _LANES
 _NW_IL = 10 * _LANES
@@ -117,7 +120,7 @@ def _near_radial_k(W, ri, rx, ry, rz, r, lim, beta, kind, lanes):
         q = W[_NW_ID + j]
         r2 = dx * dx + dy * dy + dz * dz
         # one select per test: a compound condition branches, and the loop does not vectorize
-        # (the energy alone took 2.6–3.2× the time at 10⁵ edges, docs/benchmarks.md)
+        # (the energy alone took 2.6–3.2× the time at 10⁵ edges, docs/lab/tangent-point.md)
         r2 = np.inf if r == q else r2
         r2 = np.inf if r == W[_NW_ID + _LANES + j] else r2
         r2 = np.inf if r == W[_NW_ID + 2 * _LANES + j] else r2
@@ -239,7 +242,8 @@ def _near_leaves(E, M, ln, lo, hi, leaves, t0, t1, uoff, upart, uslot, nbr, widt
     what their pairs give other edges to ``acc`` (:func:`_near_group`). A function
     of its own, called from the parallel loop: in a copy of a variant, compiled without
     ``parallel``, the gradient pass took 0.28 s against 0.33 s inside the loop's body (10⁵
-    edges); in place the difference was in the noise (docs/benchmarks.md, session 11)."""
+    edges); in place the difference was in the noise (docs/lab/repulsor.md, "Vectorized masking,
+    faster band solves")."""
     W = np.zeros(_NW_SIZE)
     for t in range(t0, t1):
         a = leaves[t]
@@ -489,7 +493,7 @@ def _far_sources(M, ln, L, C, lo, hi, leaves, parent, gnode, rows):
 #   F(A, B) = L_B [L_A |d|^(2−β) − |d|^−β dᵀG_A d − 2 |d|^−β <v_A, d> + β |d|^(−β−2) W_A(d, d, d)]
 #
 # with v_a = Σ_b W_abb: one kernel per pair of clusters (O(N) kernels, not one per edge and
-# cluster), error of second order in diam / |d| on both sides (docs/benchmarks.md,
+# cluster), error of second order in diam / |d| on both sides (docs/lab/tangent-point.md,
 # "Tangent-point energy: cluster against cluster").
 
 
@@ -620,7 +624,7 @@ def _cc_slots(foff, fpart, m, nchunks):
     piece; ``fslot`` the row of each far pair (``fpart``'s order), ``soff``/``sidx`` per node
     its rows, in piece order (CSR). At 10⁵ edges (θ 0.7) 58 582 rows against 16 × 50 000 for
     a row per piece and node, whose scattered writes faulted in 25 MB of pages per evaluation
-    (docs/benchmarks.md, session 20)."""
+    (docs/lab/repulsor.md, "The Möbius near field takes each pair once, …")."""
     fslot = np.empty(fpart.shape[0], np.int32)
     stamp = np.full(m, -1, np.int64)
     slot = np.empty(m, np.int64)
@@ -654,7 +658,8 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, e
     """Target ``a`` against its far partners, by lanes (see above); ``S`` scratch for the
     lanes' sums; ``gs[fslot[p]]`` the source row of pair ``p`` (:func:`_cc_slots`). Rows are
     indexed in place, not taken as views: a view per partner counted its reference up and
-    down, atomically (docs/benchmarks.md, session 19)."""
+    down, atomically (docs/lab/repulsor.md, "The near field's divisions overlap, no reference
+    counting in the loops, …")."""
     la = L[a]
     cax, cay, caz = C[a, 0], C[a, 1], C[a, 2]
     g00, g01, g02, g11, g12, g22 = G[a, 0], G[a, 1], G[a, 2], G[a, 3], G[a, 4], G[a, 5]
@@ -802,7 +807,8 @@ def _cc_far(L, C, G, Wm, foff, fpart, fslot, rows, beta, kind, grad, lanes):
     m = L.shape[0]
     nchunks = min(m, _FAR_CHUNKS)
     # every row written below (a target's own, zeros where it has no partner): np.zeros
-    # cleared the 16 MB of these at 10⁵ edges once more (docs/benchmarks.md, session 19)
+    # cleared the 16 MB of these at 10⁵ edges once more (docs/lab/repulsor.md, "The near field's
+    # divisions overlap, no reference counting in the loops, …")
     eF = np.empty(m)
     gt = np.empty((m if grad else 0, 4))
     gG = np.empty((m if grad else 0, 6))
@@ -972,7 +978,7 @@ class TangentPointFrame(Frame):
     # open components: the same kernel as closed ones (pairs of neighbours along the curve left
     # out; the first and last edge are none) and no arc-length part; pairs of clusters that may
     # share one take θ · OPEN_THETA as for the Möbius energy (a single bent cable of 2 000
-    # edges, (2, 4): gradient error 1.1e-2 against 6.5e-2 with θ alone; docs/benchmarks.md)
+    # edges, (2, 4): gradient error 1.1e-2 against 6.5e-2 with θ alone; docs/lab/tangent-point.md)
     arc_part = False
 
     def __init__(self, X: np.ndarray, layout: Layout, alpha: float = DEFAULT_ALPHA,
