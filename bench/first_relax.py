@@ -115,7 +115,7 @@ def session(zip_path: str | None, path: str) -> dict:
     import numpy
 
     installed = Path(importlib.import_module(MODULE).__file__).with_name("blender_manifest.toml")
-    shipped = Path(importlib.import_module(MODULE + ".core._shipped_cache").SHIPPED)
+    shipped = Path(importlib.import_module(MODULE + ".core.compilation.shipped_cache").SHIPPED)
     seen["versions"] = (f"moebius_addon {tomllib.loads(installed.read_text())['version']}"
                         f"{' (kernel cache shipped)' if shipped.is_dir() else ''}, "
                         f"bpy {bpy.app.version_string}, Python {sys.version.split()[0]}, "

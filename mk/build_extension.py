@@ -171,7 +171,7 @@ def build_kernel_cache(stage_dir: Path, pythons: dict[str, str]) -> None:
         # reach LAPACK through it fails to compile here instead of aborting a user's Blender
         code = (f"import sys; assert sys.version_info[:2] == {tuple(map(int, version.split('.')))}"
                 f", sys.version; sys.modules['scipy'] = None; "
-                f"from {stage_dir.name}.core import warmup; sys.exit(warmup.main())")
+                f"from {stage_dir.name}.core.compilation import warmup; sys.exit(warmup.main())")
         print(f"kernel cache: compiling for {GENERIC_CPU} with Python {version} ({exe})",
               flush=True)
         procs.append((version, subprocess.Popen([exe, "-c", code], env=env)))

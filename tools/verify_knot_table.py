@@ -38,8 +38,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from moebius_addon.core import check_polygon, contact_ratio
-from moebius_addon.core.topology import identify, knots, table  # noqa: E402
+from moebius_addon.core import check_polygon, contact_ratio, identify  # noqa: E402
+from moebius_addon.core.topology import knots, table  # noqa: E402
 
 OUT = ROOT / "out" / "verify_knot_table.jsonl"
 

@@ -71,7 +71,7 @@ def main() -> None:
     zip_path = sys.argv[1]
     assert bpy.ops.extensions.package_install_files(
         filepath=zip_path, repo="user_default", enable_on_install=True) == {"FINISHED"}
-    compiling = importlib.import_module(EXT_MODULE + ".core.compiling")
+    compiling = importlib.import_module(EXT_MODULE + ".core.compilation.notice")
 
     def preset(name: str, scene, pin_tangents: bool | None = None):
         def run() -> int:
@@ -106,7 +106,7 @@ def main() -> None:
         "tangent_point": knot("3_1", 100, energy="tangent_point"),
         "identify": identify,
     }
-    shipped = importlib.import_module(EXT_MODULE + ".core._shipped_cache")
+    shipped = importlib.import_module(EXT_MODULE + ".core.compilation.shipped_cache")
     found = {"scipy": importlib.util.find_spec("scipy") is not None,
              "generic": shipped.host_runs_generic()}
     for name, run in paths.items():

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from moebius_addon import core
-from moebius_addon.core import Match
-from moebius_addon.core.topology import identify, knots
+from moebius_addon.core import Match, identify
+from moebius_addon.core.topology import knots
 from tests.conftest import random_rotation
 
 _RNG = np.random.default_rng(2026)

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from moebius_addon.core import check_polygon, contact_ratio
-from moebius_addon.core.topology import identify, knots, notation, pd
+from moebius_addon.core import check_polygon, contact_ratio, identify
+from moebius_addon.core.topology import knots, notation, pd
 
 knotinfo = pytest.importorskip("database_knotinfo")
 

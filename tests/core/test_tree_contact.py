@@ -143,7 +143,7 @@ def test_bad_search_refused():
 CODE = """
 import json, numpy as np
 from moebius_addon import core
-from moebius_addon.core import collision
+from moebius_addon.core.geometry import collision
 from moebius_addon.core.geometry.layout import as_layout
 rng = np.random.default_rng(3)
 P = core.resample(core.knots.named("8_17"), 6000)
