@@ -8,6 +8,8 @@ farther apart in space than about one edge length, or the discrete energy is no 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
@@ -18,6 +20,7 @@ from .collision import closest_pairs, closest_vertices
 from .layout import (
     MIN_CLOSED_VERTICES,
     MIN_OPEN_VERTICES,
+    Layout,
     as_checked_layout,
     as_unit_layout,
     check_counts,
@@ -414,7 +417,16 @@ def contact_ratio(P, min_gap: int = CONTACT_GAP, closed=True) -> float:
     different components), divided by the mean edge length. The start check wants >= 1.
     ``closed=False``: open polylines (distances along them do not wrap round the ends)."""
     min_gap = check_number("min_gap", min_gap, 1, integer=True)
-    X, layout, _ = as_checked_layout(P, closed, touching=False)
+    if isinstance(P, CheckedCurve) and min_gap == CONTACT_GAP:
+        return P.ratio
+    X, layout, _ = (P.X, P.layout, P.exponent) if isinstance(P, CheckedCurve) else (
+        as_checked_layout(P, closed, touching=False))
+    return layout_contact_ratio(X, layout, min_gap)
+
+
+def layout_contact_ratio(X: np.ndarray, layout: Layout, min_gap: int = CONTACT_GAP) -> float:
+    """:func:`contact_ratio` of vertices a run already holds (stacked and checked): the same
+    number, without checking them again."""
     dv, _ = closest_vertices(X, layout, min_gap)
     return dv / _mean_edge(X, layout)
 
@@ -448,6 +460,94 @@ def suggest_edge_count(P, max_edges: int = 20000, start: int | None = None,
     return None
 
 
+class CheckedCurve(NamedTuple):
+    """A start checked once at the door (:func:`check_curve`): what the checks found, kept so
+    that nothing after them validates the vertices or searches their closest pairs again.
+    Runs (:class:`..runs.base.Run`), :func:`contact_ratio` and :func:`check_polygon` take one
+    in place of the vertices."""
+
+    X: np.ndarray            #: the vertices scaled by ``2^-exponent`` (exact), stacked
+    layout: Layout
+    exponent: int
+    closed: object           #: the ``closed=`` the curve was checked with
+    mean_edge: float         #: of the real edges, at the scaled size
+    vertex_gap: float        #: closest vertices ``CONTACT_GAP`` apart along the curve
+    vertices: tuple          #: those two vertices
+    coarse_checked: bool     #: whether the coarseness rule was checked (and passed)
+
+    @property
+    def ratio(self) -> float:
+        """The contact ratio (:func:`contact_ratio`)."""
+        return self.vertex_gap / self.mean_edge
+
+
+def check_curve(P, *, coarseness: bool = True, name: str = "the curve",
+                closed=True) -> CheckedCurve:
+    """:func:`check_polygon`, returning what it found (:class:`CheckedCurve`). A curve
+    already checked is not checked again: only the coarseness rule, if it was left out."""
+    coarseness = check_flag("coarseness", coarseness)
+    if isinstance(P, CheckedCurve):
+        if coarseness and not P.coarse_checked:
+            _check_coarseness(P, name)
+            return P._replace(coarse_checked=True)
+        return P
+    X, layout, e2 = as_unit_layout(P, closed)
+    return check_layout(X, layout, e2, closed, coarseness=coarseness, name=name)
+
+
+def check_layout(X: np.ndarray, layout: Layout, e2: int, closed=True, *,
+                 coarseness: bool = True, name: str = "the curve") -> CheckedCurve:
+    """:func:`check_curve` of a curve already stacked and scaled (:func:`.layout.as_unit_layout`:
+    ``X``, ``layout``, ``e2``), as a run has it."""
+    check_counts(layout, name)
+    check_finite(X, layout, name)
+    check_distinct(X, layout, name)
+    edge = np.linalg.norm(X[layout.nxt] - X, axis=1)
+    if layout.has_open:  # the dummy edges (.layout) are no edges
+        edge = edge[layout.real]
+    h = float(edge.mean())
+    (dv, (vi, vj)), (de, (ei, ej), (s, t)) = closest_pairs(X, layout, CONTACT_GAP)
+    if de <= 1e-6 * h:
+        point = np.ldexp(X[ei] + s * (X[layout.nxt[ei]] - X[ei]), e2)
+        raise ValueError(
+            f"{name} intersects itself: the edges after {vertex_name(layout, ei)} and after "
+            f"{vertex_name(layout, ej)} touch near ({point[0]:.6g}, {point[1]:.6g}, "
+            f"{point[2]:.6g}); move the strands apart before relaxing"
+        )
+    checked = CheckedCurve(X, layout, e2, closed, h, float(dv), (int(vi), int(vj)), False)
+    if coarseness:
+        _check_coarseness(checked, name)
+        checked = checked._replace(coarse_checked=True)
+    return checked
+
+
+def _check_coarseness(c: CheckedCurve, name: str) -> None:
+    """ValueError for vertices far apart along the curve that are closer than
+    ``CONTACT_RATIO`` mean edges in space, naming the edge count that works."""
+    layout, X, h = c.layout, c.X, c.mean_edge
+    dv, (vi, vj) = c.vertex_gap, c.vertices
+    if dv >= CONTACT_RATIO * h:
+        return
+    flags = [True] if layout.closed is None else list(layout.closed)
+    try:
+        k = suggest_edge_count(layout.split(X) if layout.is_link else X,
+                               closed=flags[0]) if len(set(flags)) == 1 else None
+    except ValueError:  # a resampling on the way failed: no count to suggest, the refusal
+        k = None        # stands (an open cable's 'could not make … equilateral' hid it)
+    fix = (
+        f"resample with at least {k} edges"
+        if k is not None
+        else "move the strands apart or use a much finer polygon"
+    )
+    raise ValueError(
+        f"{name} is too coarse for its shape: {vertex_name(layout, vi)} and "
+        f"{vertex_name(layout, vj)} are {dv / h:.2f} edge lengths apart in space but far "
+        f"apart along the curve "
+        f"(need >= {CONTACT_RATIO}); the energy cannot keep the strands apart at this "
+        f"resolution — {fix}"
+    )
+
+
 def check_polygon(P, *, coarseness: bool = True, name: str = "the curve",
                   closed=True) -> None:
     """Raise ``ValueError`` if ``P`` cannot start a flow; the message says what to do.
@@ -460,39 +560,4 @@ def check_polygon(P, *, coarseness: bool = True, name: str = "the curve",
     ``closed=False``: open polylines (a link: one flag per component, or one for all), with at
     least 3 vertices, distances along them not wrapping round the ends.
     """
-    coarseness = check_flag("coarseness", coarseness)
-    X, layout, e2 = as_unit_layout(P, closed)
-    check_counts(layout, name)
-    check_finite(X, layout, name)
-    check_distinct(X, layout, name)
-    edge = np.linalg.norm(X[layout.nxt] - X, axis=1)
-    if layout.has_open:  # the dummy edges (._layout) are no edges
-        edge = edge[layout.real]
-    h = float(edge.mean())
-    (dv, (vi, vj)), (de, (ei, ej), (s, t)) = closest_pairs(X, layout, CONTACT_GAP)
-    if de <= 1e-6 * h:
-        point = np.ldexp(X[ei] + s * (X[layout.nxt[ei]] - X[ei]), e2)
-        raise ValueError(
-            f"{name} intersects itself: the edges after {vertex_name(layout, ei)} and after "
-            f"{vertex_name(layout, ej)} touch near ({point[0]:.6g}, {point[1]:.6g}, "
-            f"{point[2]:.6g}); move the strands apart before relaxing"
-        )
-    if coarseness and dv < CONTACT_RATIO * h:
-        flags = [True] if layout.closed is None else list(layout.closed)
-        try:
-            k = suggest_edge_count(layout.split(X) if layout.is_link else X,
-                                   closed=flags[0]) if len(set(flags)) == 1 else None
-        except ValueError:  # a resampling on the way failed: no count to suggest, the refusal
-            k = None        # stands (an open cable's 'could not make … equilateral' hid it)
-        fix = (
-            f"resample with at least {k} edges"
-            if k is not None
-            else "move the strands apart or use a much finer polygon"
-        )
-        raise ValueError(
-            f"{name} is too coarse for its shape: {vertex_name(layout, vi)} and "
-            f"{vertex_name(layout, vj)} are {dv / h:.2f} edge lengths apart in space but far "
-            f"apart along the curve "
-            f"(need >= {CONTACT_RATIO}); the energy cannot keep the strands apart at this "
-            f"resolution — {fix}"
-        )
+    check_curve(P, coarseness=coarseness, name=name, closed=closed)

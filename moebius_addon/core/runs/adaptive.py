@@ -33,7 +33,14 @@ import numpy as np
 
 from ..geometry.layout import as_layout
 from ..geometry.pins import check_pins
-from ..geometry.polygon import CONTACT_RATIO, check_polygon, contact_ratio, subdivide
+from ..geometry.polygon import (
+    CONTACT_RATIO,
+    check_curve,
+    check_polygon,
+    contact_ratio,
+    layout_contact_ratio,
+    subdivide,
+)
 from ..geometry.push_apart import separate
 from ._interrupts import as_interrupt
 from .base import IterationState, RelaxResult, Status, check_number
@@ -276,10 +283,10 @@ class AdaptiveRun:
         pushed apart (:func:`..separate.separate`, at the fewest edges where that works: its
         steps become the path's first iterates); then splitting up to ``max_edges``."""
         changes = {} if pinned is None else {"pinned": pinned}
-        check_polygon(P, coarseness=False, closed=self.closed)
-        ratio = contact_ratio(P, closed=self.closed)
-        if ratio >= CONTACT_RATIO:
-            return P, changes, []
+        checked = check_curve(P, coarseness=False, closed=self.closed)
+        ratio = checked.ratio
+        if ratio >= CONTACT_RATIO:  # the run takes the checked start: nothing checked twice
+            return checked, changes, []
         edges = self._edges(layout.n)
         factors = [FACTOR ** k for k in range(1, 64)
                    if edges * FACTOR ** k <= self.max_edges]
@@ -470,7 +477,7 @@ class AdaptiveRun:
         """Whether a stalled run's strands are closer than the start check allows (contact
         ratio below 1): a jam a finer polygon resolves. A run stalled against an obstacle, or
         with its strands apart, is not refined (it would stall the same at any resolution)."""
-        if contact_ratio(run.layout.split(run.X), closed=self.closed) < CONTACT_RATIO:
+        if layout_contact_ratio(run.X, run.layout) < CONTACT_RATIO:
             return True
         self._why_not = "not refined: no two strands are closer than an edge length"
         return False
@@ -479,9 +486,10 @@ class AdaptiveRun:
         """Make the current iterate the checkpoint if it is healthy: strands at least
         :data:`CHECKPOINT_RATIO` mean edge lengths apart (vertices 4 edges apart along the
         curve, as the start check measures)."""
-        # the run's own scaled copy (the ratio is scale-free): no copy in the caller's size
-        ratio = contact_ratio(run.layout.split(run.X), closed=self.closed)
-        if ratio >= CHECKPOINT_RATIO or self._checkpoint[1] is None:
+        # the run's own scaled copy (the ratio is scale-free), checked already; the first
+        # checkpoint is taken whatever its ratio
+        if self._checkpoint[1] is None or (
+                layout_contact_ratio(run.X, run.layout) >= CHECKPOINT_RATIO):
             self._checkpoint = (self.nit, run.x, len(self.history["energy"]))
 
     def _iterations_left(self) -> int:

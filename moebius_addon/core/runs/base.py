@@ -38,7 +38,7 @@ from ..geometry.edge_pairs import SLACK
 from ..geometry.layout import as_unit_layout
 from ..geometry.obstacles import ObstacleField, auto_obstacle_tol, check_obstacles
 from ..geometry.pins import check_pins
-from ..geometry.polygon import check_polygon, contact_ratio
+from ..geometry.polygon import CheckedCurve, check_curve, check_layout, layout_contact_ratio
 from ..geometry.thickness import check_thickness, closest_tested, near_counts
 from ..metrics.gram import METRICS
 from ..metrics.pinned_solve import TREE_MAX_PINS
@@ -300,7 +300,9 @@ class Run:
                                                                               container)
         meshes = None if obstacles is None else check_obstacles(obstacles)
         container = None if container is None else check_container(container)
-        X, layout, e2 = as_unit_layout(P, closed)  # exact scaling of curves far from size 1
+        # a start checked at the door (AdaptiveRun) comes with its layout: not made again
+        X, layout, e2 = ((P.X, P.layout, P.exponent) if isinstance(P, CheckedCurve)
+                         else as_unit_layout(P, closed))  # exact scaling far from size 1
         if layout.has_open:
             self._check_open(engine)
         self.pinned = check_pins(pinned, layout, X, tangents=pin_tangents,
@@ -316,8 +318,11 @@ class Run:
             check_dense_size(layout.n, "method")
         elif self.engine.dense_metric:
             check_dense_size(layout.n)
-        if check:
-            check_polygon(P, closed=closed)
+        if check:  # once: a checked start only for the coarseness it may have left out
+            if isinstance(P, CheckedCurve):
+                check_curve(P, closed=closed)
+            else:
+                check_layout(X, layout, e2, closed)
         self.layout = layout
         self.metric = metric
         ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
@@ -601,12 +606,7 @@ class Run:
     def _strand_gap(self) -> float:
         """The start check's contact ratio of the current iterate: the closest approach of
         vertices far apart along the curve, in mean edge lengths (0 where strands touch)."""
-        layout = self.layout
-        try:
-            return contact_ratio(layout.split(self.X), closed=layout.closed
-                                 if layout.closed is not None else True)
-        except ValueError:  # strands that touch: the start check's words
-            return 0.0
+        return layout_contact_ratio(self.X, self.layout)
 
     def _deadline(self) -> None:
         """Raise :class:`_OutOfTime` once the budget is used up (checked inside long steps)."""
