@@ -403,7 +403,7 @@ def test_ctrl_c_in_a_kernel_outside_a_step_is_a_keyboard_interrupt(monkeypatch):
             raise SystemError("CPUDispatcher(...) returned a result with an exception set"
                               ) from err
 
-    monkeypatch.setattr(solver_base, "check_polygon", interrupted)
+    monkeypatch.setattr(solver_base, "check_layout", interrupted)
     with pytest.raises(KeyboardInterrupt):
         core.relax(core.knots.named("3_1", 60), max_iter=2, refine=False)
     with pytest.raises(KeyboardInterrupt):

@@ -477,7 +477,7 @@ def test_obstacle_tol_is_chosen_by_size_unless_given():
 HIERARCHY_CODE = """
 import numpy as np
 from tests.core.test_obstacles import _fine_torus_and_ring
-from moebius_addon.core import obstacles as ob
+from moebius_addon.core.geometry import obstacles as ob
 from moebius_addon.core.geometry.layout import as_layout
 V, F, P = _fine_torus_and_ring()
 X, layout = as_layout(P, True)

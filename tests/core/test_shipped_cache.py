@@ -77,7 +77,7 @@ def test_a_shipped_kernel_that_needs_scipy_is_compiled_instead_never_run(tmp_pat
         from pathlib import Path
         import numpy as np
         import lapack_kernel as k
-        from moebius_addon.core import _shipped_cache as sc
+        from moebius_addon.core.compilation import shipped_cache as sc
         (where,) = Path(sys.argv[1]).iterdir()
         k.top._cache = sc.ShippedFunctionCache(k.top.py_func, where, "lapack_kernel",
                                                "lapack_kernel")
