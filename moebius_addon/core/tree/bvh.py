@@ -271,3 +271,87 @@ def push_split(stack, top, a, b, left, right, diam2):
         stack[top, 0], stack[top, 1] = a, right[b]
         stack[top + 1, 0], stack[top + 1, 1] = a, left[b]
     return stack, top + 2
+
+
+# ------------------------------------------------------------------------------------------------
+# the dual traversal: one walk, parameterized by its test and what it does with a pair
+
+#: Verdicts of a traversal's ``test`` on a pair of nodes: nothing in it matters (dropped), it is
+#: taken whole (a far pair, given to ``visit``), or it is split (a pair of leaves: ``visit``).
+PRUNE = 0
+ACCEPT = 1
+SPLIT = 2
+
+
+@nb.njit(cache=True, inline="always")
+def dual_traversal(stack, a0, b0, left, right, diam2, test, visit, ctx, state):
+    """Depth-first dual traversal from the pair of nodes ``(a0, b0)``: ``test(a, b, ctx,
+    state)`` gives each pair's verdict (:data:`PRUNE`, :data:`ACCEPT`, :data:`SPLIT`); an
+    accepted pair and every pair of leaves to split go to ``visit(a, b, accepted, ctx, state)``,
+    which returns ``(go on, state)``; other pairs are split by :func:`push_split`, the last
+    pushed visited first. Returns the stack (grown when full), the state, and whether the walk
+    ran to its end.
+
+    Written once for the energy's split, the metric's and the contact searches; inlined into
+    each caller (``inline="always"``), it is compiled with their ``test`` and ``visit`` as
+    direct calls, and the callers stay cacheable (a jitted function passed to a kernel that is
+    compiled apart makes its callers uncacheable)."""
+    stack[0, 0] = a0
+    stack[0, 1] = b0
+    top = 1
+    while top > 0:
+        top -= 1
+        a = stack[top, 0]
+        b = stack[top, 1]
+        verdict = test(a, b, ctx, state)
+        if verdict == PRUNE:
+            continue
+        if verdict == SPLIT and (left[a] >= 0 or left[b] >= 0):
+            stack, top = push_split(stack, top, a, b, left, right, diam2)
+            continue
+        go, state = visit(a, b, verdict == ACCEPT, ctx, state)
+        if not go:
+            return stack, state, False
+    return stack, state, True
+
+
+@nb.njit(cache=True, inline="always")
+def frontier(left, right, diam2, want, test, ctx, state):
+    """The pairs of nodes that :func:`dual_traversal` from (root, root) with ``test`` passes
+    through, expanded breadth first until there are ``want`` of them or none splits further
+    (pruned pairs dropped, accepted ones and pairs of leaves kept): the starting pairs of
+    depth-first walks in parallel chunks, the same for every thread count."""
+    cur = np.zeros((1, 2), np.int64)
+    while cur.shape[0] < want:
+        nxt = np.empty((3 * cur.shape[0], 2), np.int64)
+        count = 0
+        grew = False
+        for p in range(cur.shape[0]):
+            a, b = cur[p, 0], cur[p, 1]
+            verdict = test(a, b, ctx, state)
+            if verdict == PRUNE:
+                continue
+            if verdict == SPLIT and (left[a] >= 0 or left[b] >= 0):
+                nxt, count = push_split(nxt, count, a, b, left, right, diam2)
+                grew = True
+            else:
+                nxt[count, 0], nxt[count, 1] = a, b
+                count += 1
+        cur = nxt[:count].copy()
+        if not grew:
+            break
+    return cur
+
+
+@nb.njit(cache=True, inline="always")
+def walk_tasks(tasks, first, step, stack, left, right, diam2, test, visit, ctx, state):
+    """:func:`dual_traversal` from each of the pairs ``tasks[first::step]`` in turn, the state
+    carried from one to the next: one chunk of a parallel search over a :func:`frontier`
+    (fixed chunks, so the same work and order for every thread count). Stops at the first walk
+    that stops; returns as :func:`dual_traversal`."""
+    for t in range(first, tasks.shape[0], step):
+        stack, state, done = dual_traversal(stack, tasks[t, 0], tasks[t, 1], left, right, diam2,
+                                            test, visit, ctx, state)
+        if not done:
+            return stack, state, False
+    return stack, state, True
