@@ -253,7 +253,7 @@ def test_straight_cable_is_nearly_free():
 CODE = """
 import numpy as np
 from moebius_addon import core
-from moebius_addon.core import barnes_hut as bh
+from moebius_addon.core.tree import moebius as bh
 from moebius_addon.core.geometry.layout import as_layout
 rng = np.random.default_rng(7)
 t = np.linspace(0, 1, 801)[:, None]

@@ -228,7 +228,7 @@ def test_same_function_as_exact_where_everything_is_near():
 
 CODE = """
 import json, numpy as np
-from moebius_addon.core import barnes_hut as bh
+from moebius_addon.core.tree import moebius as bh
 from moebius_addon.core.geometry.layout import as_layout
 rng = np.random.default_rng(5)
 # a (2, 5) torus knot made with numpy alone: only the tree's kernels run

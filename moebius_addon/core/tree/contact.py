@@ -26,6 +26,33 @@ _CHUNKS = 16
 _TASKS = 8 * _CHUNKS  # node pairs in the frontier before the parallel search
 
 
+@nb.njit(cache=True)
+def _frontier(left, right, bmin, bmax, diam2, overlap, want, umin, umax, T, eps):
+    """Node pairs (self pairs included) that hold every pair of edges a search must test,
+    expanded breadth first from (root, root) until there are ``want`` of them or only leaf
+    pairs are left; with ``overlap``, pairs that cannot come within ``eps`` before ``T``
+    (:func:`_may_meet`) are dropped."""
+    cur = np.zeros((1, 2), np.int64)
+    while cur.shape[0] < want:
+        nxt = np.empty((3 * cur.shape[0], 2), np.int64)
+        count = 0
+        grew = False
+        for p in range(cur.shape[0]):
+            a, b = cur[p, 0], cur[p, 1]
+            if overlap and a != b and not _may_meet(bmin, bmax, umin, umax, a, b, T, eps):
+                continue
+            if left[a] >= 0 or left[b] >= 0:
+                nxt, count = bvh.push_split(nxt, count, a, b, left, right, diam2)
+                grew = True
+            else:
+                nxt[count, 0], nxt[count, 1] = a, b
+                count += 1
+        cur = nxt[:count].copy()
+        if not grew:
+            break
+    return cur
+
+
 # ------------------------------------------------------------------------------------------------
 # first contact along a motion
 
@@ -83,47 +110,6 @@ def _may_meet(bmin, bmax, umin, umax, a, b, T, eps):
     return True
 
 
-@nb.njit(cache=True, inline="always")
-def _contact_test(a, b, ctx, tb):
-    """Node pairs that cannot meet before the best time so far ``tb`` are pruned (only
-    contacts before it can change the answer); every other pair is split."""
-    bmin, bmax, umin, umax, reach = ctx[16:]
-    if a != b and not _may_meet(bmin, bmax, umin, umax, a, b, tb, reach):
-        return bvh.PRUNE
-    return bvh.SPLIT
-
-
-@nb.njit(cache=True, inline="always")
-def _contact_visit(a, b, accepted, ctx, tb):
-    """The pair test of every pair of edges of the leaves ``a`` and ``b``: the least contact
-    time, below ``tb``."""
-    X, U, nxt, starts, comp, closed, near, perm, lo, hi, mid, vel, spread, half, vmax, eps = (
-        ctx[:16])
-    for q in range(lo[a], hi[a]):
-        for r in range(q + 1 if a == b else lo[b], hi[b]):
-            i, j = perm[q], perm[r]
-            if i > j:
-                i, j = j, i
-            if tested(i, j, starts, comp, closed, near):
-                tb = pair_time(X, U, nxt, i, j, mid, vel, spread, half, vmax, eps, tb)
-    return True, tb
-
-
-@nb.njit(cache=True)
-def _contact_tasks(left, right, diam2, want, ctx, tau_max):
-    """The starting pairs of the contact search (:func:`bvh.frontier`)."""
-    return bvh.frontier(left, right, diam2, want, _contact_test, ctx, tau_max)
-
-
-@nb.njit(cache=True)
-def _contact_chunk(tasks, first, step, left, right, diam2, ctx, tau_max):
-    """The least contact time below ``tau_max`` in one chunk of the search
-    (:func:`bvh.walk_tasks`; kept apart from the parallel loop, whose analysis the inlined walk
-    would go through)."""
-    return bvh.walk_tasks(tasks, first, step, np.empty((128, 2), np.int64), left, right, diam2,
-                          _contact_test, _contact_visit, ctx, tau_max)[1]
-
-
 @nb.njit(cache=True, parallel=True)
 def _contact_search(X, U, nxt, starts, comp, closed, near, perm, lo, hi, left, right,
                     tau_max, eps, nchunks, want):
@@ -137,13 +123,34 @@ def _contact_search(X, U, nxt, starts, comp, closed, near, perm, lo, hi, left, r
     bmin, bmax, umin, umax = _motion_boxes(X, U, nxt, perm, lo, hi, left, right, pad)
     diam2 = bvh.node_diam2(bmin, bmax)
     reach = SLACK * eps  # what the pair test calls a contact
-    ctx = (X, U, nxt, starts, comp, closed, near, perm, lo, hi, mid, vel, spread, half, vmax,
-           eps, bmin, bmax, umin, umax, reach)
-    tasks = _contact_tasks(left, right, diam2, want, ctx, tau_max)
+    tasks = _frontier(left, right, bmin, bmax, diam2, True, want, umin, umax, tau_max, reach)
     best = np.full(nchunks, tau_max)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
-        best[ch] = _contact_chunk(tasks, ch, nchunks, left, right, diam2, ctx, tau_max)
+        tb = tau_max
+        stack = np.empty((128, 2), np.int64)
+        for t in range(ch, tasks.shape[0], nchunks):
+            stack[0, 0] = tasks[t, 0]
+            stack[0, 1] = tasks[t, 1]
+            top = 1
+            while top > 0:
+                top -= 1
+                a, b = stack[top, 0], stack[top, 1]
+                # only contacts before this chunk's best so far can change its answer
+                if a != b and not _may_meet(bmin, bmax, umin, umax, a, b, tb, reach):
+                    continue
+                if left[a] < 0 and left[b] < 0:
+                    for q in range(lo[a], hi[a]):
+                        for r in range(q + 1 if a == b else lo[b], hi[b]):
+                            i, j = perm[q], perm[r]
+                            if i > j:
+                                i, j = j, i
+                            if tested(i, j, starts, comp, closed, near):
+                                tb = pair_time(X, U, nxt, i, j, mid, vel, spread, half, vmax,
+                                               eps, tb)
+                else:
+                    stack, top = bvh.push_split(stack, top, a, b, left, right, diam2)
+        best[ch] = tb
     return best.min()
 
 
@@ -180,75 +187,12 @@ def _better(d2, i, j, best, bi, bj):
     return d2 < best or (d2 == best and (i < bi or (i == bi and j < bj)))
 
 
-@nb.njit(cache=True, inline="always")
-def _closest_test(a, b, ctx, best):
-    """Node pairs farther apart than both best distances so far (``best[0]``, ``best[3]``)
-    are pruned; every other pair is split."""
-    if a != b:
-        g = bvh.box_gap2(ctx[8], ctx[9], a, b)
-        if g > best[0] and g > best[3]:
-            return bvh.PRUNE
-    return bvh.SPLIT
-
-
-@nb.njit(cache=True, inline="always")
-def _closest_visit(a, b, accepted, ctx, best):
-    """Every pair of edges of the leaves ``a`` and ``b``: the closest pair of vertices at
-    least ``min_gap`` apart along their curve and, with ``edges``, the closest pair of
-    disjoint edges (``best``: squared distances, indices and the edges' parameters)."""
-    X, nxt, starts, comp, closed, perm, lo, hi, _, _, min_gap, edges = ctx
-    vb, vi0, vj0, eb, ei0, ej0, es, et = best
-    for q in range(lo[a], hi[a]):
-        for r in range(q + 1 if a == b else lo[b], hi[b]):
-            i, j = perm[q], perm[r]
-            if i > j:
-                i, j = j, i
-            c = comp[i]
-            same = comp[j] == c
-            size = starts[c + 1] - starts[c]
-            gap = j - i
-            if same and closed[c]:  # an open one: no way round the ends
-                gap = min(gap, size - gap)
-            if (not same) or gap >= min_gap:
-                d2 = (X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (
-                    X[i, 2] - X[j, 2]
-                ) ** 2
-                if _better(d2, i, j, vb, vi0, vj0):
-                    vb, vi0, vj0 = d2, i, j
-            i1, j1 = nxt[i], nxt[j]
-            # an open component's dummy edge (a point) is no edge here
-            if edges and ((not same) or gap >= 2) and i1 != i and j1 != j:
-                d2, s, u = segment_distance2(
-                    X[i, 0], X[i, 1], X[i, 2], X[i1, 0], X[i1, 1], X[i1, 2],
-                    X[j, 0], X[j, 1], X[j, 2], X[j1, 0], X[j1, 1], X[j1, 2],
-                )
-                if _better(d2, i, j, eb, ei0, ej0):
-                    eb, ei0, ej0, es, et = d2, i, j, s, u
-    return True, (vb, vi0, vj0, eb, ei0, ej0, es, et)
-
-
-@nb.njit(cache=True)
-def _closest_tasks(left, right, diam2, want, ctx, start):
-    """The starting pairs of the closest-pair search (:func:`bvh.frontier`)."""
-    return bvh.frontier(left, right, diam2, want, _closest_test, ctx, start)
-
-
-@nb.njit(cache=True)
-def _closest_chunk(tasks, first, step, left, right, diam2, ctx, start):
-    """The closest pairs in one chunk of the search (:func:`bvh.walk_tasks`)."""
-    return bvh.walk_tasks(tasks, first, step, np.empty((128, 2), np.int64), left, right, diam2,
-                          _closest_test, _closest_visit, ctx, start)[1]
-
-
 @nb.njit(cache=True, parallel=True)
 def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmin, bmax,
                     min_gap, nchunks, want, edges):
     diam2 = bvh.node_diam2(bmin, bmax)
+    tasks = _frontier(left, right, bmin, bmax, diam2, False, want, bmin, bmax, 0.0, 0.0)
     big = np.iinfo(np.int64).max
-    # without the edges, their bound never keeps a box pair (−∞)
-    start = (np.inf, big, big, np.inf if edges else -np.inf, big, big, 0.0, 0.0)
-    ctx = (X, nxt, starts, comp, closed, perm, lo, hi, bmin, bmax, min_gap, edges)
-    tasks = _closest_tasks(left, right, diam2, want, ctx, start)
     vbest = np.full(nchunks, np.inf)
     vidx = np.full((nchunks, 2), big, np.int64)
     ebest = np.full(nchunks, np.inf)
@@ -256,10 +200,53 @@ def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmi
     epar = np.zeros((nchunks, 2))
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
-        best = _closest_chunk(tasks, ch, nchunks, left, right, diam2, ctx, start)
-        vbest[ch], vidx[ch, 0], vidx[ch, 1] = best[0], best[1], best[2]
-        ebest[ch], eidx[ch, 0], eidx[ch, 1] = best[3], best[4], best[5]
-        epar[ch, 0], epar[ch, 1] = best[6], best[7]
+        vb, vi0, vj0 = np.inf, big, big
+        # without the edges, their bound never keeps a box pair (−∞)
+        eb, ei0, ej0, es, et = np.inf if edges else -np.inf, big, big, 0.0, 0.0
+        stack = np.empty((128, 2), np.int64)
+        for t in range(ch, tasks.shape[0], nchunks):
+            stack[0, 0] = tasks[t, 0]
+            stack[0, 1] = tasks[t, 1]
+            top = 1
+            while top > 0:
+                top -= 1
+                a, b = stack[top, 0], stack[top, 1]
+                if a != b:
+                    g = bvh.box_gap2(bmin, bmax, a, b)
+                    if g > vb and g > eb:
+                        continue
+                if left[a] < 0 and left[b] < 0:
+                    for q in range(lo[a], hi[a]):
+                        for r in range(q + 1 if a == b else lo[b], hi[b]):
+                            i, j = perm[q], perm[r]
+                            if i > j:
+                                i, j = j, i
+                            c = comp[i]
+                            same = comp[j] == c
+                            size = starts[c + 1] - starts[c]
+                            gap = j - i
+                            if same and closed[c]:  # an open one: no way round the ends
+                                gap = min(gap, size - gap)
+                            if (not same) or gap >= min_gap:
+                                d2 = (X[i, 0] - X[j, 0]) ** 2 + (X[i, 1] - X[j, 1]) ** 2 + (
+                                    X[i, 2] - X[j, 2]
+                                ) ** 2
+                                if _better(d2, i, j, vb, vi0, vj0):
+                                    vb, vi0, vj0 = d2, i, j
+                            i1, j1 = nxt[i], nxt[j]
+                            # an open component's dummy edge (a point) is no edge here
+                            if edges and ((not same) or gap >= 2) and i1 != i and j1 != j:
+                                d2, s, u = segment_distance2(
+                                    X[i, 0], X[i, 1], X[i, 2], X[i1, 0], X[i1, 1], X[i1, 2],
+                                    X[j, 0], X[j, 1], X[j, 2], X[j1, 0], X[j1, 1], X[j1, 2],
+                                )
+                                if _better(d2, i, j, eb, ei0, ej0):
+                                    eb, ei0, ej0, es, et = d2, i, j, s, u
+                else:
+                    stack, top = bvh.push_split(stack, top, a, b, left, right, diam2)
+        vbest[ch], vidx[ch, 0], vidx[ch, 1] = vb, vi0, vj0
+        ebest[ch], eidx[ch, 0], eidx[ch, 1] = eb, ei0, ej0
+        epar[ch, 0], epar[ch, 1] = es, et
     return vbest, vidx, ebest, eidx, epar
 
 

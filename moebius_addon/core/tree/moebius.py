@@ -204,46 +204,100 @@ def _admissible_row(tab, a, b, theta2, masks):
     return max(tab[a, 6], tab[b, 6]) <= t2 * g
 
 
-@nb.njit(cache=True, inline="always")
-def _split_test(a, b, ctx, counts):
-    """A pair of admissible clusters (``ctx``: the node table, θ², the open masks) is far;
-    every other pair, self pairs first of all, is split."""
-    if a != b and _admissible_row(ctx[0], a, b, ctx[1], ctx[2]):
-        return bvh.ACCEPT
-    return bvh.SPLIT
+@nb.njit(cache=True)
+def _descend(a0, b0, left, right, tab, theta2, masks, stack, far, nfar, near, nnear):
+    """Depth-first split of the pair (a0, b0): far pairs (admissible clusters) and near pairs of
+    leaves written to ``far``/``near`` from ``nfar``/``nnear`` on; returns the new counts, or
+    (−1, −1) when an array is full. The order of :func:`bvh.push_split`: a self pair's children
+    with themselves, then with each other; else the larger node's halves, left first."""
+    stack[0, 0] = a0
+    stack[0, 1] = b0
+    top = 1
+    fcap = far.shape[0]
+    ncap = near.shape[0]
+    while top > 0:
+        top -= 1
+        a = stack[top, 0]
+        b = stack[top, 1]
+        la = left[a]
+        if a == b:
+            if la < 0:
+                if nnear == ncap:
+                    return -1, -1
+                near[nnear, 0] = a
+                near[nnear, 1] = b
+                nnear += 1
+            else:
+                ra = right[a]
+                stack[top, 0] = la
+                stack[top, 1] = ra
+                stack[top + 1, 0] = ra
+                stack[top + 1, 1] = ra
+                stack[top + 2, 0] = la
+                stack[top + 2, 1] = la
+                top += 3
+            continue
+        if _admissible_row(tab, a, b, theta2, masks):
+            if nfar == fcap:
+                return -1, -1
+            far[nfar, 0] = a
+            far[nfar, 1] = b
+            nfar += 1
+            continue
+        lb = left[b]
+        if la < 0 and lb < 0:
+            if nnear == ncap:
+                return -1, -1
+            near[nnear, 0] = a
+            near[nnear, 1] = b
+            nnear += 1
+        elif lb < 0 or (la >= 0 and tab[a, 6] >= tab[b, 6]):
+            stack[top, 0] = right[a]
+            stack[top, 1] = b
+            stack[top + 1, 0] = la
+            stack[top + 1, 1] = b
+            top += 2
+        else:
+            stack[top, 0] = a
+            stack[top, 1] = right[b]
+            stack[top + 1, 0] = a
+            stack[top + 1, 1] = lb
+            top += 2
+    return nfar, nnear
 
 
 @nb.njit(cache=True, inline="always")
-def _split_visit(a, b, far_pair, ctx, counts):
-    """A far pair written to ``ctx[3]``, a near pair of leaves to ``ctx[4]`` (``counts``: how
-    many each holds); stops when the list is full."""
-    nfar, nnear = counts
-    out = ctx[3] if far_pair else ctx[4]
-    k = nfar if far_pair else nnear
-    if k == out.shape[0]:
-        return False, counts
-    out[k, 0] = a
-    out[k, 1] = b
-    return True, ((nfar + 1, nnear) if far_pair else (nfar, nnear + 1))
+def _admissible(a, b, bmin, bmax, nc, diam2, theta2, masks):
+    gap2 = bvh.box_gap2(bmin, bmax, a, b)
+    if gap2 <= 0.0 or not _kinds_admissible(nc[a], nc[b]):
+        return False
+    t2 = (theta2 * (OPEN_THETA * OPEN_THETA) if _may_share_open(nc[a], nc[b], masks, a, b)
+          else theta2)
+    return max(diam2[a], diam2[b]) <= t2 * gap2
 
 
 @nb.njit(cache=True)
-def _split_tasks(left, right, tab, theta2, masks, want):
-    """The pairs of nodes the depth-first split starts from (:func:`bvh.frontier`)."""
-    return bvh.frontier(left, right, tab[:, 6], want, _split_test, (tab, theta2, masks), (0, 0))
-
-
-@nb.njit(cache=True)
-def _split_chunk(tasks, first, step, left, right, tab, theta2, masks, far, near):
-    """Depth-first split (:func:`bvh.walk_tasks`) of the pairs ``tasks[first::step]``: far
-    pairs (admissible clusters) and near pairs of leaves written to ``far`` and ``near``;
-    returns how many of each, or (−1, −1) when an array is full."""
-    ctx = (tab, theta2, masks, far, near)
-    _, counts, done = bvh.walk_tasks(tasks, first, step, np.empty((_STACK, 2), np.int64), left,
-                                     right, tab[:, 6], _split_test, _split_visit, ctx, (0, 0))
-    if not done:
-        return -1, -1
-    return counts
+def _tasks(left, right, bmin, bmax, nc, diam2, theta2, masks, want):
+    """The pairs of nodes the depth-first split starts from: (root, root) expanded breadth
+    first, as the split would (far and leaf pairs are final), until there are ``want``."""
+    cur = np.zeros((1, 2), np.int64)
+    while cur.shape[0] < want:
+        nxt = np.empty((3 * cur.shape[0], 2), np.int64)
+        count = 0
+        grew = False
+        for p in range(cur.shape[0]):
+            a, b = cur[p, 0], cur[p, 1]
+            if (left[a] >= 0 or left[b] >= 0) and (
+                    a == b or not _admissible(a, b, bmin, bmax, nc, diam2, theta2, masks)):
+                nxt, count = bvh.push_split(nxt, count, a, b, left, right, diam2)
+                grew = True
+            else:
+                nxt[count, 0], nxt[count, 1] = a, b
+                count += 1
+        cur = nxt[:count].copy()
+        if not grew:
+            break
+    return cur
 
 
 @nb.njit(cache=True, parallel=True)
@@ -253,8 +307,9 @@ def _split(left, right, bmin, bmax, nc, theta2, masks, nchunks, want, cap):
     pairs are split depth first in ``nchunks`` fixed chunks, each into a buffer of ``cap``
     pairs (all chunks again with twice the room while one runs out), and concatenated in
     chunk order: the same lists for every thread count."""
+    diam2 = bvh.node_diam2(bmin, bmax)
+    tasks = _tasks(left, right, bmin, bmax, nc, diam2, theta2, masks, want)
     tab = _node_table(bmin, bmax, nc)
-    tasks = _split_tasks(left, right, tab, theta2, masks, want)
     nf = np.zeros(nchunks, np.int64)
     nn = np.zeros(nchunks, np.int64)
     room = max(cap, 1)
@@ -263,8 +318,15 @@ def _split(left, right, bmin, bmax, nc, theta2, masks, nchunks, want, cap):
         nbuf = np.empty((nchunks, room, 2), np.int64)
         for cc in nb.prange(nchunks):
             ch = np.int64(cc)
-            nf[ch], nn[ch] = _split_chunk(tasks, ch, nchunks, left, right, tab, theta2, masks,
-                                          fbuf[ch], nbuf[ch])
+            stack = np.empty((_STACK, 2), np.int64)
+            f, n = 0, 0
+            for t in range(ch, tasks.shape[0], nchunks):
+                f, n = _descend(tasks[t, 0], tasks[t, 1], left, right, tab, theta2, masks, stack,
+                                fbuf[ch], f, nbuf[ch], n)
+                if f < 0:
+                    break
+            nf[ch] = f
+            nn[ch] = n
         if nf.min() >= 0:
             break
         room *= 2
