@@ -271,3 +271,46 @@ def push_split(stack, top, a, b, left, right, diam2):
         stack[top, 0], stack[top, 1] = a, right[b]
         stack[top + 1, 0], stack[top + 1, 1] = a, left[b]
     return stack, top + 2
+
+
+# ------------------------------------------------------------------------------------------------
+# the dual traversal: one walk, parameterized by its test and what it does with a pair
+
+#: Verdicts of a traversal's ``test`` on a pair of nodes: nothing in it matters (dropped), it is
+#: taken whole (a far pair, given to ``visit``), or it is split (a pair of leaves: ``visit``).
+PRUNE = 0
+ACCEPT = 1
+SPLIT = 2
+
+
+@nb.njit(cache=True, inline="always")
+def dual_traversal(stack, a0, b0, left, right, diam2, test, visit, ctx, state):
+    """Depth-first dual traversal from the pair of nodes ``(a0, b0)``: ``test(a, b, ctx,
+    state)`` gives each pair's verdict (:data:`PRUNE`, :data:`ACCEPT`, :data:`SPLIT`); an
+    accepted pair and every pair of leaves to split go to ``visit(a, b, accepted, ctx, state)``,
+    which returns ``(go on, state)``; other pairs are split by :func:`push_split`, the last
+    pushed visited first. Returns the stack (grown when full), the state, and whether the walk
+    ran to its end.
+
+    Inlined into its caller (``inline="always"``), it is compiled with the caller's ``test``
+    and ``visit`` as direct calls and the caller stays cacheable (a jitted function passed to a
+    kernel compiled apart makes its callers uncacheable). The hs metric's split uses it; the
+    energy's split and the contact searches keep their own loops, measured up to 2× faster
+    (docs/lab/tree-engine.md, "One dual traversal")."""
+    stack[0, 0] = a0
+    stack[0, 1] = b0
+    top = 1
+    while top > 0:
+        top -= 1
+        a = stack[top, 0]
+        b = stack[top, 1]
+        verdict = test(a, b, ctx, state)
+        if verdict == PRUNE:
+            continue
+        if verdict == SPLIT and (left[a] >= 0 or left[b] >= 0):
+            stack, top = push_split(stack, top, a, b, left, right, diam2)
+            continue
+        go, state = visit(a, b, verdict == ACCEPT, ctx, state)
+        if not go:
+            return stack, state, False
+    return stack, state, True

@@ -210,40 +210,45 @@ def _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, closed, theta2):
     return span * span <= theta2 * rho * rho
 
 
+@nb.njit(cache=True, inline="always")
+def _split_test(a, b, ctx, lists):
+    """A pair of admissible clusters (``ctx``: :func:`_admissible`'s arrays) is far; every
+    other pair, self pairs first of all, is split."""
+    bmin, bmax, diam2, nc, s0, s1, clen, closed, theta2 = ctx
+    if a != b and _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, closed, theta2):
+        return bvh.ACCEPT
+    return bvh.SPLIT
+
+
+@nb.njit(cache=True, inline="always")
+def _split_visit(a, b, far_pair, ctx, lists):
+    """A far pair appended to the far list, a near pair of leaves to the near list
+    (``lists``: both and their counts), each grown when full."""
+    far, nf, near, nn = lists
+    out = far if far_pair else near
+    k = nf if far_pair else nn
+    if k == out.shape[0]:
+        grown = np.empty((2 * k, 2), np.int64)
+        grown[:k] = out
+        out = grown
+    out[k, 0], out[k, 1] = a, b
+    if far_pair:
+        return True, (out, nf + 1, near, nn)
+    return True, (far, nf, out, nn + 1)
+
+
 @nb.njit(cache=True)
 def _split(left, right, bmin, bmax, nc, s0, s1, clen, closed, theta2):
-    """Dual traversal from (root, root): unordered far pairs of admissible clusters and near
-    pairs of leaves (self pairs included)."""
+    """Dual traversal from (root, root) (:func:`bvh.dual_traversal`): unordered far pairs of
+    admissible clusters and near pairs of leaves (self pairs included)."""
     diam2 = bvh.node_diam2(bmin, bmax)
     m = left.shape[0]
     far = np.empty((max(64, 8 * m), 2), np.int64)
     near = np.empty((max(64, 8 * m), 2), np.int64)
-    nf = 0
-    nn = 0
-    stack = np.empty((256, 2), np.int64)
-    stack[0, 0] = 0
-    stack[0, 1] = 0
-    top = 1
-    while top > 0:
-        top -= 1
-        a = stack[top, 0]
-        b = stack[top, 1]
-        if a != b and _admissible(a, b, bmin, bmax, diam2, nc, s0, s1, clen, closed, theta2):
-            if nf == far.shape[0]:
-                grown = np.empty((2 * nf, 2), np.int64)
-                grown[:nf] = far
-                far = grown
-            far[nf, 0], far[nf, 1] = a, b
-            nf += 1
-        elif left[a] >= 0 or left[b] >= 0:
-            stack, top = bvh.push_split(stack, top, a, b, left, right, diam2)
-        else:
-            if nn == near.shape[0]:
-                grown = np.empty((2 * nn, 2), np.int64)
-                grown[:nn] = near
-                near = grown
-            near[nn, 0], near[nn, 1] = a, b
-            nn += 1
+    ctx = (bmin, bmax, diam2, nc, s0, s1, clen, closed, theta2)
+    _, (far, nf, near, nn), _ = bvh.dual_traversal(np.empty((256, 2), np.int64), 0, 0, left,
+                                                   right, diam2, _split_test, _split_visit, ctx,
+                                                   (far, 0, near, 0))
     return far[:nf].copy(), near[:nn].copy()
 
 
