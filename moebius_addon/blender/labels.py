@@ -9,28 +9,24 @@ from __future__ import annotations
 from fractions import Fraction
 
 from .. import core
+from ..core import energies as core_energies
+from ..core.metrics import records as metric_records
 from ..core.runs.engine import AUTO_TREE_FROM, ENGINE_NAMES
 
-#: Metrics offered for the flow, as ``(core name, label, description)``.
-METRICS = (
-    ("hs", "W^{s,2} (geometric)",
-     "Geometric fractional Sobolev metric of the paper, of the order that fits the energy "
-     "(s = 3/2 for Möbius, (β − 1)/α for tangent-point): fastest, scale-aware"),
-    ("hs_pure", "W^{s,2} (pure)",
-     "Fractional Sobolev metric of order s without the lower-order terms"),
-    ("h2", "H²", "Second-order Sobolev metric (too strong: slow for fine polygons)"),
-    ("h1", "H¹", "First-order Sobolev metric (too weak: step sizes shrink with N)"),
-    ("l2", "L²", "Plain L² gradient descent (needs tiny steps; for comparison only)"),
-)
+#: Metrics offered for the flow, as ``(core name, label, description)``: the core's metric
+#: records (``core.metrics.records.METRIC_RECORDS``) in their order.
+METRICS = tuple((m.name, m.label, m.help) for m in metric_records.METRIC_RECORDS.values())
+#: The metric of a run when none is chosen.
+DEFAULT_METRIC = metric_records.DEFAULT_METRIC
 
 #: The energy records of the core (``core.energies.ENERGIES``): the menu, sliders and command-line
 #: options below are derived from them.
-ENERGY_RECORDS = tuple(core.energies.ENERGIES.values())
+ENERGY_RECORDS = tuple(core_energies.ENERGIES.values())
 #: Energies the flow can minimize, as ``(core name, label, description)``: the repulsive
 #: records (``core.energies.choice.RUN_ENERGY_NAMES``).
 ENERGIES = tuple((r.name, r.label, r.help) for r in ENERGY_RECORDS if r.repulsive)
 #: The energy of a run when none is chosen.
-DEFAULT_ENERGY = core.energies.DEFAULT_ENERGY
+DEFAULT_ENERGY = core_energies.DEFAULT_ENERGY
 #: The energies' parameters (α, β) and the added energies' weights (Stiffness), as
 #: ``(record, core.energies.Parameter)``: one setting each (``Parameter.setting``).
 ENERGY_PARAMETERS = tuple((r, p) for r in ENERGY_RECORDS for p in r.options)
@@ -43,7 +39,7 @@ def metric_order_text(energy: str, alpha: float | None = None, beta: float | Non
     panel shows it under the metric: "s = 3/2" (Möbius, and tangent-point at (2, 4)),
     "s = 7/4" (tangent-point at the default (2, 4.5)); ValueError (naming the parameter) for
     values the energy refuses."""
-    own = {p.name for p in core.energies.ENERGIES[energy].parameters}
+    own = {p.name for p in core_energies.ENERGIES[energy].parameters}
     given = {k: v for k, v in dict(params, alpha=alpha, beta=beta).items() if k in own}
     s = core.check_energy(energy, **given).metric_order
     # a small fraction where it is one (the panel's α, β are single-precision floats)

@@ -58,7 +58,7 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     # the energies' parameters (α, β) and weights (Stiffness): one setting each, added below
     # from the core's records
     metric: EnumProperty(
-        name="Metric", default="hs",
+        name="Metric", default=labels.DEFAULT_METRIC,
         items=[(key, label, desc) for key, label, desc in labels.METRICS],
         description="Inner product that turns the energy's derivative into a gradient",
     )
