@@ -20,7 +20,7 @@ import numpy as np
 
 from ..geometry.layout import Layout
 from ..runs.checks import check_number
-from . import DEFAULT_ENERGY, ENERGIES, tangent_point
+from . import DEFAULT_ENERGY, ENERGIES
 from .record import Energy
 
 #: The names of the ``energy=`` option, the default first (an energy evaluates alone by any
@@ -32,9 +32,6 @@ RUN_ENERGY_NAMES = tuple(name for name, r in ENERGIES.items() if r.repulsive)
 WEIGHTED = {r.weight.name: r for r in ENERGIES.values() if r.weight is not None}
 #: Every option an energy brings to a run, as ``{option name: (record, Parameter)}``.
 ENERGY_OPTIONS = {p.name: (r, p) for r in ENERGIES.values() for p in r.options}
-#: The tangent-point exponents when none are given (Repulsive Curves' choice; order 3/2,
-#: scale-invariant).
-DEFAULT_EXPONENTS = (tangent_point.DEFAULT_ALPHA, tangent_point.DEFAULT_BETA)
 
 
 def take_energy_options(options: dict) -> dict:
