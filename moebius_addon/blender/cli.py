@@ -24,10 +24,17 @@ import time
 import bpy
 
 from ..core.compilation.notice import compiling
-from ..core.energies.choice import check_energy
+from ..core.energies.choice import check_run_energy
 from ..core.runs.engine import AUTO_TREE_FROM
 from . import api, geometry, keyframes
-from .labels import DEFAULT_MAX_ITERATIONS, DEFAULT_SETTLE, DEFAULT_TOLERANCE
+from .labels import (
+    DEFAULT_ENERGY,
+    DEFAULT_MAX_ITERATIONS,
+    DEFAULT_SETTLE,
+    DEFAULT_TOLERANCE,
+    ENERGY_PARAMETERS,
+    THETA_TEXT,
+)
 
 
 def _thickness(text: str):
@@ -80,13 +87,15 @@ def _parser() -> argparse.ArgumentParser:
                    help="seed of --knot random and of --restarts (default %(default)s)")
     p.add_argument("--pq", type=int, nargs=2, default=(2, 3), metavar=("P", "Q"),
                    help="p and q of --knot torus")
-    p.add_argument("--energy", default="moebius", choices=[e for e, *_ in api.ENERGIES],
-                   help="the energy to minimize (default moebius; tangent_point spreads the "
-                        "strands evenly)")
-    p.add_argument("--alpha", type=float, default=None,
-                   help="tangent-point exponent α (default 2; needs α + 1 < β < 2α + 1)")
-    p.add_argument("--beta", type=float, default=None,
-                   help="tangent-point exponent β (default 4)")
+    p.add_argument("--energy", default=DEFAULT_ENERGY, choices=[e for e, *_ in api.ENERGIES],
+                   help=f"the energy to minimize (default {DEFAULT_ENERGY}): "
+                        + "; ".join(f"{e}: {text}" for e, _, text in api.ENERGIES))
+    for record, option in ENERGY_PARAMETERS:  # --alpha, --beta, --stiffness: the records'
+        p.add_argument(f"--{option.name.replace('_', '-')}", dest=option.name, type=float,
+                       default=None,
+                       help=f"{option.help} (default {option.default:g}"
+                            + (f"; with --energy {record.name})" if option in record.parameters
+                               else ")"))
     p.add_argument("--metric", default="hs", choices=[m for m, *_ in api.METRICS])
     p.add_argument("--method", default=api.DEFAULT_METHOD, choices=[m for m, *_ in api.METHODS],
                    help="optimizer (default auto: the implicit gradient for a knotted curve or "
@@ -96,8 +105,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="how the energy is evaluated (default auto: exact below "
                         f"{AUTO_TREE_FROM} edges, the Barnes-Hut tree from there on)")
     p.add_argument("--theta", type=float, default=None,
-                   help="admissibility of the tree engine in (0, 2) (default "
-                        f"{api.DEFAULT_THETA:g}; smaller is more accurate and slower)")
+                   help="admissibility of the tree engine in (0, 2) (default: the energy's "
+                        f"own, {THETA_TEXT}; smaller is more accurate and slower)")
     p.add_argument("--penalty", type=float, default=None, metavar="ALPHA",
                    help="penalty weight of ncg, lbfgs and nesterov (default "
                         f"{api.DEFAULT_PENALTY:g}; larger keeps edge lengths closer)")
@@ -156,6 +165,15 @@ def _parser() -> argparse.ArgumentParser:
     talk.add_argument("-q", "--quiet", action="store_true",
                       help="print nothing but errors and warnings")
     return p
+
+
+def _energy_options(args) -> dict:
+    """``energy=`` and the energy options given on the command line (``--alpha``,
+    ``--stiffness``, ...: the core's records), as ``relax_object`` takes them."""
+    out = {"energy": args.energy}
+    out.update((p.name, getattr(args, p.name)) for _, p in ENERGY_PARAMETERS
+               if getattr(args, p.name) is not None)
+    return out
 
 
 def _is_converted(obj, allow_open: bool = False) -> bool:
@@ -252,7 +270,7 @@ def _run(args, run: dict, notation: str | None):
             method, why = api.EXPLICIT_METHOD, ("an open curve" if is_open else "length growth")
         else:
             method, why = api.choose_method(args.method, start)
-        result = api.relax_object(obj, energy=args.energy, alpha=args.alpha, beta=args.beta,
+        result = api.relax_object(obj, **_energy_options(args),
                                   metric=args.metric, method=method,
                                   penalty=args.penalty, engine=args.engine,
                                   theta=args.theta, max_iterations=args.max_iterations,
@@ -265,7 +283,7 @@ def _run(args, run: dict, notation: str | None):
                                   **scene, **_pins(obj, args))
         frames = keyframes.keyed_frames(obj)
         say(f"{method}{f' ({why})' if why else ''}, "
-            f"{'' if result.energy == 'moebius' else result.energy + ' energy, '}"
+            f"{'' if result.energy == DEFAULT_ENERGY else result.energy + ' energy, '}"
             f"{result.stats['engine']} engine, {result.nit} iterations in "
             f"{time.perf_counter() - t0:.2f} s, energy "
             f"{result.history['energy'][0]:.6g} -> {float(result.fun):.6g}, keyed frames "
@@ -299,7 +317,7 @@ def main(argv: list[str]) -> int:
         api.check_relax_options(args.max_iterations, args.tolerance, args.stride,
                                 args.frame_start, args.method, args.penalty, args.engine,
                                 args.theta)
-        check_energy(args.energy, args.alpha, args.beta)  # refused by name
+        check_run_energy(**_energy_options(args))  # refused by name
         if args.max_edges is not None and args.max_edges < 1:
             raise ValueError(f"--max-edges must be a positive whole number, got "
                              f"{args.max_edges}")

@@ -3,6 +3,7 @@ the curve's shape changes."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 
 import bpy
@@ -20,9 +21,9 @@ _GRADIENT_COLOURS = {"l2": (0.9, 0.2, 0.15, 1.0), "hs_pure": (0.2, 0.7, 0.2, 1.0
 
 def show_gradients(obj: bpy.types.Object, metrics: Sequence[str] = ("l2", "hs_pure", "hs"),
                    length: float = 0.15, projected: bool = True,
-                   context: bpy.types.Context | None = None, *, energy: str = "moebius",
-                   alpha: float | None = None,
-                   beta: float | None = None) -> list[bpy.types.Object]:
+                   context: bpy.types.Context | None = None, *,
+                   energy: str = core.energies.DEFAULT_ENERGY,
+                   **energy_options) -> list[bpy.types.Object]:
     """Draw energy gradients of a curve as vector fields (the paper's Fig. 2).
 
     For each metric a mesh object ``"<curve>.grad.<metric>"`` is made with one edge per vertex,
@@ -43,10 +44,12 @@ def show_gradients(obj: bpy.types.Object, metrics: Sequence[str] = ("l2", "hs_pu
     projected : bool
         Project onto the constraints' tangent space (what the flow uses).
     context : bpy.types.Context, optional
-    energy, alpha, beta
-        The energy whose gradient is drawn, as ``relax_object`` takes it (the Flow panel's
-        *Energy*; ``hs`` and ``hs_pure`` of the order that fits it). Stored on the fields
-        (``["moebius_gradient_energy"]``, its label) so that a redraw draws the same energy's.
+    energy, **energy_options
+        The energy whose gradient is drawn and its options (``alpha``, ``beta``,
+        ``stiffness``), as ``relax_object`` takes them (the Flow panel's *Energy*; ``hs`` and
+        ``hs_pure`` of the order that fits it). Stored on the fields
+        (``["moebius_gradient_energy"]``, its label, and ``["moebius_energy_options"]``) so
+        that a redraw draws the same energy's.
 
     Returns
     -------
@@ -54,7 +57,7 @@ def show_gradients(obj: bpy.types.Object, metrics: Sequence[str] = ("l2", "hs_pu
         The gradient objects, parented to ``obj``.
     """
     context = context or bpy.context
-    choice = core.check_energy(energy, alpha, beta)
+    choice = core.check_energy(energy, **energy_options)
     polygons = geometry.curve_polygons(obj)
     try:  # NaN or a self-intersection would give NaN arrows; coarseness is no obstacle here
         core.check_polygon(as_input(polygons), coarseness=False)
@@ -90,8 +93,7 @@ def show_gradients(obj: bpy.types.Object, metrics: Sequence[str] = ("l2", "hs_pu
         arrows["moebius_arrow_length"] = length
         arrows["moebius_projected"] = bool(projected)
         arrows["moebius_gradient_energy"] = choice.label
-        if choice.alpha is not None:
-            arrows["moebius_energy_exponents"] = (choice.alpha, choice.beta)
+        arrows["moebius_energy_options"] = json.dumps(choice.options)
         out.append(arrows)
     return out
 
@@ -113,10 +115,7 @@ def refresh_gradients(obj: bpy.types.Object,
     metrics = [c["moebius_gradient"] for c in fields]
     length = float(fields[0].get("moebius_arrow_length", 0.15))
     projected = bool(fields[0].get("moebius_projected", True))
-    energy = {}
-    if "moebius_energy_exponents" in fields[0]:  # drawn for the tangent-point energy
-        alpha, beta = fields[0]["moebius_energy_exponents"]
-        energy = {"energy": "tangent_point", "alpha": float(alpha), "beta": float(beta)}
+    energy = json.loads(fields[0].get("moebius_energy_options", "{}"))
     try:
         return show_gradients(obj, metrics, length=length, projected=projected, context=context,
                               **energy)

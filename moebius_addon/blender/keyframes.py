@@ -189,7 +189,8 @@ def _write_channel(fcurves, data_path: str, index: int, frames: np.ndarray,
 
 def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.ndarray]],
                          energies: Sequence[float], frame_start: int = 1,
-                         shape_keys: bool | None = None, energy_name: str | None = None) -> range:
+                         shape_keys: bool | None = None, energy_name: str | None = None,
+                         energy_words: str | None = None) -> range:
     """Keyframe a sequence of polygons on the curve's splines and the energy on the object.
 
     Replaces keys from an earlier call (to append, pass the earlier iterates too: see
@@ -212,8 +213,9 @@ def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.n
         by the size (shape keys above :data:`PER_POINT_MAX` points).
     energy_name : str, optional
         Which energy ``energies`` are (``core.EnergyChoice.label``), stored as
-        ``obj["moebius_energy_name"]`` and in the energy property's tooltip; None leaves the
-        stored name as it is.
+        ``obj["moebius_energy_name"]``; None leaves the stored name as it is.
+    energy_words : str, optional
+        The energy property's tooltip (``core.EnergyChoice.words``; None: ``energy_name``).
 
     Returns
     -------
@@ -241,18 +243,11 @@ def write_flow_keyframes(obj: bpy.types.Object, iterates: Sequence[Sequence[np.n
     obj[ENERGY_PROP] = float(energies[0])
     if energy_name is not None:
         obj[ENERGY_NAME_PROP] = energy_name
-        obj.id_properties_ui(ENERGY_PROP).update(description=_energy_words(energy_name))
+        obj.id_properties_ui(ENERGY_PROP).update(
+            description=energy_name if energy_words is None else energy_words)
     _write_channel(_fcurves(obj, create=True), ENERGY_PATH, 0, frames,
                    np.asarray(energies, dtype=np.float64))
     return range(frame_start, frame_start + len(iterates))
-
-
-def _energy_words(label: str) -> str:
-    """The tooltip of the keyed energy for the energy ``label``."""
-    if label == "moebius":
-        return "Möbius energy of the curve at this frame (scale-invariant)"
-    return (f"Tangent-point energy {label[len('tangent_point'):]} (α, β) of the curve at this "
-            f"frame, for the curve scaled to total length 1")
 
 
 def _write_points(obj, sizes, iterates, frames) -> None:

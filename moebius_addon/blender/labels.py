@@ -9,53 +9,43 @@ from __future__ import annotations
 from fractions import Fraction
 
 from .. import core
+from ..core import energies as core_energies
+from ..core.metrics import records as metric_records
 from ..core.runs.engine import AUTO_TREE_FROM, ENGINE_NAMES
-from ..core.tree import moebius as barnes_hut
 
-#: Metrics offered for the flow, as ``(core name, label, description)``.
-METRICS = (
-    ("hs", "W^{s,2} (geometric)",
-     "Geometric fractional Sobolev metric of the paper, of the order that fits the energy "
-     "(s = 3/2 for Möbius, (β − 1)/α for tangent-point): fastest, scale-aware"),
-    ("hs_pure", "W^{s,2} (pure)",
-     "Fractional Sobolev metric of order s without the lower-order terms"),
-    ("h2", "H²", "Second-order Sobolev metric (too strong: slow for fine polygons)"),
-    ("h1", "H¹", "First-order Sobolev metric (too weak: step sizes shrink with N)"),
-    ("l2", "L²", "Plain L² gradient descent (needs tiny steps; for comparison only)"),
-)
+#: Metrics offered for the flow, as ``(core name, label, description)``: the core's metric
+#: records (``core.metrics.records.METRIC_RECORDS``) in their order.
+METRICS = tuple((m.name, m.label, m.help) for m in metric_records.METRIC_RECORDS.values())
+#: The metric of a run when none is chosen.
+DEFAULT_METRIC = metric_records.DEFAULT_METRIC
 
-#: Energies the flow can minimize, as ``(core name, label, description)``
-#: (``core.ENERGY_NAMES``).
-ENERGIES = (
-    ("moebius", "Möbius",
-     "The paper's Möbius energy: scale-invariant, keeps tight clasps where strands meet"),
-    ("tangent_point", "Tangent-Point",
-     "Tangent-point energy with exponents α, β (Advanced; default 2, 4.5): spreads the "
-     "strands evenly, opens tight clasps"),
-)
-assert tuple(key for key, _, _ in ENERGIES) == core.ENERGY_NAMES
+#: The energy records of the core (``core.energies.ENERGIES``): the menu, sliders and command-line
+#: options below are derived from them.
+ENERGY_RECORDS = tuple(core_energies.ENERGIES.values())
+#: Energies the flow can minimize, as ``(core name, label, description)``: the repulsive
+#: records (``core.energies.choice.RUN_ENERGY_NAMES``).
+ENERGIES = tuple((r.name, r.label, r.help) for r in ENERGY_RECORDS if r.repulsive)
+#: The energy of a run when none is chosen.
+DEFAULT_ENERGY = core_energies.DEFAULT_ENERGY
+#: The energies' parameters (α, β) and the added energies' weights (Stiffness), as
+#: ``(record, core.energies.Parameter)``: one setting each (``Parameter.setting``).
+ENERGY_PARAMETERS = tuple((r, p) for r in ENERGY_RECORDS for p in r.options)
 
 
-def energy_label(name: str) -> str:
-    """The *Last Run* box's row name for the energy ``name`` (``EnergyChoice.label``):
-    "Energy" for Möbius, "TP (2, 4.5)" for the tangent-point energy with its exponents."""
-    return "Energy" if name == "moebius" else "TP" + name[len("tangent_point"):]
-
-
-def metric_order_text(energy: str, alpha: float, beta: float) -> str:
-    """The order ``s`` of the ``hs`` metrics for ``energy`` (``alpha``, ``beta``: the
-    tangent-point exponents, ignored for Möbius) as the panel shows it under the metric:
-    "s = 3/2" (Möbius, and tangent-point at (2, 4)), "s = 7/4" (tangent-point at the default
-    (2, 4.5)); ValueError (naming the exponent) for exponents the energy refuses."""
-    tp = energy == "tangent_point"  # the exponents (the panel's α, β) are only its own
-    s = core.check_energy(energy, alpha if tp else None, beta if tp else None).metric_order
+def metric_order_text(energy: str, alpha: float | None = None, beta: float | None = None,
+                      **params) -> str:
+    """The order ``s`` of the ``hs`` metrics for ``energy`` with the panel's values of the
+    energies' parameters (``alpha``, ``beta``, ...: only the energy's own are used) as the
+    panel shows it under the metric: "s = 3/2" (Möbius, and tangent-point at (2, 4)),
+    "s = 7/4" (tangent-point at the default (2, 4.5)); ValueError (naming the parameter) for
+    values the energy refuses."""
+    own = {p.name for p in core_energies.ENERGIES[energy].parameters}
+    given = {k: v for k, v in dict(params, alpha=alpha, beta=beta).items() if k in own}
+    s = core.check_energy(energy, **given).metric_order
     # a small fraction where it is one (the panel's α, β are single-precision floats)
     f = Fraction(s).limit_denominator(12)
     return f"s = {f.numerator}/{f.denominator}" if abs(float(f) - s) < 1e-6 else f"s = {s:.4g}"
 
-
-#: Default exponents α, β of the tangent-point energy (``core.energies.choice``).
-DEFAULT_TP_ALPHA, DEFAULT_TP_BETA = core.energies.choice.DEFAULT_EXPONENTS
 
 #: The paper's explicit projected gradient (``core.Relaxation``): best on unknots.
 EXPLICIT_METHOD = "projected_gradient"
@@ -125,8 +115,12 @@ PENALTY_METHODS = core.runs.methods.INFEASIBLE
 #: Default engine: the tree from ``core.runs.engine.AUTO_TREE_FROM`` edges on, exact below (the
 #: core's).
 DEFAULT_ENGINE = "auto"
-#: Default admissibility θ of the tree (the core's).
-DEFAULT_THETA = barnes_hut.THETA
+#: The panel's θ when none is typed: 0, the energy's own default (each energy's record has
+#: its own; one value for all gave the tangent-point tree the Möbius tree's).
+DEFAULT_THETA = 0.0
+#: Each energy's own θ, as the θ setting's tooltip lists them.
+THETA_TEXT = ", ".join(f"{r.label} {r.default_theta:g}" for r in ENERGY_RECORDS
+                       if r.default_theta is not None)
 
 _ENGINE_TEXT = {
     "auto": (

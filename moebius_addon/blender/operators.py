@@ -529,10 +529,9 @@ class MOEBIUS_OT_show_gradient(bpy.types.Operator):
         obj = _active_curve(context)
         try:
             # the gradient of the energy the Flow panel relaxes
-            settings = api.relax_settings(context.scene.moebius)
-            energy = {k: settings[k] for k in ("energy", "alpha", "beta") if k in settings}
             made = api.show_gradients(obj, metrics, length=self.length,
-                                      projected=self.projected, context=context, **energy)
+                                      projected=self.projected, context=context,
+                                      **options.energy_settings(context.scene.moebius))
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}

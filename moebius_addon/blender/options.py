@@ -14,9 +14,11 @@ from ..core.runs.engine import engine_class
 from ..core.tree import moebius as barnes_hut
 from .labels import (
     AUTO_METHOD,
+    DEFAULT_ENERGY,
     DEFAULT_ENGINE,
     DEFAULT_METHOD,
     DEFAULT_PENALTY,
+    ENERGY_PARAMETERS,
     EXPLICIT_METHOD,
     KNOT_METHOD,
     PENALTY_METHODS,
@@ -45,6 +47,21 @@ def acting_settings(method: str, engine: str = DEFAULT_ENGINE) -> frozenset:
                                    "keep_edge_lengths", "keep_barycenter", "keep_thickness"})
 
 
+def energy_settings(settings) -> dict:
+    """``energy=`` and its options from the ``scene.moebius`` settings, by the core's records:
+    the chosen energy's own parameters (α, β of the tangent-point energy), and each added
+    energy's weight (``stiffness``) where it is above 0; as typed (float32 properties)."""
+    name = getattr(settings, "energy", DEFAULT_ENERGY)
+    out = {"energy": name}
+    for record, p in ENERGY_PARAMETERS:
+        value = getattr(settings, p.setting, p.default)
+        if record.name == name and p in record.parameters:
+            out[p.name] = round(value, 6)
+        elif p is record.weight and value > 0.0:
+            out[p.name] = round(value, 6)
+    return out
+
+
 def relax_settings(settings) -> dict:
     """Keyword arguments for ``relax_object`` from the ``scene.moebius`` settings: those
     every method takes, and of the others only those that act on the chosen method
@@ -52,7 +69,7 @@ def relax_settings(settings) -> dict:
     method = settings.method
     acting = acting_settings(method, settings.engine)
     kwargs = dict(
-        energy=getattr(settings, "energy", "moebius"),
+        **energy_settings(settings),
         metric=settings.metric,
         method=method,
         engine=settings.engine,
@@ -63,16 +80,15 @@ def relax_settings(settings) -> dict:
         keyframe_stride=settings.keyframe_stride,
         initial_step=settings.initial_step,
     )
-    if kwargs["energy"] == "tangent_point":  # as typed (float32 properties)
-        kwargs.update(alpha=round(settings.tp_alpha, 6), beta=round(settings.tp_beta, 6))
     if "armijo" in acting:
         kwargs["armijo"] = settings.armijo
     if "growth" in acting:
         kwargs["growth"] = settings.growth
     if "penalty" in acting:
         kwargs["penalty"] = settings.penalty
-    if "theta" in acting:  # as typed: the float32 property's 0.17499999701976776 is 0.175
-        kwargs["theta"] = round(settings.theta, 6)
+    if "theta" in acting:  # as typed: the float32 property's 0.17499999701976776 is 0.175;
+        # 0: the energy's own (None, the core's default for the energy run)
+        kwargs["theta"] = round(settings.theta, 6) if settings.theta > 0.0 else None
     if "backproject_iter" in acting:
         kwargs.update(
             backproject_iter=settings.backproject_iter,

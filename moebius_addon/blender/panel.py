@@ -85,7 +85,7 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
             col.label(text=labels.method_label(s.last_method))
             for name, value in (
                 ("Iterations", str(s.last_iterations)),
-                (labels.energy_label(s.last_energy_name),
+                (s.last_energy_row,
                  f"{s.last_energy_start:.5g} → {s.last_energy_end:.5g}"),
                 ("Time", f"{s.last_seconds:.2f} s"),
                 ("Keyed", f"{s.last_keyframes} frames"),
@@ -137,14 +137,19 @@ class VIEW3D_PT_moebius_flow(_MoebiusPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.label(text="Energy")
         col.prop(s, "energy", text="")
+        for record, p in labels.ENERGY_PARAMETERS:  # the added energies' weights: Stiffness
+            if p is record.weight:
+                col.prop(s, p.setting)
         col.label(text="Metric")
         col.prop(s, "metric", text="")
         if s.metric in ("hs", "hs_pure"):  # its order depends on the energy (api.md)
             try:
-                col.label(text="Order " + labels.metric_order_text(s.energy, s.tp_alpha,
-                                                                    s.tp_beta))
+                col.label(text="Order " + labels.metric_order_text(
+                    **options.energy_settings(s)))
             except ValueError:  # Relax reports the whole message
-                col.label(text="α, β out of range (Advanced)", icon="ERROR")
+                own = ", ".join(p.label for r, p in labels.ENERGY_PARAMETERS
+                                if r.name == s.energy and p in r.parameters)
+                col.label(text=f"{own} out of range (Advanced)", icon="ERROR")
         col = layout.column(align=True)
         col.prop(s, "max_iterations")
         col.prop(s, "tolerance")
@@ -195,12 +200,14 @@ class VIEW3D_PT_moebius_advanced(_MoebiusPanel, bpy.types.Panel):
             col.label(text="Unknots: Projected")
         if "penalty" in acting:
             col.prop(s, "penalty")
-        col = layout.column(align=True)
-        col.label(text="Tangent-Point Exponents")
-        row = col.row(align=True)
-        row.active = s.energy == "tangent_point"
-        row.prop(s, "tp_alpha")
-        row.prop(s, "tp_beta")
+        for record in labels.ENERGY_RECORDS:  # each energy's parameters (α, β), active when
+            if record.parameters:  # it is the chosen one
+                col = layout.column(align=True)
+                col.label(text=f"{record.label} Parameters")
+                row = col.row(align=True)
+                row.active = s.energy == record.name
+                for p in record.parameters:
+                    row.prop(s, p.setting)
         col = layout.column(align=True)
         col.label(text="Engine")
         col.prop(s, "engine", text="")

@@ -51,22 +51,14 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     )
     # Flow
     energy: EnumProperty(
-        name="Energy", default="moebius",
+        name="Energy", default=labels.DEFAULT_ENERGY,
         items=[(key, label, desc) for key, label, desc in labels.ENERGIES],
         description="The energy the flow minimizes (and keys on the object)",
     )
-    tp_alpha: FloatProperty(
-        name="α", default=labels.DEFAULT_TP_ALPHA, min=0.01, soft_max=8.0, precision=2,
-        description="Tangent-point energy: exponent α of |T × (x − y)| (needs α + 1 < β < "
-                    "2α + 1)",
-    )
-    tp_beta: FloatProperty(
-        name="β", default=labels.DEFAULT_TP_BETA, min=0.01, soft_max=16.0, precision=2,
-        description="Tangent-point energy: exponent β of |x − y| (needs α + 1 < β < 2α + 1; "
-                    "β = α + 2 makes it scale-invariant)",
-    )
+    # the energies' parameters (α, β) and weights (Stiffness): one setting each, added below
+    # from the core's records
     metric: EnumProperty(
-        name="Metric", default="hs",
+        name="Metric", default=labels.DEFAULT_METRIC,
         items=[(key, label, desc) for key, label, desc in labels.METRICS],
         description="Inner product that turns the energy's derivative into a gradient",
     )
@@ -140,10 +132,11 @@ class MoebiusSettings(bpy.types.PropertyGroup):
                     "of edges, or by the Barnes–Hut tree (large curves)",
     )
     theta: FloatProperty(
-        name="Theta", default=labels.DEFAULT_THETA, min=0.0, max=2.0, soft_min=0.05,
-        soft_max=1.0, precision=3,
+        name="Theta", default=labels.DEFAULT_THETA, min=0.0, max=2.0, soft_max=1.0,
+        precision=3,
         description="Tree engine only: admissibility θ of the far field of the energy and its "
-                    "gradient, in (0, 2). Smaller is more accurate and slower",
+                    "gradient, in (0, 2); 0: the energy's own (" + labels.THETA_TEXT + "). "
+                    "Smaller is more accurate and slower",
     )
     initial_step: FloatProperty(
         name="Initial Step", default=1.0, min=1e-12, precision=4,
@@ -274,7 +267,9 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     last_engine: StringProperty(name="Engine", get=_stat("engine", ""))
     last_type: StringProperty(name="Knot Type", get=_stat("type", ""))
     last_refined: StringProperty(name="Refined", get=_stat("refined", ""))
-    last_energy_name: StringProperty(name="Energy Name", get=_stat("energy_name", "moebius"))
+    last_energy_name: StringProperty(name="Energy Name",
+                                     get=_stat("energy_name", labels.DEFAULT_ENERGY))
+    last_energy_row: StringProperty(name="Energy Row", get=_stat("energy_row", "Energy"))
     # Notation typed for Add from Notation (braid word or PD code)
     notation: StringProperty(
         name="Notation", default="1 -2 1 -2",
@@ -286,16 +281,22 @@ class MoebiusSettings(bpy.types.PropertyGroup):
     def store_run(self, obj_name: str, iterations: int, energy_start: float, energy_end: float,
                   seconds: float, message: str, keyed: int,
                   method: str = labels.DEFAULT_METHOD, engine: str = "",
-                  knot_type: str = "", refined: str = "", energy_name: str = "moebius") -> None:
+                  knot_type: str = "", refined: str = "",
+                  energy_name: str = labels.DEFAULT_ENERGY, energy_row: str = "Energy") -> None:
         """Record the statistics of a finished run (shown read-only in the panel)."""
         self["_stats"] = {
             "object": obj_name, "iterations": int(iterations),
             "energy_start": float(energy_start), "energy_end": float(energy_end),
             "seconds": float(seconds), "message": message, "keyframes": int(keyed),
             "method": method, "engine": engine, "type": knot_type, "refined": refined,
-            "energy_name": energy_name,
+            "energy_name": energy_name, "energy_row": energy_row,
         }
 
+
+for _record, _p in labels.ENERGY_PARAMETERS:  # α, β, Stiffness, ...: from the core's records
+    MoebiusSettings.__annotations__[_p.setting] = FloatProperty(
+        name=_p.label, default=_p.default, min=_p.minimum, soft_max=_p.soft_max,
+        precision=_p.precision, description=_p.help)
 
 classes = (MoebiusSettings,)
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from .. import core
 from ..core.compilation.notice import compiling
+from ..core.energies.choice import ENERGY_OPTIONS
 from ..core.runs.aliases import take_spelling
 from . import geometry, keyframes, scene_constraints
 from .gradients import refresh_gradients
@@ -293,12 +294,14 @@ class ObjectRelaxation:
             theta)
         options.update(extra)
         try:  # the energy and its exponents, before any work
-            choice = core.check_energy(options.get("energy", "moebius"), options.get("alpha"),
-                                       options.get("beta"))
+            choice = core.check_energy(**{k: options[k] for k in ("energy", *ENERGY_OPTIONS)
+                                          if k in options})
         except ValueError as err:
             raise ValueError(f"'{obj.name}': {err}") from None
         #: which energy the flow minimizes and keys ("moebius", "tangent_point(2, 4.5)")
         self.energy_label = choice.label
+        #: the energy as a choice of the core (its tooltip words, its row name)
+        self.energy_choice = choice
         #: the curve objects of the run (:mod:`.group`), the first one's coordinates the run's
         self.members = members(obj)
         obj = self.members[0].obj
@@ -432,7 +435,7 @@ class ObjectRelaxation:
         the start in the run's coordinates, and its frame."""
         for m in self.members:
             m.prior = keyframes.read_flow_keyframes(m.obj)
-            keyed = m.obj.get(keyframes.ENERGY_NAME_PROP, "moebius")
+            keyed = m.obj.get(keyframes.ENERGY_NAME_PROP, core.energies.DEFAULT_ENERGY)
             if m.prior is not None and keyed != self.energy_label:
                 raise ValueError(
                     f"'{m.obj.name}': its keyed flow minimized the {keyed} energy, not "
@@ -572,7 +575,8 @@ class ObjectRelaxation:
                             time.perf_counter() - self.t0, str(result.message), len(frames),
                             self.method, self.engine, self.type_message,
                             refined=self.refinement_text(result),
-                            energy_name=self.energy_label)
+                            energy_name=self.energy_label,
+                            energy_row=self.energy_choice.short_label)
         return result
 
 
@@ -598,7 +602,8 @@ class ObjectRelaxation:
         rest = rest_shape(obj)
         geometry.write_polygons(obj.data, iterates[0] if rest is None else rest)
         return keyframes.write_flow_keyframes(obj, iterates, energies, first,
-                                              energy_name=self.energy_label)
+                                              energy_name=self.energy_label,
+                                              energy_words=self.energy_choice.words)
 
 
 def _refinement_line(r: dict) -> str:

@@ -1,6 +1,8 @@
 """The Energy menu: a flow of the tangent-point energy keyed like a Möbius one, the keyed energy
 saying which it is; its exponents checked before any work; the command line's --energy."""
 
+import importlib
+
 import bpy
 import numpy as np
 import pytest
@@ -128,3 +130,54 @@ def test_cli_energy(scene, mb, capfd):
     assert bpy.context.active_object[mb.ENERGY_NAME_PROP] == "tangent_point(3, 6)"
     assert cli.main(["--knot", "3_1", "--energy", "tangent_point", "--beta", "9"]) == 1
     assert "beta" in capfd.readouterr().err
+
+
+def test_menus_and_sliders_are_the_cores_records(scene, mb, core):
+    # the Energy and Metric menus, the parameters' sliders and the command line's choices are
+    # read from the core's records: a record added there appears here
+    labels = importlib.import_module(mb.__name__ + ".labels")
+    from_core = core.energies.choice.RUN_ENERGY_NAMES
+    assert tuple(k for k, _, _ in labels.ENERGIES) == from_core
+    props = scene.moebius.bl_rna.properties
+    assert tuple(i.identifier for i in props["energy"].enum_items) == from_core
+    metrics = tuple(core.metrics.records.METRIC_RECORDS)
+    assert tuple(k for k, _, _ in labels.METRICS) == metrics
+    assert set(metrics) == set(core.METRICS)
+    assert tuple(i.identifier for i in props["metric"].enum_items) == metrics
+    for record in core.energies.ENERGIES.values():
+        for p in record.options:  # α, β, Stiffness
+            assert props[p.setting].default == pytest.approx(p.default)
+            assert props[p.setting].name == p.label
+    cli = importlib.import_module(mb.__name__ + ".cli")
+    text = cli._parser().format_help()
+    assert "--stiffness" in text and "--alpha" in text and "--beta" in text
+
+
+def test_a_tangent_point_run_from_the_defaults_gets_its_own_theta(scene, mb, core, knot):
+    # the panel's θ passed the Möbius tree's 0.175 to every energy; 0 now means the energy's own
+    s = scene.moebius
+    s.energy, s.engine, s.max_iterations = "tangent_point", "tree", 1
+    assert s.theta == 0.0
+    assert mb.relax_settings(s)["theta"] is None
+    run = mb.ObjectRelaxation(knot, **mb.relax_settings(s))
+    assert run.run.engine.theta == core.energies.ENERGIES["tangent_point"].default_theta == 0.25
+    s.energy = "moebius"
+    run = mb.ObjectRelaxation(knot, **mb.relax_settings(s))
+    assert run.run.engine.theta == core.energies.ENERGIES["moebius"].default_theta == 0.175
+    s.theta = 0.3  # a typed θ is every energy's
+    assert mb.ObjectRelaxation(knot, **mb.relax_settings(s)).run.engine.theta == 0.3
+
+
+def test_stiffness_slider_reaches_the_run(scene, mb, core, knot):
+    s = scene.moebius
+    assert "stiffness" not in mb.relax_settings(s)  # 0: no bending term at all
+    s.stiffness, s.max_iterations, s.tolerance = 0.5, 2, 0.0
+    assert mb.relax_settings(s)["stiffness"] == 0.5
+    assert bpy.ops.moebius.relax() == {"FINISHED"}
+    assert knot[mb.ENERGY_NAME_PROP] == "moebius + bending(0.5)"
+    assert s.last_energy_row == "Energy + 0.5 bend"
+    assert "bending" in knot.id_properties_ui(mb.ENERGY_PROP).as_dict()["description"]
+    cli = importlib.import_module(mb.__name__ + ".cli")
+    assert cli.main(["--knot", "3_1", "--edges", "60", "--max-iterations", "1",
+                     "--stiffness", "0.2"]) == 0
+    assert cli.main(["--knot", "3_1", "--edges", "60", "--stiffness", "-1", "--no-relax"]) == 1

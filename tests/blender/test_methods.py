@@ -55,9 +55,9 @@ def test_settings_pass_each_method_only_its_options(scene, mb, core):
     s.refine = False
     assert mb.relax_settings(s)["refine"] is False and "max_edges" not in mb.relax_settings(s)
     s.refine, s.max_edges, s.restarts = True, 0, 0
-    # the default run is the core's: θ is a float32 property, passed on as typed
+    # the default run is the core's: θ 0 passes None, the energy's own default
     assert mb.relax_settings(s)["engine"] == "auto"
-    assert mb.relax_settings(s)["theta"] == core.tree.moebius.THETA
+    assert mb.relax_settings(s)["theta"] is None
     # the tolerance is set as digits (a number field shows only six decimals)
     assert mb.relax_settings(s)["backproject_tol"] == pytest.approx(1e-10, rel=1e-12)
     s.backproject_digits = 8

@@ -121,7 +121,8 @@ def test_run_objects_share_the_relaxation_interface(trefoil100):
 #: what an optimizer (core/runs/ but the engine) may import from the numerical rooms: the
 #: metric names, the pin limit of the tree's solves, the energy's options; nothing that sums
 _ALLOWED_REACH = {"metrics.gram": {"METRICS"}, "metrics.pinned_solve": {"TREE_MAX_PINS"},
-                  "energies.choice": {"check_energy"}}
+                  "energies.choice": {"check_energy", "check_run_energy", "take_energy_options",
+                                      "DEFAULT_ENERGY", "ENERGY_OPTIONS", "RUN_ENERGY_NAMES"}}
 _NUMERICS = ("tree", "energies", "metrics", "geometry.collision")
 
 

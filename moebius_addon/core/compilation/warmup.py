@@ -17,6 +17,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..energies import ENERGIES
 from ..geometry.layout import layout_from_sizes
 from ..geometry.polygon import check_polygon, contact_ratio, resample
 from ..geometry.push_apart import separate
@@ -69,13 +70,17 @@ def _tree() -> None:
     hs_tree.HsOperator(X, layout_from_sizes([400], False), single=True).product(X)
 
 
-def _tangent_point() -> None:
-    # Energy ▸ Tangent-Point: its sums, the metric of its order (7/4 at the default exponents),
-    # on the exact engine and, from engine.AUTO_TREE_FROM edges on, the tree
-    for n in (100, 3000):
-        P = knots.named("3_1", n)
-        energy(P, energy="tangent_point")
-        _relax(P, "projected_gradient_implicit", energy="tangent_point")
+def _energy_path(record) -> Callable[[], None]:
+    """The warm-up path of an energy's record (``warmup``: run options, ``warmup_sizes``):
+    its sums alone, then runs minimizing it (the metric of its order; from
+    engine.AUTO_TREE_FROM edges on, the tree)."""
+    def path() -> None:
+        for n in record.warmup_sizes:
+            P = knots.named("3_1", n)
+            energy(P, energy=record.name)
+            for options in record.warmup:
+                _relax(P, "projected_gradient_implicit", **options)
+    return path
 
 
 def _convert() -> None:
@@ -200,7 +205,8 @@ PATHS: dict[str, Callable[[], None]] = {
     "identify": _identify,
     "open": _open,
     "tree": _tree,
-    "tangent_point": _tangent_point,
+    # Energy ▸ Tangent-Point, Stiffness, ...: each energy's own path (energies.ENERGIES)
+    **{name: _energy_path(r) for name, r in ENERGIES.items() if r.warmup},
     "cables": _cables,
     "obstacles": _obstacles,
     "untangle_cables": _untangle_cables,

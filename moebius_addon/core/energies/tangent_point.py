@@ -25,6 +25,7 @@ import math
 import numba as nb
 
 from ..runs.checks import check_number
+from .record import Energy, Parameter
 
 #: The name of the energy (``energies.ENERGIES``).
 NAME = "tangent_point"
@@ -44,6 +45,12 @@ DEFAULT_BETA = 4.5
 #: apart; N^beta must stay far inside float64's 1e308 for N to 10^6 (alpha = 100, beta = 150
 #: gave a finite energy of 5.8e19 on the start and NaN in the run).
 MAX_BETA = 40.0
+#: Default admissibility of the tangent-point tree (with leaves of ``tree.tangent_point.
+#: LEAF_SIZE`` edges): relative errors (energy / gradient) at most 1.4e-3 / 2.5e-2 on FHW at
+#: 2 400–10 000 edges, about 6–7× / 24–40× below Repulsor's at its default. With leaves of four
+#: edges, 0.3 gave errors 0.9–2.5× those of 0.3 with leaves of eight; 0.25 gives about the same
+#: (docs/performance.md; docs/lab).
+THETA = 0.25
 
 # what :func:`pair` computes (a constant argument at every call site)
 KIND_2_4 = 0  # α = 2, β = 4: no pow
@@ -189,3 +196,61 @@ def pair_both_2(dx, dy, dz, ax, ay, az, li, il, sx, sy, sz, lj, jl, inv, rb, bet
     return (F, dy * gz - dz * gy, dz * gx - dx * gz, dx * gy - dy * gx,
             dy * hz - dz * hy, dz * hx - dx * hz, dx * hy - dy * hx,
             mx, my, mz, (fj - fi) * il, (fi - fj) * jl)
+
+
+# -- the record (energies.record): sums and tree imported when first used, as they import the
+# kernels above
+
+
+def _check(values: dict) -> dict:
+    a, b = values.get("alpha"), values.get("beta")
+    a, b = check_exponents(DEFAULT_ALPHA if a is None else a, DEFAULT_BETA if b is None else b)
+    return {"alpha": a, "beta": b}
+
+
+def _exact(X, layout, alpha, beta):
+    from .tangent_point_dense import tp_energy_x
+
+    return tp_energy_x(X, layout, alpha, beta)
+
+
+def _exact_gradient(X, layout, alpha, beta):
+    from .tangent_point_dense import tp_energy_gradient_x
+
+    return tp_energy_gradient_x(X, layout, alpha, beta)
+
+
+def _frame(X, layout, theta, alpha, beta):
+    from ..tree.tangent_point import TangentPointFrame
+
+    return TangentPointFrame(X, layout, alpha, beta, theta)
+
+
+RECORD = Energy(
+    name=NAME,
+    short='TP',
+    label="Tangent-Point",
+    help="Tangent-point energy with exponents α, β (Advanced; default 2, 4.5): spreads the "
+         "strands evenly, opens tight clasps",
+    exact=_exact,
+    exact_gradient=_exact_gradient,
+    parameters=(
+        Parameter("alpha", "α", "Tangent-point energy: exponent α of |T × (x − y)| (needs "
+                  "α + 1 < β < 2α + 1)", DEFAULT_ALPHA, "tp_alpha", minimum=0.01,
+                  soft_max=8.0),
+        Parameter("beta", "β", "Tangent-point energy: exponent β of |x − y| (needs α + 1 < β < "
+                  "2α + 1; β = α + 2 makes it scale-invariant)", DEFAULT_BETA, "tp_beta",
+                  minimum=0.01, soft_max=16.0),
+    ),
+    check=_check,
+    scaling=scaling,
+    # Repulsive Curves' order: 7/4 at the default (2, 4.5), 3/2 at (2, 4)
+    metric_order=lambda alpha, beta: (beta - 1.0) / alpha,
+    default_theta=THETA,
+    frame=_frame,
+    tag=lambda alpha, beta: f"{NAME}({alpha:g}, {beta:g})",
+    words=lambda alpha, beta: (f"Tangent-point energy ({alpha:g}, {beta:g}) (α, β) of the curve "
+                               "at this frame, for the curve scaled to total length 1"),
+    warmup=({"energy": NAME},),
+    warmup_sizes=(100, 3000),
+)

@@ -33,9 +33,11 @@ import numpy as np
 
 from ..geometry.constraints import Jacobian
 from ..geometry.layout import Layout
+from .records import served_by
 
-#: Metrics whose Gram matrix is banded along the curve (plus the barycenter term).
-BANDED_METRICS = ("l2", "h1", "h2")
+#: Metrics whose Gram matrix is banded along the curve (plus the barycenter term):
+#: :mod:`.records`.
+BANDED_METRICS = served_by("banded")
 # The band of several components is factored and solved in up to this many blocks of whole
 # components, in parallel (the same bits: no entry crosses a block's edge).
 _BLOCKS = 64

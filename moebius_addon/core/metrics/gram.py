@@ -35,7 +35,9 @@ import numpy as np
 
 from ..geometry.layout import Layout, as_checked_layout
 from ..runs.memory import check_memory
+from .hs_weight import hs_weight
 from .open import open_hs
+from .records import METRIC_RECORDS, ORDERED
 
 # Tiny L² term that keeps the pure W^{3/2,2} matrix definite for 4-gons, where disjoint edge
 # pairs do not connect all edges (docs/design.md: "+ a small L² term if needed").
@@ -44,8 +46,8 @@ _PURE_L2 = 1e-6
 _CHUNKS = 16
 #: The order of the paper's metric, W^{3/2,2} (the Möbius energy's; the default).
 PAPER_ORDER = 1.5
-#: The metrics with an order s (the others ignore it).
-ORDERED_METRICS = ("hs_pure", "hs")
+#: The metrics with an order s (the others ignore it): :mod:`.records`.
+ORDERED_METRICS = ORDERED
 
 
 def check_order(order) -> float:
@@ -109,11 +111,7 @@ def _edge_row(i, mx, my, mz, ln, arc, clen, starts, comp, low, expo, kw, kv):
             dy = py - my[j]
             dz = pz - mz[j]
             r2 = dx * dx + dy * dy + dz * dz
-            inv = 1.0 / r2
-            if expo is None:
-                w = li * ln[j] * inv
-            else:
-                w = li * ln[j] * r2**-expo
+            w, inv = hs_weight(li, ln[j], r2, expo)
             fwd = abs(arc[j] - si)
             rho = min(fwd, lc - fwd)
             v = low * w * (inv - 1.0 / (rho * rho))
@@ -126,11 +124,7 @@ def _edge_row(i, mx, my, mz, ln, arc, clen, starts, comp, low, expo, kw, kv):
         dy = py - my[j]
         dz = pz - mz[j]
         r2 = dx * dx + dy * dy + dz * dz
-        inv = 1.0 / r2
-        if expo is None:
-            w = li * ln[j] * inv
-        else:
-            w = li * ln[j] * r2**-expo
+        w, inv = hs_weight(li, ln[j], r2, expo)
         kw[j] = w
         kv[j] = low * w * inv  # 1/ρ² = 0 between components
         sw += w
@@ -140,11 +134,7 @@ def _edge_row(i, mx, my, mz, ln, arc, clen, starts, comp, low, expo, kw, kv):
         dy = py - my[j]
         dz = pz - mz[j]
         r2 = dx * dx + dy * dy + dz * dz
-        inv = 1.0 / r2
-        if expo is None:
-            w = li * ln[j] * inv
-        else:
-            w = li * ln[j] * r2**-expo
+        w, inv = hs_weight(li, ln[j], r2, expo)
         kw[j] = w
         kv[j] = low * w * inv
         sw += w
@@ -381,6 +371,7 @@ _BUILDERS = {
     "hs": _gram_hs,
 }
 METRICS = tuple(_BUILDERS)
+assert set(METRICS) == set(METRIC_RECORDS), "a metric without its record in .records"
 
 
 def gram_x(metric: str, X: np.ndarray, layout: Layout, out: np.ndarray | None = None,

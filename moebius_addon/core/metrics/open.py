@@ -17,6 +17,7 @@ import numba as nb
 import numpy as np
 
 from ..geometry.layout import Layout
+from .hs_weight import hs_weight
 
 
 @nb.njit(cache=True, parallel=True, fastmath={"reassoc", "contract", "nsz", "arcp"})
@@ -46,11 +47,7 @@ def _weights(mx, my, mz, ln, arc, clen, starts, comp, closed, real, low, expo):
             dy = my[i] - my[j]
             dz = mz[i] - mz[j]
             r2 = dx * dx + dy * dy + dz * dz
-            inv = 1.0 / r2
-            if expo is None:
-                w = ln[i] * ln[j] * inv
-            else:
-                w = ln[i] * ln[j] * r2**-expo
+            w, inv = hs_weight(ln[i], ln[j], r2, expo)
             W[i, j] = w
             if same:
                 rho = abs(arc[j] - arc[i])

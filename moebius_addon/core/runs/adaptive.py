@@ -234,9 +234,12 @@ class AdaptiveRun:
         iterates of the path: the caller steps through them as through any (the history has
         their energy; what only a run has, such as the gradient norm, is NaN)."""
         run = self.run
-        # the Möbius energy is scale-free: the run's engine takes the caller's size as well
-        energies = [float(run.engine.energy(np.ascontiguousarray(as_layout(Q, self.closed)[0])))
-                    for Q in path]
+        # the run's engine works at total length 1: a scale-free energy takes the caller's size
+        # as well, any other the polygons mapped as the run maps its own
+        scaled = not run.energy_choice.scale_invariant
+        energies = [float(run.engine.energy(np.ascontiguousarray(
+            (X - run._shift) / run._scale if scaled else X)))
+            for X in (as_layout(Q, self.closed)[0] for Q in path)]
         self._prelude = list(zip(path[1:], energies[1:], strict=True)) + [None]
         self._current = (path[0], energies[0])
         self.history = {k: [np.nan] for k in run.history}

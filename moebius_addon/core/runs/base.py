@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..energies.choice import check_energy
+from ..energies.choice import DEFAULT_ENERGY, check_run_energy, take_energy_options
 from ..geometry.container import check_container, check_inside
 from ..geometry.edge_pairs import SLACK
 from ..geometry.layout import as_unit_layout
@@ -131,7 +131,7 @@ class RelaxResult:
     refinements: list = field(default_factory=list)
     #: the energy minimized: ``"moebius"`` or ``"tangent_point(α, β)"``
     #: (``energy_choice.EnergyChoice.label``)
-    energy: str = "moebius"
+    energy: str = DEFAULT_ENERGY
 
     def __repr__(self) -> str:
         return (
@@ -254,16 +254,17 @@ class Run:
                  target_lengths: str, check: bool, equilateral: bool, engine: str = "auto",
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
                  fixed_lengths: bool = True, obstacles=None, obstacle_weight: float = 1.0,
-                 container=None, obstacle_tol: float | None = None, closed=True, energy="moebius",
-                 alpha=None, beta=None, length_target=None, length_growth=None,
+                 container=None, obstacle_tol: float | None = None, closed=True,
+                 energy=DEFAULT_ENERGY, length_target=None, length_growth=None,
                  settle: float = 0.0, settle_iterations: int = SETTLE_ITERATIONS,
                  thickness: float = 0.0, push_apart: bool = False, **engine_options):
         _check_names(metric, target_lengths)
         check = check_flag("check", check)
         pin_tangents = check_flag("pin_tangents", pin_tangents)
         fixed_lengths = check_flag("fixed_lengths", fixed_lengths)
-        #: The energy minimized (:mod:`..energy_choice`): ``energy``, ``alpha``, ``beta``.
-        self.energy_choice = check_energy(energy, alpha, beta)
+        #: The energy minimized (:mod:`..energies.choice`): ``energy`` and the options its
+        #: record brings (``alpha``, ``beta``, ``stiffness``)
+        self.energy_choice = check_run_energy(energy, **take_energy_options(engine_options))
         self.t0 = time.perf_counter()
         self.max_iter = check_number("max_iter", max_iter, 0, integer=True)
         self.tol = check_number("tol", tol, 0)
@@ -329,8 +330,8 @@ class Run:
         shift = X.mean(axis=0)
         # total length 1; an energy that is not scale-invariant reports its values there, so
         # for it an open curve's closing chord (the dummy edge of ._layout) is left out
-        scale = float((ln[layout.real] if layout.has_open and self.energy_choice.scaling
-                       else ln).sum())
+        scale = float((ln[layout.real] if layout.has_open and not
+                       self.energy_choice.scale_invariant else ln).sum())
         self.X = (X - shift) / scale
         ln = ln / scale
         self._check_reach(ln, layout)

@@ -41,7 +41,13 @@ from pathlib import Path
 
 import numpy as np
 
-from ..energies.choice import check_energy
+from ..energies.choice import (
+    DEFAULT_ENERGY,
+    ENERGY_OPTIONS,
+    RUN_ENERGY_NAMES,
+    check_energy,
+    check_run_energy,
+)
 from ..topology import knots, table
 from .batch_folder import SETTINGS_FIELDS as _SETTINGS
 from .batch_folder import (  # noqa: F401 - the folder's public names, read as batch.<name>
@@ -98,7 +104,7 @@ class Task:
     ref: str
     edges: int
     stages: tuple = (1,)
-    energy: str = "moebius"
+    energy: str = DEFAULT_ENERGY
     method: str = DEFAULT_METHOD
     tol: float = 1e-4
     max_iter: int = 1500
@@ -107,12 +113,16 @@ class Task:
     how: str = "braid"
     identify: bool = True
     curve: tuple = field(default=(), compare=False, repr=False)
+    #: the energy's options (its records' ``alpha``, ``beta``, ``stiffness``) as sorted
+    #: ``(name, value)`` pairs; empty: the defaults
+    energy_options: tuple = ()
 
     @property
     def id(self) -> str:
         """A key for the curve, energy, edges, stages and start, safe as a file name on any
         file system (:func:`safe_name`): it names the task's row and ``curves/<id>.npz``."""
-        tag = "" if self.energy == "moebius" else f"_{self.energy}"
+        tag = "" if self.energy == DEFAULT_ENERGY else f"_{self.energy}"
+        tag += "".join(f"_{k}{v:g}" for k, v in self.energy_options)
         stages = "" if self.stages == (1,) else "_x" + "-".join(f"{s:g}" for s in self.stages)
         seed = "" if self.seed is None else f"_{self.how}{self.seed}"
         key = f"{safe_name(self.name)}_{self.edges}{tag}{stages}{seed}"
@@ -149,7 +159,8 @@ class Task:
         """The row's description of the task (everything but the curve)."""
         d = asdict(self)
         d.update(id=self.id, stages=" ".join(f"{s:g}" for s in self.stages),
-                 seed="" if self.seed is None else self.seed)
+                 seed="" if self.seed is None else self.seed,
+                 energy=self.energy + "".join(f" {k}={v:g}" for k, v in self.energy_options))
         return {k: d[k] for k in _SETTINGS}
 
 
@@ -241,16 +252,20 @@ def _notation_file(path: Path) -> list[tuple[str, str, str, tuple, str]]:
 
 
 def tasks(inputs=(), *, crossings: str | None = None, edges=None, stages=(1,),
-          energy: str = "moebius", seeds=(None,), how: str = "braid",
+          energy: str = DEFAULT_ENERGY, seeds=(None,), how: str = "braid",
           method: str = DEFAULT_METHOD, tol: float = 1e-4, max_iter: int = 1500,
-          max_seconds: float = 600.0, identify: bool = True) -> list[Task]:
+          max_seconds: float = 600.0, identify: bool = True,
+          energy_options: dict | None = None) -> list[Task]:
     """The tasks for ``inputs`` (table names or aliases, patterns such as ``"10_*"``, notation
     files, OBJ files, folders of OBJ files) and the knots of ``crossings`` (``"11"``,
     ``"6-7"``), each at every edge count of ``edges`` (None: the entry's default, a file's own
     count) and every seed of ``seeds``. The same input twice is one task. Raises ValueError
     naming the first bad input before anything runs, and both inputs if two different ones
-    have one name (one task would replace the other)."""
-    check_energy(energy)
+    have one name (one task would replace the other). ``energy_options``: the options of the
+    energies' records (``{"stiffness": 0.1}``), None or 0-weight ones left out."""
+    energy_options = {k: float(v) for k, v in (energy_options or {}).items() if v is not None}
+    check_run_energy(energy, **energy_options)
+    energy_options = tuple(sorted(energy_options.items()))
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     if not stages or any(not s > 0 for s in stages):
@@ -289,7 +304,8 @@ def tasks(inputs=(), *, crossings: str | None = None, edges=None, stages=(1,),
                     else _count(knots.from_notation(ref)))
             for seed in seeds:
                 t = Task(name, kind, ref, int(n), tuple(float(s) for s in stages), energy,
-                         method, tol, max_iter, max_seconds, seed, how, identify, curve)
+                         method, tol, max_iter, max_seconds, seed, how, identify, curve,
+                         energy_options)
                 first = seen.setdefault(t.id, (same, origin, k))
                 if first[0] != same:
                     raise ValueError(
@@ -348,7 +364,8 @@ def run_task(task: Task, threads: int | None = None) -> dict:
                 previous = factor
             t0, c0 = time.perf_counter(), time.process_time()
             r = relax(P, method=task.method, max_iter=task.max_iter, tol=task.tol,
-                      max_seconds=task.max_seconds, energy=task.energy)
+                      max_seconds=task.max_seconds, energy=task.energy,
+                      **dict(task.energy_options))
             P = r.x
             row["runs"].append({"n": _count(P), "energy": float(r.fun), "iterations": r.nit,
                                   "seconds": round(time.perf_counter() - t0, 3),
@@ -645,8 +662,13 @@ def _quiet_worker() -> None:
 
 
 def _warm_paths(todo: list[Task]) -> tuple[str, ...]:
-    return ("exact",) + (("tangent_point",) if any(t.energy != "moebius" for t in todo)
-                         else ())
+    """The warm-up paths of the tasks: the exact engine's, and each energy's own."""
+    paths = ["exact"]
+    for t in todo:
+        for record in check_energy(t.energy, **dict(t.energy_options)).records:
+            if record.warmup and record.name not in paths:
+                paths.append(record.name)
+    return tuple(paths)
 
 
 def _warm_worker(paths: tuple[str, ...], threads: int) -> None:
@@ -737,7 +759,11 @@ def parser(prog: str = "moebius batch") -> argparse.ArgumentParser:
     ap.add_argument("--stages", type=float, nargs="+", default=[1.0],
                     help="factors of the edge count, each relaxed from the last (1 2: the "
                     "energy table's n1, 2 n1)")
-    ap.add_argument("--energy", default="moebius", help="moebius or tangent_point")
+    ap.add_argument("--energy", default=DEFAULT_ENERGY, choices=RUN_ENERGY_NAMES,
+                    help=f"the energy (default {DEFAULT_ENERGY})")
+    for option, (_, p) in ENERGY_OPTIONS.items():  # --alpha, --beta, --stiffness, ...
+        ap.add_argument(f"--{option.replace('_', '-')}", dest=option, type=float, default=None,
+                        help=f"{p.help} (default {p.default:g})")
     ap.add_argument("--method", default=DEFAULT_METHOD)
     ap.add_argument("--tol", type=float, default=1e-4)
     ap.add_argument("--max-iter", type=int, default=1500)
@@ -768,7 +794,8 @@ def main(argv: list[str] | None = None, prog: str = "moebius batch") -> int:
                      stages=tuple(args.stages), energy=args.energy,
                      seeds=tuple(args.seeds) if args.seeds else (None,), how=args.how,
                      method=args.method, tol=args.tol, max_iter=args.max_iter,
-                     max_seconds=args.max_seconds, identify=not args.no_identify)
+                     max_seconds=args.max_seconds, identify=not args.no_identify,
+                     energy_options={k: getattr(args, k) for k in ENERGY_OPTIONS})
         if args.dry_run:
             for t in sorted(todo, key=lambda t: -t.cost):
                 print(t.id)

@@ -35,9 +35,9 @@ from fractions import Fraction
 
 import numpy as np
 
+from ..energies import DEFAULT_ENERGY
 from ..energies import choice as energy_choice
 from ..energies.choice import MOEBIUS, EnergyChoice, check_energy
-from ..energies.moebius_dense import energy_gradient_x, energy_x
 from ..geometry.collision import contact_time_x
 from ..geometry.constraints import Jacobian
 from ..geometry.layout import Layout, as_checked_layout
@@ -665,13 +665,13 @@ def engine_class(name: str, n: int) -> type[DenseEngine]:
 # the public evaluators
 
 
-def _frame(X, layout, engine, theta, choice: EnergyChoice = MOEBIUS):
-    """The Barnes–Hut frame of the energy ``choice`` for ``engine``/``theta`` at X (θ None:
-    the energy's own default), or None for the exact sum."""
+def _frame(X, layout, engine, theta, choice: EnergyChoice = MOEBIUS, k: int = 0):
+    """The tree's frame of the energy ``choice`` for ``engine``/``theta`` at X (θ None: the
+    energy's own default), or None for the exact sum (and for an energy without a tree)."""
     theta = choice.default_theta if theta is None else barnes_hut.check_theta(theta)
-    if not uses_tree(engine, layout.n):
+    if choice.record.frame is None or not uses_tree(engine, layout.n):
         return None
-    return choice.frame(X, layout, theta)
+    return choice.frame(X, layout, theta, k)
 
 
 def moebius_energy(P, *, engine: str = "auto", theta: float | None = None,
@@ -701,7 +701,7 @@ def moebius_energy(P, *, engine: str = "auto", theta: float | None = None,
         invariant under similarities and reversal. Scale-free (computed at a size near 1 for
         curves spanning more than 2^64 or less than 2^-64).
     """
-    return _moebius(P, engine, theta, closed, True, False)[0]
+    return _evaluate(P, MOEBIUS, engine, theta, closed, True, False)[0]
 
 
 def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None, closed=True):
@@ -719,81 +719,81 @@ def moebius_gradient(P, *, engine: str = "auto", theta: float | None = None, clo
     (N, 3) array or list of arrays
         Same shape as ``P``; units 1/length.
     """
-    return _moebius(P, engine, theta, closed, False, True)[1]
+    return _evaluate(P, MOEBIUS, engine, theta, closed, False, True)[1]
 
 
-def _moebius(P, engine, theta, closed, want_energy: bool, want_gradient: bool):
-    """``(E or None, ∇E or None)`` of the Möbius energy on one input check and one frame:
-    :func:`moebius_energy`'s value by the energy's own kernel, :func:`moebius_gradient`'s by
-    the gradient's (their last bits differ), both when asked (``energy_gradient``: the two
-    frames it built before were a quarter of its time at 10⁵ edges, 0.29 of 1.13 s)."""
+def _evaluate(P, choice: EnergyChoice, engine, theta, closed, want_energy: bool,
+              want_gradient: bool):
+    """``(E or None, ∇E or None)`` of the energy ``choice`` on one input check and one frame.
+    Where the record says so (``value_apart``: the Möbius energy) the energy comes from the
+    value sum even with the gradient (their last bits differ; one frame for both: the two
+    frames ``energy_gradient`` built before were a quarter of its time at 10⁵ edges, 0.29 of
+    1.13 s), else from the gradient's pass."""
     X, layout, k = as_checked_layout(P, closed)
-    frame = _frame(X, layout, engine, theta)
+    frame = _frame(X, layout, engine, theta, choice, k)
     e = g = None
-    if want_energy:
-        e = energy_x(X, layout) if frame is None else frame.energy(X)
-    if want_gradient:
-        g = (energy_gradient_x(X, layout) if frame is None else frame.energy_gradient(X))[1]
-        g = layout.split(np.ldexp(g, -k) if k else g)  # ∇E(2^k X) = 2^-k ∇E(X)
-    return e, g
+    if want_gradient and not choice.record.value_apart:
+        e, g = choice.exact_gradient(X, layout, k) if frame is None else frame.energy_gradient(X)
+    else:
+        if want_energy:
+            e = choice.exact(X, layout, k) if frame is None else frame.energy(X)
+        if want_gradient:
+            g = (choice.exact_gradient(X, layout, k) if frame is None
+                 else frame.energy_gradient(X))[1]
+    if k:  # X was scaled by 2^-k: E(2^k X) = 2^(k s) E(X), ∇E(2^k X) = 2^(k (s − 1)) ∇E(X)
+        s = choice.scaling
+        e = None if e is None else e * 2.0 ** (k * s)
+        g = None if g is None else g * 2.0 ** (k * (s - 1.0))
+    return e, (None if g is None else layout.split(g))
 
 
 #: The names of the ``energy=`` option of :func:`energy`, :func:`energy_gradient` and the runs.
 ENERGY_NAMES = energy_choice.ENERGY_NAMES
 
 
-def _evaluate(P, energy_name, alpha, beta, engine, theta, closed, grad):
-    choice = check_energy(energy_name, alpha, beta)  # ValueError naming what is wrong
-    if choice.name == "moebius":
-        return _moebius(P, engine, theta, closed, True, grad)
-    X, layout, k = as_checked_layout(P, closed)
-    frame = _frame(X, layout, engine, theta, choice)
-    if grad:
-        e, g = choice.exact_gradient(X, layout) if frame is None else frame.energy_gradient(X)
-    else:
-        e, g = (choice.exact(X, layout) if frame is None else frame.energy(X)), None
-    if k:  # X was scaled by 2^-k: E(2^k X) = 2^(k s) E(X), ∇E(2^k X) = 2^(k (s − 1)) ∇E(X)
-        s = choice.scaling
-        e = e * 2.0 ** (k * s)
-        g = None if g is None else g * 2.0 ** (k * (s - 1.0))
-    return e, (None if g is None else layout.split(g))
-
-
-def energy(P, *, energy: str = "moebius", alpha: float | None = None, beta: float | None = None,
-           engine: str = "auto", theta: float | None = None, closed=True) -> float:
+def energy(P, *, energy: str = DEFAULT_ENERGY, alpha: float | None = None,
+           beta: float | None = None, engine: str = "auto", theta: float | None = None,
+           closed=True, **options) -> float:
     """The energy ``energy`` of a closed polygon, a link or open polylines.
 
     Parameters
     ----------
     P : (N, 3) array or list of (N_k, 3) arrays
         Vertices of a closed polygon, or the components of a link (as :func:`moebius_energy`).
-    energy : {"moebius", "tangent_point"}
-        "moebius": exactly :func:`moebius_energy`. "tangent_point": the discrete tangent-point
-        energy ``Σ_{(I, J) ordered, disjoint} l_I l_J |T_I × (m_I − m_J)|^α / |m_I − m_J|^β``
-        (docs/design.md, "Tangent-point energy").
+    energy : {"moebius", "tangent_point", "bending"}
+        A name of :data:`ENERGY_NAMES` (the records of ``core.energies``). "moebius": exactly
+        :func:`moebius_energy`. "tangent_point": the discrete tangent-point energy
+        ``Σ_{(I, J) ordered, disjoint} l_I l_J |T_I × (m_I − m_J)|^α / |m_I − m_J|^β``
+        (docs/design.md, "Tangent-point energy"). "bending": the discrete elastic rod's
+        ``Σ_i 4 tan²(φ_i/2) / ℓ_i`` over interior vertices (docs/api.md, "Bending stiffness").
     alpha, beta : float
-        The tangent-point exponents: finite, ``α > 0``, ``α + 1 < β < 2α + 1`` (None: 2, 4,
-        scale-invariant). With "moebius" they are refused (ValueError), not ignored
+        The tangent-point exponents: finite, ``α > 0``, ``α + 1 < β < 2α + 1`` (None: 2, 4.5).
+        With another energy they are refused (ValueError), not ignored
         (:func:`.energy_choice.check_energy`, the runs' check).
+    **options
+        The weights of added energies: ``stiffness=w`` adds ``w`` times the bending energy
+        of ``P`` as it is (a run's stiffness acts at total length 1: docs/api.md).
     engine : {"exact", "tree", "auto"}
         As in :func:`moebius_energy` ("auto": the tree from ``ENERGY_TREE_FROM`` edges on).
     theta : float, optional
-        Admissibility of the tree in (0, 2); default ``barnes_hut.THETA`` for "moebius",
-        ``tangent_point_tree.THETA`` for "tangent_point".
+        Admissibility of the tree in (0, 2); default the energy's own (its record's
+        ``default_theta``). An energy without a tree (bending) is summed exactly.
     closed : bool or sequence of bool
         As in :func:`moebius_energy`.
 
     Returns
     -------
     float
-        The energy; the tangent-point energy scales as ``λ^(2 + α − β)`` under ``P → λP``.
+        The energy; the tangent-point energy scales as ``λ^(2 + α − β)`` under ``P → λP``,
+        the bending energy as ``1/λ``.
     """
-    return _evaluate(P, energy, alpha, beta, engine, theta, closed, False)[0]
+    choice = check_energy(energy, alpha, beta, **options)  # ValueError naming what is wrong
+    return _evaluate(P, choice, engine, theta, closed, True, False)[0]
 
 
-def energy_gradient(P, *, energy: str = "moebius", alpha: float | None = None,
+def energy_gradient(P, *, energy: str = DEFAULT_ENERGY, alpha: float | None = None,
                     beta: float | None = None, engine: str = "auto", theta: float | None = None,
-                    closed=True):
+                    closed=True, **options):
     """:func:`energy` and its exact derivative with respect to the vertices (with the tree,
     the exact derivative of the approximated sum).
 
@@ -803,4 +803,5 @@ def energy_gradient(P, *, energy: str = "moebius", alpha: float | None = None,
         The energy and the gradient, shaped like ``P``. For "moebius" exactly
         ``(moebius_energy(P, …), moebius_gradient(P, …))``.
     """
-    return _evaluate(P, energy, alpha, beta, engine, theta, closed, True)
+    choice = check_energy(energy, alpha, beta, **options)
+    return _evaluate(P, choice, engine, theta, closed, True, True)

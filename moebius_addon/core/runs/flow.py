@@ -11,7 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..energies.choice import check_energy
+from ..energies.choice import DEFAULT_ENERGY, check_run_energy
 from ..geometry.constraints import jacobian, make_constraints
 from ..geometry.layout import as_checked_layout
 from ..metrics.gram import ORDERED_METRICS, gram_x
@@ -94,8 +94,8 @@ def relax(
     return run.result()
 
 
-def sobolev_gradient(P, metric: str = "hs", projected: bool = True, *, energy: str = "moebius",
-                     alpha: float | None = None, beta: float | None = None):
+def sobolev_gradient(P, metric: str = "hs", projected: bool = True, *,
+                     energy: str = DEFAULT_ENERGY, **energy_options):
     """The ``metric``-gradient of the energy ``energy`` at ``P`` (exact sums).
 
     Parameters
@@ -107,8 +107,9 @@ def sobolev_gradient(P, metric: str = "hs", projected: bool = True, *, energy: s
     projected : bool
         Project onto the tangent space of the constraints (edge lengths and barycenter fixed),
         as the flow does; otherwise ``G⁻¹ ∇E``.
-    energy, alpha, beta
-        The energy, as :func:`relax` takes it (default the Möbius energy).
+    energy, **energy_options
+        The energy and its options (``alpha``, ``beta``, ``stiffness``), as :func:`relax`
+        takes them (default the Möbius energy); ``stiffness`` acts on ``P`` as it is.
 
     Returns
     -------
@@ -116,11 +117,11 @@ def sobolev_gradient(P, metric: str = "hs", projected: bool = True, *, energy: s
         Direction of steepest ascent in that metric (the flow moves along its negative); the
         paper's Fig. 2 compares these fields.
     """
-    choice = check_energy(energy, alpha, beta)
+    choice = check_run_energy(energy, **energy_options)
     X, layout, k = as_checked_layout(P)  # the vertices scaled by 2^-k
     check_dense_size(layout.n)
     order = choice.metric_order
-    _, g = choice.exact_gradient(X, layout)
+    _, g = choice.exact_gradient(X, layout, k)
     A = gram_x(metric, X, layout, order=order)
     if not projected:
         u = np.linalg.solve(A, g)

@@ -23,6 +23,7 @@ import time
 
 import numpy as np
 
+from ..energies.choice import DEFAULT_ENERGY, take_energy_options
 from ..geometry.constraints import jacobian, make_constraints
 from ..geometry.pins import count_pins
 from ._interrupts import resumable
@@ -80,10 +81,11 @@ class _PenaltyRun(Run):
                  theta: float | None = None, pinned=None, pin_tangents: bool = False,
                  obstacles=None, obstacle_weight: float = 1.0, container=None,
                  obstacle_tol: float | None = None, closed=True,
-                 energy="moebius", alpha=None, beta=None, length_target=None,
+                 energy=DEFAULT_ENERGY, length_target=None,
                  length_growth=None, settle: float = 0.0,
                  settle_iterations: int = SETTLE_ITERATIONS, thickness: float = 0.0,
                  **ignored):
+        energy_options = take_energy_options(ignored)
         unknown = set(ignored) - _FEASIBLE_ONLY
         if unknown:
             raise TypeError(f"unknown option(s) {', '.join(sorted(unknown))}")
@@ -108,9 +110,9 @@ class _PenaltyRun(Run):
                          equilateral=False, engine=engine, theta=theta, obstacles=obstacles,
                          obstacle_weight=obstacle_weight, container=container,
                          obstacle_tol=obstacle_tol, closed=closed,
-                         energy=energy, alpha=alpha, beta=beta, length_target=length_target,
+                         energy=energy, length_target=length_target,
                          length_growth=length_growth,  # refused there, by name
-                         settle=settle, settle_iterations=settle_iterations)
+                         settle=settle, settle_iterations=settle_iterations, **energy_options)
         self.alpha = float(weight)  # α of the docs (docs/design.md, the penalty methods)
         self.penalty_in_metric = (metric != "l2") if penalty_metric == "auto" else bool(
             penalty_metric)

@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from ..energies.choice import DEFAULT_ENERGY
 from ..geometry.constraints import Constraints, jacobian, make_constraints, residual
 from ._interrupts import resumable
 from .base import (
@@ -139,11 +140,13 @@ class Relaxation(Run):
         False: ``P`` is an open polyline (a link: one flag per component, or one for all),
         relaxed with O'Hara's regularized energy of an open polygon on the exact engine
         (docs/api.md, "Open curves").
-    energy, alpha, beta
+    energy, **energy_options
         The energy minimized: ``"moebius"`` (default) or ``"tangent_point"`` with exponents
-        ``alpha``, ``beta`` (default 2, 4.5; :mod:`..energy_choice`). The energies of the history
-        are those of the curve scaled to total length 1 (the same as the caller's curve's when
-        the energy is scale-invariant: Möbius, and tangent-point with β = α + 2).
+        ``alpha``, ``beta`` (default 2, 4.5), and ``stiffness`` (default 0), the weight of the
+        bending energy added to it (the options of the records in ``core.energies``; other
+        names are refused). The energies of the history are those of the curve scaled to
+        total length 1 (the same as the caller's curve's when the energy is scale-invariant:
+        Möbius, and tangent-point with β = α + 2, without stiffness).
     length_target : float or sequence of float, optional
         Grow the total length (caller's units; of the whole curve, or one per component) to
         this during the run, then hold it (:mod:`.growth`; docs/api.md, "Length growth").
@@ -204,15 +207,14 @@ class Relaxation(Run):
         container=None,
         obstacle_tol: float | None = None,
         closed=True,
-        energy="moebius",
-        alpha: float | None = None,
-        beta: float | None = None,
+        energy=DEFAULT_ENERGY,
         length_target=None,
         length_growth: float | None = None,
         settle: float = 0.0,
         settle_iterations: int = SETTLE_ITERATIONS,
         thickness: float = 0.0,
         push_apart: bool = False,
+        **energy_options,
     ):
         _check_names(metric, target_lengths)
         edge_lengths = check_flag("edge_lengths", edge_lengths)
@@ -234,10 +236,10 @@ class Relaxation(Run):
                          exact_backprojection=exact_backprojection, pinned=pinned,
                          pin_tangents=pin_tangents, fixed_lengths=edge_lengths,
                          obstacles=obstacles, obstacle_weight=obstacle_weight, container=container,
-                         obstacle_tol=obstacle_tol, closed=closed, energy=energy, alpha=alpha,
-                         beta=beta, length_target=length_target, length_growth=length_growth,
+                         obstacle_tol=obstacle_tol, closed=closed, energy=energy,
+                         length_target=length_target, length_growth=length_growth,
                          settle=settle, settle_iterations=settle_iterations,
-                         thickness=thickness, push_apart=push_apart)
+                         thickness=thickness, push_apart=push_apart, **energy_options)
         self.armijo = float(armijo)
         self.growth = growth
         self.backproject_iter = backproject_iter

@@ -46,6 +46,8 @@ from ..metrics.gram import (
     kernel_exponent,
     length_power,
 )
+from ..metrics.hs_weight import hs_weight
+from ..metrics.records import served_by
 from . import bvh
 from .moebius import _by_target
 
@@ -58,8 +60,8 @@ LEAF_SIZE = 8
 #: come close again along the curve, or other components): the lower-order weights of those
 #: pairs alone enter the preconditioner's diagonal (see :meth:`HsOperator.preconditioner_parts`).
 FOLDED = 2.0
-#: The metrics this module computes.
-METRICS = ("hs_pure", "hs")
+#: The metrics this module computes (``metrics.records``: those the tree solves by Krylov).
+METRICS = served_by("krylov")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -295,11 +297,7 @@ def _near_weights(ln, mid, arc, clen, closed, nxt, starts, comp, lo, hi, leaves,
                         dy = mid[q, 1] - mid[r, 1]
                         dz = mid[q, 2] - mid[r, 2]
                         r2 = dx * dx + dy * dy + dz * dz
-                        inv = 1.0 / r2
-                        if expo is None:
-                            wq = ln[q] * ln[r] * inv
-                        else:
-                            wq = ln[q] * ln[r] * r2**-expo
+                        wq, inv = hs_weight(ln[q], ln[r], r2, expo)
                         if same:
                             fwd = abs(arc[r] - arc[q])
                             rho = min(fwd, clen[cq] - fwd) if closed[cq] else fwd
@@ -338,11 +336,7 @@ def _far_weights(L, C, nc, s0, s1, clen, closed, foff, fpart, low, expo, cross2,
             dy = C[a, 1] - C[b, 1]
             dz = C[a, 2] - C[b, 2]
             r2 = dx * dx + dy * dy + dz * dz
-            inv = 1.0 / r2
-            if expo is None:
-                ww = inv
-            else:
-                ww = r2**-expo
+            ww, inv = hs_weight(1.0, 1.0, r2, expo)  # per unit length of both clusters
             if nc[a] == nc[b]:
                 ca = 0.5 * (s0[a] + s1[a])
                 cb = 0.5 * (s0[b] + s1[b])

@@ -37,17 +37,13 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ..energies.moebius import THETA  # the default θ: the energy's record
 from ..geometry.layout import Layout
 from . import bvh
 from .arc_field import ArcField
 from .far_field import _cluster_data, _far, _far_to_edges, _push_down
 from .near_field import _NEAR_PIECES, _near, _near_schedule, _to_vertices
 
-# Default admissibility: the largest of 0.15, 0.175, 0.2, 0.25 whose relative errors stay, with
-# a margin, below 1e-4 (energy) and 1e-3 (gradient) on 7_2, FHW, a link and a non-equilateral
-# polygon at 3 000 to 20 000 edges (worst measured with full leaves of 8: 8.2e-6 and 5.0e-4,
-# FHW's gradient at 5 000 edges; 0.2 gave 8.8e-4 there, 0.25 1.5e-3).
-THETA = 0.175
 # Fixed split of the traversal into chunks (the same lists for every thread count).
 _SPLIT_CHUNKS = 16
 

@@ -44,6 +44,7 @@ from ..energies.tangent_point import (
     KIND_2_4,
     KIND_2_45,
     KIND_GENERAL,
+    THETA,
     check_exponents,
     kind_of,
     pair,
@@ -56,13 +57,6 @@ from .far_field import _kind, _levels
 from .moebius import Frame, _edge_arrays, _neighbours, check_theta
 from .near_field import _lane_store, _load_lanes, _to_vertices
 
-#: Default admissibility of the tangent-point tree (with leaves of :data:`LEAF_SIZE` edges):
-#: relative errors (energy / gradient) at most 1.4e-3 / 2.5e-2 on FHW at 2 400–10 000 edges,
-#: about 6–7× / 24–40× below Repulsor's at its default. With leaves of four edges, 0.3 gave
-#: errors 0.9–2.5× those of 0.3 with leaves of eight; 0.25 gives about the same
-#: (docs/lab/tangent-point.md, "Tangent-point energy: cluster against cluster";
-#: docs/lab/repulsor.md, "The tangent-point tree on leaves of four edges").
-THETA = 0.25
 #: Edges per leaf of the tangent-point tree (the near field's lanes, below).
 LEAF_SIZE = 4
 # Fixed pieces of the parallel loops over leaves: the per-edge sums are their own (any split,
