@@ -111,18 +111,38 @@ def test_scaling_law_and_rigid_motions():
 def test_moebius_is_unchanged_through_the_new_door():
     P = trefoil(200)
     assert core.energy(P) == core.moebius_energy(P) == 75.99452256688987
-    # one frame for both : the same values as the two doors apart, on
-    # both engines, for a link and for a curve scaled far beyond 2^64
+    # one frame and one pass for both: the gradient of the other door, the energy within
+    # rounding of it, on both engines, for a link and for a curve scaled far beyond 2^64
     link = [P, P + np.array([3.0, 0.0, 0.0])]
     for Q in (P, link, P * 2.0**80):
         for eng in ("tree", "exact"):
             e, g = core.energy_gradient(Q, energy="moebius", engine=eng)
-            assert e == core.moebius_energy(Q, engine=eng)
+            assert e == pytest.approx(core.moebius_energy(Q, engine=eng), rel=1e-13)
             g0 = core.moebius_gradient(Q, engine=eng)
             if isinstance(Q, list):
                 assert all(np.array_equal(a, b) for a, b in zip(g, g0, strict=True))
             else:
                 assert np.array_equal(g, g0)
+
+
+def test_energy_gradient_sums_the_pairs_once(monkeypatch):
+    # the energy comes from the gradient's pass: no value sum (which the tree's frame and the
+    # exact engine would otherwise run first)
+    from moebius_addon.core.energies import moebius_dense
+    from moebius_addon.core.tree import moebius as tree
+
+    P = trefoil(1200)
+
+    def refused(*args, **kwargs):
+        raise AssertionError("a second pass over the pairs")
+
+    monkeypatch.setattr(tree.Frame, "energy", refused)
+    monkeypatch.setattr(moebius_dense, "energy_x", refused)
+    for eng in ("tree", "exact"):
+        e, g = core.energy_gradient(P, engine=eng)
+        assert np.isfinite(e) and np.isfinite(g).all()
+    with pytest.raises(AssertionError, match="second pass"):  # the patch is where sums go
+        core.energy(P, engine="tree")
 
 
 @pytest.mark.parametrize("alpha, beta", [(2.0, 4.0), (2.5, 5.0)])

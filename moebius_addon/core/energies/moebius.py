@@ -187,5 +187,4 @@ RECORD = Energy(
     default_theta=THETA,
     frame=_frame,
     words=lambda: "Möbius energy of the curve at this frame (scale-invariant)",
-    value_apart=True,
 )

@@ -76,9 +76,6 @@ class Energy:
     #: an energy that adds to the repulsive one with a weight: that weight's option
     #: (``stiffness=``); None for the others
     weight: Parameter | None = None
-    #: whether ``energy_gradient`` reports the energy by the value sum (:func:`exact`; its
-    #: last bits differ from the gradient sum's) rather than the gradient sum's own
-    value_apart: bool = False
     #: run options of the warm-up path that compiles this energy's kernels (empty: the
     #: energy is compiled by the warm-up's other paths), and the sizes it runs at
     warmup: tuple[dict, ...] = ()
