@@ -198,3 +198,14 @@ def _wait(cond, timeout=20.0):
             return True
         time.sleep(0.01)
     return False
+
+
+def test_tangent_point_energy_runs_live():
+    P = core.resample(core.knots.named("3_1", 200), 48)
+    run = LiveRelaxation(P, pinned=[0, 24], energy="tangent_point")
+    assert run.energy_choice.label.startswith("tangent_point")
+    before = run.x.copy()
+    T = run.pin_positions + [[0.1, 0.0, 0.0], [0.0, 0.0, 0.0]]
+    assert run.move_pins(T).share == 1.0
+    assert run.step()
+    certify_move([before], [run.x], [True])
