@@ -39,7 +39,7 @@ TICK = 1.0 / 60.0
 
 def knot_scene(n: int = 1000):
     P = np.asarray(core.knots.named("3_1", n))
-    return dict(P=P, pinned=[0, n // 2]), "3_1, %d edges, 2 pins" % n
+    return dict(P=P, pinned=[0, n // 2]), f"3_1, {n} edges, 2 pins"
 
 
 def cables_scene(cables: int = 10, edges: int = 100):

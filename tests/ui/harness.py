@@ -375,8 +375,8 @@ def cmd_check_live(args) -> dict:
     if args.get("record"):
         sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
         import numpy as np
-        from moebius_addon.blender import keyframes
 
+        from moebius_addon.blender import keyframes
         from tests.live_checks import certify_record
 
         frames, points, _ = keyframes.read_flow_keyframes(obj)
