@@ -464,6 +464,7 @@ class MOEBIUS_OT_live(bpy.types.Operator):
             return {"CANCELLED"}
         self._error = None
         self._ended = False
+        self._header = False
         settings.running = True
         settings.live = True
         settings.live_stop = False
@@ -491,14 +492,17 @@ class MOEBIUS_OT_live(bpy.types.Operator):
             settings.live_energy = frame.energy
         try:
             self._window.workspace.status_text_set(text)
+            clipped = bool(self._session.driver.clipped)
             for area in self._window.screen.areas:
-                if area.type == "VIEW_3D":
-                    if self._session.driver.clipped:
-                        area.header_text_set(text)
-                    elif wrote:
-                        area.header_text_set(None)
+                # the header says so while a move is clipped; cleared only when it was ours
+                # (a transform running meanwhile shows its own text there)
+                if area.type == "VIEW_3D" and clipped:
+                    area.header_text_set(text)
+                elif area.type == "VIEW_3D" and self._header:
+                    area.header_text_set(None)
                 if wrote and area.type in {"VIEW_3D", "PROPERTIES"}:
                     area.tag_redraw()
+            self._header = clipped
         except ReferenceError:  # the window closed
             return None
         return self.INTERVAL

@@ -367,10 +367,10 @@ BUTTONS = {
     "bpy.ops.moebius.clear_animation()": "clear",
     "bpy.ops.moebius.live()": "live",
 }
-#: Live: the pinned points of the relaxed curve, and the drag (a share of the way to the view's
-#: centre, and a sideways share of it).
+#: Live: the pinned points of the relaxed curve, and the drag of the first (a share of the way
+#: to the other pin on the screen, and a sideways share of it): across the circle.
 LIVE_PINS = (0, 80)
-LIVE_DRAG = (0.45, 0.25)
+LIVE_DRAG = (0.55, 0.2)
 
 
 def centre(box) -> tuple[int, int]:
@@ -667,7 +667,8 @@ class Scenario:
         s.click(x, y)  # select this pin alone, as a person does before G
         time.sleep(0.5)
         shots = [s.screenshot(f"{tag}-1-before-drag")]
-        cx, cy = centre(view)
+        q = s.command("pin_screen", index=LIVE_PINS[1])
+        cx, cy = s.to_screen(q["x"], q["y"])
         dx = LIVE_DRAG[0] * (cx - x) - LIVE_DRAG[1] * (cy - y)
         dy = LIVE_DRAG[0] * (cy - y) + LIVE_DRAG[1] * (cx - x)
         s.move(x, y)
