@@ -465,6 +465,7 @@ class MOEBIUS_OT_live(bpy.types.Operator):
         self._error = None
         self._ended = False
         self._header = False
+        self._text = ""
         settings.running = True
         settings.live = True
         settings.live_stop = False
@@ -485,13 +486,15 @@ class MOEBIUS_OT_live(bpy.types.Operator):
             self._error = err
             return None
         text = self._session.status()
-        settings = bpy.context.scene.moebius
         frame = self._session.frame
-        if frame is not None:
+        if wrote and frame is not None:  # an RNA write is an update of the scene: only news
+            settings = bpy.context.scene.moebius
             settings.live_iteration = frame.nit
             settings.live_energy = frame.energy
         try:
-            self._window.workspace.status_text_set(text)
+            if text != self._text:
+                self._window.workspace.status_text_set(text)
+                self._text = text
             clipped = bool(self._session.driver.clipped)
             for area in self._window.screen.areas:
                 # the header says so while a move is clipped; cleared only when it was ours
