@@ -696,8 +696,8 @@ class Scenario:
         end = (int(round(x + dx)), int(round(y + dy)))
         s.xdo("click", "1")  # confirm the move where the mouse is
         time.sleep(1.5)
-        shots.append(s.screenshot(f"{tag}-3-after-drag"))
-        crops = [crop(img, view) for img in shots]
+        s.screenshot(f"{tag}-3-after-drag")
+        crops = [crop(img, view) for img in shots]  # the shots during the drag
         diffs = [changed_fraction(a, b_) for a, b_ in pairwise(crops)]
         p = s.command("pin_screen", index=LIVE_PINS[0])
         px, py = s.to_screen(p["x"], p["y"])
