@@ -42,9 +42,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import Relaxation, Status  # core's public names
 from .obstacles import ObstacleField, auto_obstacle_tol
-from .solvers.base import Status
-from .solvers.projected import Relaxation
 
 #: A pin move that fails its tests is halved up to this many times until a share passes …
 PIN_HALVINGS = 12
