@@ -12,7 +12,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, StringProperty
 
 from .. import core
-from . import api, keyframes, options, presets
+from . import api, keyframes, live, options, presets
 
 _CONVERTIBLE = {"CURVE", "MESH"}
 
@@ -610,12 +610,14 @@ classes = (
 
 
 def register() -> None:
-    for cls in classes:
+    for cls in (*classes, *live.classes):
         bpy.utils.register_class(cls)
     bpy.types.VIEW3D_MT_curve_add.append(menu_add_knot)
+    live.register_keymap()
 
 
 def unregister() -> None:
+    live.unregister_keymap()
     bpy.types.VIEW3D_MT_curve_add.remove(menu_add_knot)
-    for cls in reversed(classes):
+    for cls in reversed((*classes, *live.classes)):
         bpy.utils.unregister_class(cls)

@@ -47,7 +47,11 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
         s = context.scene.moebius
         obj = context.active_object
         col = layout.column(align=True)
-        if s.running:
+        if s.running and getattr(s, "live", False):
+            col.label(text=f"Live: iteration {s.live_iteration}", icon="REC")
+            col.label(text=f"Energy {s.live_energy:.6g}", icon="SORTTIME")
+            col.label(text="Enter keeps, Esc restores")
+        elif s.running:
             if hasattr(col, "progress"):  # Blender 4.0+
                 col.progress(factor=s.progress, text=f"Iteration {s.live_iteration}")
             else:
@@ -76,6 +80,15 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
         sub = row.row(align=True)
         sub.enabled = obj is not None and bool(keyed_frames(obj))
         sub.operator("moebius.relax", text="Continue", icon="FF").append = True
+        # Live (blender.live): the flow follows what the user moves
+        row = layout.row(align=True)
+        if getattr(s, "live", False):
+            row.operator("moebius.live_finish", text="Finish Live", icon="CHECKMARK")
+        else:
+            row.operator("moebius.live", text="Live", icon="REC")
+        sub = row.row(align=True)
+        sub.enabled = not s.running
+        sub.prop(s, "live_record", toggle=True, icon="KEYINGSET")
         # the statistics of the previous run would be mistaken for the running one's
         if s.last_object and not s.running:
             box = layout.box()

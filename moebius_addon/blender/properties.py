@@ -255,6 +255,14 @@ class MoebiusSettings(bpy.types.PropertyGroup):
                             options={"SKIP_SAVE"})
     live_energy: FloatProperty(name="Energy", default=0.0, options={"SKIP_SAVE"})
     live_iteration: IntProperty(name="Iteration", default=0, options={"SKIP_SAVE"})
+    # Live (blender.live): whether it runs, the record toggle, the panel's Finish
+    live: BoolProperty(name="Live", default=False, options={"SKIP_SAVE"})
+    live_stop: BoolProperty(name="Finish Live", default=False, options={"SKIP_SAVE"})
+    live_record: BoolProperty(
+        name="Record", default=False,
+        description="Live: key every state of the live run on the curves when it ends (and "
+                    "the moved obstacles' transforms), from the current frame on: the live "
+                    "run becomes an animation in which nothing passes through anything")
     # Read-only statistics of the last run
     last_object: StringProperty(name="Object", get=_stat("object", ""))
     last_iterations: IntProperty(name="Iterations", get=_stat("iterations", 0))

@@ -155,7 +155,8 @@ def test_optimizers_reach_the_kernels_only_through_the_engine():
              "memory"}  # the engine itself; entry points and option checks around the runs
     optimizers = [runs[name] for name in sorted(set(runs) - doors)]
     assert {p.stem for p in optimizers} == {"base", "projected", "penalty", "second_order",
-                                            "adaptive", "growth", "methods", "_interrupts"}
+                                            "adaptive", "growth", "methods", "_interrupts",
+                                            "live"}
     for path in optimizers:
         assert _direct_reaches(path.read_text(encoding="utf-8")) == [], path.name
     # the check sees a direct reach, spelled either way

@@ -323,6 +323,75 @@ def cmd_graph_editor(_args) -> dict:
     return {"graph": _rect(graph), "view3d": _rect(next(a for a in halves if a != graph))}
 
 
+# -- Live (docs/ui-testing.md, "Live") -----------------------------------------------------------
+
+def _snapshot(obj) -> dict:
+    keys = _flow_keys(obj)
+    return {"points": _points(obj.data),
+            "energy_keys": keys["energy_keys"],
+            "point_keys": {f"{fc.data_path}[{fc.array_index}]": _keys(fc)
+                           for fc in keys["point_fcurves"]}}
+
+
+def cmd_live_prepare(args) -> dict:
+    """Select the points ``pins`` of the active curve (Pin Selected Points on, Record on) and
+    remember the scene as it is (what Esc and one Ctrl+Z must bring back)."""
+    obj = _flow_object()
+    for i, p in enumerate(obj.data.splines[0].points):
+        p.select = i in args["pins"]
+    s = bpy.context.scene.moebius
+    s.pin_selected = True
+    s.live_record = True
+    _saved["before_live"] = _snapshot(obj)
+    return {"object": obj.name, "pins": args["pins"], "frame": bpy.context.scene.frame_current}
+
+
+def cmd_pin_screen(args) -> dict:
+    """Where point ``index`` of the active curve is drawn: window pixels (origin bottom left)
+    of the largest 3D view, and its world position."""
+    from bpy_extras.view3d_utils import location_3d_to_region_2d
+
+    obj = _flow_object()
+    co = obj.matrix_world @ obj.data.splines[0].points[args["index"]].co.xyz
+    area = max((a for a in _window().screen.areas if a.type == "VIEW_3D"),
+               key=lambda a: a.width * a.height)
+    region = next(r for r in area.regions if r.type == "WINDOW")
+    xy = location_3d_to_region_2d(region, area.spaces.active.region_3d, co)
+    return {"x": region.x + xy.x, "y": region.y + xy.y, "world": list(co)}
+
+
+def cmd_check_live(args) -> dict:
+    """After Live: ``compare`` — the scene equals what ``live_prepare`` saw (points and flow
+    keys to the bit); ``record`` — the recorded keys never cross (the tests' own certificate,
+    tests/live_checks.py: every straight move between keyed frames)."""
+    obj = _flow_object()
+    out = {"mode": obj.mode}
+    if args.get("compare"):
+        now, before = _snapshot(obj), _saved["before_live"]
+        out["points_equal"] = now["points"] == before["points"]
+        out["points_maxdiff"] = _maxdiff(now["points"], before["points"])
+        out["keys_equal"] = (now["energy_keys"] == before["energy_keys"]
+                             and now["point_keys"] == before["point_keys"])
+    if args.get("record"):
+        sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+        import numpy as np
+
+        from moebius_addon.blender import keyframes
+        from tests.live_checks import certify_record
+
+        frames, points, _ = keyframes.read_flow_keyframes(obj)
+        M = np.array(obj.matrix_world)
+        states = [[P @ M[:3, :3].T + M[:3, 3]] for P in points]
+        out["recorded_frames"] = len(frames)
+        try:
+            out["least_distance"] = certify_record(states, [True])
+            out["never_cross"] = len(states) > 1
+        except AssertionError as err:
+            out["never_cross"], out["certify_error"] = False, str(err)
+        out["moved"] = float(np.abs(points[-1] - points[0]).max()) if len(states) > 1 else 0.0
+    return out
+
+
 def cmd_status(_args) -> dict:
     return dict(_state)
 
@@ -356,6 +425,8 @@ def _live_state() -> None:
     if s is not None:
         _state.update({
             "running": bool(s.running), "progress": s.progress,
+            "live": bool(getattr(s, "live", False)),
+            "mode": obj.mode if obj is not None else None,
             "live_iteration": s.live_iteration, "live_energy": s.live_energy,
             "last_object": s.last_object, "last_iterations": s.last_iterations,
             "last_message": s.last_message, "last_keyframes": s.last_keyframes,

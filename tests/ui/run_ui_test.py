@@ -365,7 +365,12 @@ BUTTONS = {
     "bpy.ops.moebius.convert()": "convert",
     "bpy.ops.moebius.apply_frame()": "apply",
     "bpy.ops.moebius.clear_animation()": "clear",
+    "bpy.ops.moebius.live()": "live",
 }
+#: Live: the pinned points of the relaxed curve, and the drag of the first (a share of the way
+#: to the other pin on the screen, and a sideways share of it): across the circle.
+LIVE_PINS = (0, 80)
+LIVE_DRAG = (0.55, 0.2)
 
 
 def centre(box) -> tuple[int, int]:
@@ -629,6 +634,8 @@ class Scenario:
                    f"energy {res['energy_start']:.4g} -> {res['energy_end']:.6g} "
                    f"in {res['iterations']} iterations")
 
+        self.live()
+
         # The energy curve in a Graph Editor.
         s.sidebar_box = s.region_box("VIEW_3D", "UI")  # before the split halves it
         self.report["graph"] = s.command("graph_editor")
@@ -637,6 +644,124 @@ class Scenario:
         s.settle()
         s.screenshot("09-graph")
         t["scenario_s"] = time.monotonic() - t0
+
+    def _live_run(self, tag: str, box=None) -> tuple[dict, tuple]:
+        """Press Live (at ``box`` if Ctrl+C over it still copies the Live operator, else
+        found anew), go to Edit Mode (Tab), click the first pin (it alone selected), drag it
+        with G across the view taking screenshots, confirm with a click. Returns what the
+        drag did and where the Live button was."""
+        s = self.s
+        if box is None or BUTTONS.get(self.identify(box)) != "live":
+            box = self.buttons(f"before-{tag}", ("live",))["live"]
+        t1 = time.monotonic()
+        self.press(box, f"Live ({tag})", lambda st: st.get("live"))
+        s.wait_for("the live run's first iterations",
+                   lambda st: st.get("live_iteration", 0) > 0 or not st.get("live"),
+                   timeout=600, interval=0.2)
+        self.s.timings[f"{tag}_first_iteration_s"] = time.monotonic() - t1
+        view = s.region_box("VIEW_3D", "WINDOW")
+        s.move(*centre(view))
+        s.key("Tab")
+        s.wait_for("Edit Mode", lambda st: st.get("mode") == "EDIT", timeout=30)
+        time.sleep(0.5)
+        p = s.command("pin_screen", index=LIVE_PINS[0])
+        x, y = s.to_screen(p["x"], p["y"])
+        s.click(x, y)  # select this pin alone, as a person does before G
+        time.sleep(0.5)
+        shots = [s.screenshot(f"{tag}-1-before-drag")]
+        header = s.region_box("VIEW_3D", "HEADER")
+        q = s.command("pin_screen", index=LIVE_PINS[1])
+        cx, cy = s.to_screen(q["x"], q["y"])
+        dx = LIVE_DRAG[0] * (cx - x) - LIVE_DRAG[1] * (cy - y)
+        dy = LIVE_DRAG[0] * (cy - y) + LIVE_DRAG[1] * (cx - x)
+        s.move(x, y)
+        s.key("g")
+        # G has taken once the header shows the move's numbers (a loaded machine is slow)
+        for _ in range(20):
+            s.xdo("mousemove", str(x + 1), str(y))
+            s.xdo("mousemove", str(x), str(y))
+            if changed_fraction(crop(s.screenshot(f"{tag}-1-grab"), header),
+                                crop(shots[0], header)) > 0.01:
+                break
+        steps = 6
+        for k in range(1, steps + 1):
+            s.xdo("mousemove", str(int(round(x + dx * k / steps))),
+                  str(int(round(y + dy * k / steps))))
+            for _ in range(10):  # the effect, not a fixed time: wait until the view shows it
+                time.sleep(0.5)
+                img = s.screenshot(f"{tag}-2-drag-{k}")
+                if changed_fraction(crop(img, view), crop(shots[-1], view)) > 0.001:
+                    break
+            shots.append(img)
+        end = (int(round(x + dx)), int(round(y + dy)))
+        s.xdo("click", "1")  # confirm the move where the mouse is
+        time.sleep(1.5)
+        s.screenshot(f"{tag}-3-after-drag")
+        crops = [crop(img, view) for img in shots]  # the shots during the drag
+        diffs = [changed_fraction(a, b_) for a, b_ in pairwise(crops)]
+        p = s.command("pin_screen", index=LIVE_PINS[0])
+        px, py = s.to_screen(p["x"], p["y"])
+        return {"start": [x, y], "end": list(end), "pin_on_screen": [px, py],
+                "pin_off_by_px": float(np.hypot(px - end[0], py - end[1])),
+                "changed_fraction": diffs}, box
+
+    def live(self) -> None:
+        """Live on the relaxed curve with two pinned points: drag one with the mouse, keep
+        the result (Enter) and check the recording; one Ctrl+Z undoes it all; again, and Esc
+        puts everything back."""
+        s = self.s
+        s.refresh_regions()
+        self.report["live_prepare"] = s.command("live_prepare", pins=list(LIVE_PINS))
+        # 1. drag, Tab back to Object Mode, Enter keeps it (Record is on)
+        t0 = time.monotonic()
+        drag, box = self._live_run("live")
+        self.report["live_drag"] = drag
+        self.check("live_screenshots_differ_during_drag",
+                   all(d > 0.001 for d in drag["changed_fraction"]),
+                   "changed pixel fractions " + ", ".join(f"{d:.3%}" for d in
+                                                          drag["changed_fraction"]))
+        self.check("live_pin_ends_under_the_mouse", drag["pin_off_by_px"] <= 3.0,
+                   f"{drag['pin_off_by_px']:.1f} px from where the mouse left it")
+        s.move(*centre(s.region_box("VIEW_3D", "WINDOW")))
+        s.key("Tab")
+        s.wait_for("Object Mode", lambda st: st.get("mode") == "OBJECT", timeout=30)
+        s.key("Return")
+        first = self.report["live_prepare"]["frame"]
+        # ended, and the recording keyed (the scene goes to its last frame)
+        s.wait_for("Live to end (Enter)", lambda st: not st.get("live")
+                   and st.get("frame") != first, timeout=120)
+        s.settle()
+        s.screenshot("live-4-kept")
+        res = s.command("check_live", record=True)
+        self.report["live_record"] = res
+        self.check("live_recorded_frames_never_cross", res.get("never_cross", False),
+                   f"{res.get('recorded_frames')} frames, least distance "
+                   f"{res.get('least_distance')}, {res.get('certify_error', '')}")
+        self.check("live_recording_moved", res.get("moved", 0.0) > 0.0)
+        # 2. one Ctrl+Z: the scene before Live
+        s.move(*centre(s.region_box("VIEW_3D", "WINDOW")))
+        s.key("ctrl+z")
+        time.sleep(2.0)
+        res = s.command("check_live", compare=True)
+        self.report["live_undo"] = res
+        self.check("live_one_undo_restores", res["points_equal"] and res["keys_equal"],
+                   f"points off by {res['points_maxdiff']:.3g}, keys equal {res['keys_equal']}")
+        # 3. again, and Esc: everything as before Live, to the bit
+        s.command("live_prepare", pins=list(LIVE_PINS))
+        drag, _ = self._live_run("live-esc", box)
+        self.report["live_esc_drag"] = drag
+        s.move(*centre(s.region_box("VIEW_3D", "WINDOW")))
+        s.key("Escape")
+        s.wait_for("Live to end (Esc)", lambda st: not st.get("live"), timeout=60)
+        time.sleep(1.0)
+        s.screenshot("live-5-esc")
+        res = s.command("check_live", compare=True)
+        self.report["live_esc"] = res
+        self.check("live_esc_restores_the_start", res["points_equal"] and res["keys_equal"],
+                   f"points off by {res['points_maxdiff']:.3g}, keys equal {res['keys_equal']}")
+        s.key("Tab")
+        s.wait_for("Object Mode", lambda st: st.get("mode") == "OBJECT", timeout=30)
+        s.timings["live_s"] = time.monotonic() - t0
 
 
 def docs_images(s: Session, dest: Path) -> list[str]:
@@ -647,6 +772,9 @@ def docs_images(s: Session, dest: Path) -> list[str]:
         ("08-finished", "ui-panel.png", ["-crop", "{ui}", "+repage"]),
         ("07-running-full", "ui-running.png", ["-resize", "800x"]),
         ("09-graph", "ui-graph.png", ["-resize", "800x"]),
+        ("live-1-before-drag", "live-1-pinned.png", ["-resize", "800x"]),
+        ("live-2-drag-3", "live-2-dragging.png", ["-resize", "800x"]),
+        ("live-2-drag-6", "live-3-dragged.png", ["-resize", "800x"]),
     ]
     l_, t_, r_, b_ = s.sidebar_box or (0, 0, 0, 0)
     for src, name, ops in jobs:
