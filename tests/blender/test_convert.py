@@ -102,8 +102,8 @@ def test_convert_two_splines_gives_a_link(scene, mb):
 def test_convert_obj_polyline_import(scene, mb, core, tmp_path):
     from importlib import import_module
 
-    knots = import_module(core.__name__ + ".knots")
-    objio = import_module(core.__name__ + ".objio")
+    knots = import_module(core.__name__ + ".topology.knots")
+    objio = import_module(core.__name__ + ".geometry.objio")
     P = knots.torus_knot(2, 3, 90)
     path = tmp_path / "trefoil.obj"
     objio.write_obj(path, P)
@@ -150,7 +150,7 @@ def test_add_knot_catalogue_entries(scene, mb, core):
     # test_catalogue.py has more; tools/verify_knot_table.py checks every curve in the core)
     from importlib import import_module
 
-    knots = import_module(core.__name__ + ".knots")
+    knots = import_module(core.__name__ + ".topology.knots")
     rng = np.random.default_rng(3)
     table = knots.names()
     kinds = ["fhw", "helix", "random", "torus", "circle", "figure_eight", "3_1", "m3_1",

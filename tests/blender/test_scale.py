@@ -20,8 +20,8 @@ def _core_names(core):
     """``engine`` and ``DENSE_MAX_VERTICES`` of the installed extension's core (the
     repository's core needs numba in the venv, which the Blender lines' venvs leave to the
     extension)."""
-    return (import_module(core.__name__ + ".engine"),
-            import_module(core.__name__ + ".solvers.base").DENSE_MAX_VERTICES)
+    return (import_module(core.__name__ + ".runs.engine"),
+            import_module(core.__name__ + ".runs.base").DENSE_MAX_VERTICES)
 
 
 def _circle(n):
