@@ -469,7 +469,6 @@ class CheckedCurve(NamedTuple):
     X: np.ndarray            #: the vertices scaled by ``2^-exponent`` (exact), stacked
     layout: Layout
     exponent: int
-    closed: object           #: the ``closed=`` the curve was checked with
     mean_edge: float         #: of the real edges, at the scaled size
     vertex_gap: float        #: closest vertices ``CONTACT_GAP`` apart along the curve
     vertices: tuple          #: those two vertices
@@ -492,10 +491,10 @@ def check_curve(P, *, coarseness: bool = True, name: str = "the curve",
             return P._replace(coarse_checked=True)
         return P
     X, layout, e2 = as_unit_layout(P, closed)
-    return check_layout(X, layout, e2, closed, coarseness=coarseness, name=name)
+    return check_layout(X, layout, e2, coarseness=coarseness, name=name)
 
 
-def check_layout(X: np.ndarray, layout: Layout, e2: int, closed=True, *,
+def check_layout(X: np.ndarray, layout: Layout, e2: int, *,
                  coarseness: bool = True, name: str = "the curve") -> CheckedCurve:
     """:func:`check_curve` of a curve already stacked and scaled (:func:`.layout.as_unit_layout`:
     ``X``, ``layout``, ``e2``), as a run has it."""
@@ -514,7 +513,7 @@ def check_layout(X: np.ndarray, layout: Layout, e2: int, closed=True, *,
             f"{vertex_name(layout, ej)} touch near ({point[0]:.6g}, {point[1]:.6g}, "
             f"{point[2]:.6g}); move the strands apart before relaxing"
         )
-    checked = CheckedCurve(X, layout, e2, closed, h, float(dv), (int(vi), int(vj)), False)
+    checked = CheckedCurve(X, layout, e2, h, float(dv), (int(vi), int(vj)), False)
     if coarseness:
         _check_coarseness(checked, name)
         checked = checked._replace(coarse_checked=True)

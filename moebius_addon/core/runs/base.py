@@ -323,7 +323,7 @@ class Run:
             if isinstance(P, CheckedCurve):
                 check_curve(P, closed=closed)
             else:
-                check_layout(X, layout, e2, closed)
+                check_layout(X, layout, e2)
         self.layout = layout
         self.metric = metric
         ln = np.linalg.norm(X[layout.nxt] - X, axis=1)
