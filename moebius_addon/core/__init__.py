@@ -61,8 +61,8 @@ from .topology.invariants import (  # noqa: E402
     signature,
 )
 
-# every kernel module is imported now: their kernels look in the cache shipped with the
-# package as well
+# every kernel module is imported (those not yet, by use_shipped_cache): their kernels look in
+# the cache shipped with the package as well
 use_shipped_cache(__name__)
 
 __all__ = [

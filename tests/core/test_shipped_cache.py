@@ -92,3 +92,39 @@ def test_a_shipped_kernel_that_needs_scipy_is_compiled_instead_never_run(tmp_pat
     assert proc.returncode == 0, proc.stderr[-3000:]  # an abort is 134
     assert "needs scipy, which this Python does not have; compiling it instead" in proc.stderr
     assert proc.stdout.startswith("raised") and "scipy" in proc.stdout, proc.stdout
+
+
+def test_every_cached_kernel_looks_in_the_shipped_cache(tmp_path):
+    # also the kernels of modules the package imports only on first use (an energy's sums,
+    # the tangent-point tree): missed, they compiled in a first session although shipped
+    if not _shipped_cache.host_runs_generic():
+        pytest.skip("this CPU cannot run code compiled for the generic CPU")
+    (tmp_path / _shipped_cache.PACKAGE_FILE).write_text("moebius_addon\n")
+    code = textwrap.dedent("""
+        import sys
+        from numba.core.dispatcher import Dispatcher
+        import moebius_addon.core
+        from moebius_addon.core.compilation.shipped_cache import ShippedFunctionCache
+        found = {}
+        for name, module in list(sys.modules.items()):
+            if name.startswith("moebius_addon.core") and module is not None:
+                for value in vars(module).values():
+                    if isinstance(value, Dispatcher) and value.py_func.__module__ == name \\
+                            and value._cache.__class__.__name__ != "NullCache":
+                        found[name + "." + value.py_func.__name__] = isinstance(
+                            value._cache, ShippedFunctionCache)
+        modules = {k.rsplit(".", 1)[0] for k in found}
+        print(len(found), sorted(modules), sorted(k for k, shipped in found.items()
+                                                  if not shipped))
+    """)
+    env = dict(os.environ, MOEBIUS_KERNEL_CACHE=str(tmp_path), NUMBA_CACHE_DIR=str(tmp_path))
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                         cwd=ROOT, check=True).stdout.strip()
+    count, modules, unshipped = out.split(" ", 1)[0], *ast.literal_eval(
+        "(" + out.split(" ", 1)[1].replace("] [", "], [") + ")")
+    sources = {".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+               for p in (ROOT / "moebius_addon" / "core").rglob("*.py")
+               if _shipped_cache.KERNEL_DECLARATION.search(p.read_text())}
+    assert int(count) > 150 and len(sources) > 30
+    assert sources - set(modules) == set()  # every module with kernels was imported
+    assert unshipped == []

@@ -97,7 +97,7 @@ def test_a_jammed_tangent_point_start_is_refined_like_a_moebius_one():
     (dict(energy="tangent_point", alpha=-1), "alpha"),
     (dict(energy="tangent_point", beta=np.nan), "beta"),
     (dict(energy="tangent_point", alpha=2, beta=6), "beta"),  # β ≥ 2α + 1
-    (dict(alpha=2), "tangent-point energy's exponents"),  # Möbius has none
+    (dict(alpha=2), "option of the tangent-point energy"),  # Möbius has none
     (dict(method="lbfgs", alpha=1e4), "penalty="),  # the penalty weight's old name
 ])
 def test_bad_energy_options_refused_by_name(trefoil120, kw, word):

@@ -19,9 +19,11 @@ speed measured.
 
 from __future__ import annotations
 
+import importlib
 import io
 import os
 import pickle
+import re
 import sys
 from pathlib import Path
 
@@ -145,6 +147,22 @@ class ShippedFunctionCache(caching.FunctionCache):
             return None
 
 
+#: how a module declares a cached kernel: numba's jit decorator with ``cache=True``
+KERNEL_DECLARATION = re.compile(r"jit\([^)]*cache=True")
+
+
+def _import_kernel_modules(package: str) -> None:
+    """Import every module of ``package`` whose source declares cached kernels: a module
+    imported later (an energy's record loads its sums on first use) would keep numba's own
+    cache alone and compile what the package ships."""
+    root = Path(sys.modules[package].__file__).parent
+    for path in sorted(root.rglob("*.py")):
+        if not KERNEL_DECLARATION.search(path.read_text(encoding="utf-8")):
+            continue
+        parts = path.relative_to(root).with_suffix("").parts
+        importlib.import_module(".".join([package, *(p for p in parts if p != "__init__")]))
+
+
 def use_shipped_cache(package: str) -> int:
     """Give every cached kernel of the modules of ``package`` (``moebius_addon.core``, under
     whatever name it was imported) already imported the shipped cache as a second place to look;
@@ -156,6 +174,7 @@ def use_shipped_cache(package: str) -> int:
 
     built_as = (SHIPPED / PACKAGE_FILE).read_text().strip()
     top = package.rsplit(".", 1)[0]  # the package holding core (renamed by Blender)
+    _import_kernel_modules(package)
 
     count = 0
     for name, module in list(sys.modules.items()):
