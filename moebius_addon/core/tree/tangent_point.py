@@ -369,7 +369,7 @@ def _near(E, M, ln, lo, hi, leaves, uoff, upart, uslot, slot_leaf, nbr, alpha, b
     lanes' comment above)."""
     n = ln.shape[0]
     nl = leaves.shape[0]
-    width = 0
+    width = np.int64(0)  # not a literal 0: typed Literal[int], _near_leaves compiled twice
     for t in range(nl):
         width = max(width, hi[leaves[t]] - lo[leaves[t]])
     slots = slot_leaf.shape[0] if grad else 0
