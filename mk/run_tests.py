@@ -7,8 +7,9 @@ parts in this order, each the next one it can run:
 1. the test repository (``make build/test-repo/index.json``: the zip with its kernel cache,
    two compiling processes), and ``make lint``'s ruff check (seconds);
 2. the UI test in a real Blender window (``make ui-test``), beside the repository's build;
-3. the core suite (everything outside ``tests/blender``), once the repository is built: it
-   loads the kernels the zip ships (``$MOEBIUS_KERNEL_CACHE``) rather than compiling them;
+3. the core suite (everything outside ``tests/blender``) in two halves, once the repository is
+   built: it loads the kernels the zip ships (``$MOEBIUS_KERNEL_CACHE``) rather than
+   compiling them;
 4. the Blender tests on 5.0 (``tests/blender`` in .venv-blender-5.0: bpy, numpy and pytest,
    no scipy, as in Blender), once the repository is built;
 5. the ``lines`` tests on 4.2, 4.5 and 5.2, once the repository is built.
@@ -90,6 +91,14 @@ def unpack_kernel_cache(repo: Path, dest: Path) -> None:
                 target.write_bytes(z.read(name))
 
 
+def core_halves() -> tuple[list[str], list[str]]:
+    """Every test file outside ``tests/blender``, alternately into two halves (sorted by path:
+    the same halves on every machine, a new file lands in one)."""
+    files = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "tests").rglob("test_*.py")
+                   if p.relative_to(ROOT / "tests").parts[0] != "blender")
+    return files[0::2], files[1::2]
+
+
 def plan(args) -> list[tuple[str, list[str], dict | None, bool]]:
     """The parts as (name, argv, environment, needs the repository), in the order the
     workers take them."""
@@ -107,10 +116,12 @@ def plan(args) -> list[tuple[str, list[str], dict | None, bool]]:
                               "bench"], None, False)]
     if not args.no_ui:
         parts.append(("UI test, Blender 3.4 window", [*make, "ui-test"], None, False))
-    parts += [("core suite (all but tests/blender)",
-               [args.python, *pytest, "-m", "not slow", "tests", "--ignore=tests/blender"],
-               core_env, True),
-              ("Blender 5.0 (tests/blender)",
+    # the core suite in two halves, one per worker once the repository is built: run whole,
+    # it took as long as the Blender parts beside it together
+    for k, half in enumerate(core_halves(), 1):
+        parts.append((f"core suite, half {k} of 2",
+                      [args.python, *pytest, "-m", "not slow", *half], core_env, True))
+    parts += [("Blender 5.0 (tests/blender)",
                [".venv-blender-5.0/bin/python", *pytest, "-m", "not slow", "tests/blender"],
                repo_env, True)]
     for line in args.lines:

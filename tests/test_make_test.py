@@ -15,15 +15,21 @@ def test_every_part_is_planned_in_order():
     parts = run_tests.plan(args)
     assert [p[0] for p in parts] == [
         "test repository", "lint (ruff)", "UI test, Blender 3.4 window",
-        "core suite (all but tests/blender)", "Blender 5.0 (tests/blender)",
+        "core suite, half 1 of 2", "core suite, half 2 of 2", "Blender 5.0 (tests/blender)",
         "Blender 4.2 (lines)", "Blender 4.5 (lines)", "Blender 5.2 (lines)"]
     needs_repo = {name for name, _, _, needs in parts if needs}
     assert not needs_repo & {"test repository", "lint (ruff)", "UI test, Blender 3.4 window"}
     lint = dict((p[0], p) for p in parts)["lint (ruff)"]
     assert lint[1][1:] == ["-m", "ruff", "check", "moebius_addon", "tests", "bench"]
     assert "$(PY) -m ruff check moebius_addon tests bench" in (ROOT / "Makefile").read_text()
-    core = dict((p[0], p) for p in parts)["core suite (all but tests/blender)"]
-    assert "--ignore=tests/blender" in core[1] and "MOEBIUS_KERNEL_CACHE" in core[2]
+    halves = [p for p in parts if p[0].startswith("core suite")]
+    assert all("MOEBIUS_KERNEL_CACHE" in p[2] and p[3] for p in halves)
+    files = [[a for a in p[1] if a.startswith("tests/")] for p in halves]
+    every = sorted(str(f.relative_to(ROOT)) for f in (ROOT / "tests").rglob("test_*.py")
+                   if "blender" not in f.relative_to(ROOT / "tests").parts)
+    # every test file outside tests/blender, each once
+    assert sorted(files[0] + files[1]) == every and not set(files[0]) & set(files[1])
+    assert "tests/core/test_methods.py" in every and len(files[0]) > 20 < len(files[1])
     lines = [p for p in parts if p[0].endswith("(lines)")]
     assert all("lines and not slow" in p[1] and p[1][0].startswith(".venv-blender-")
                for p in lines)
