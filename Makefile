@@ -32,7 +32,7 @@ test-all: $(STAMP) $(TEST_REPO)/index.json
 	MOEBIUS_TEST_REPO=$(TEST_REPO) $(PY) -m pytest -q
 
 lint: $(STAMP)
-	$(PY) -m ruff check moebius_addon tests bench
+	$(PY) -m ruff check moebius_addon tests bench mk
 
 demo: $(STAMP)
 	$(PY) bench/demo_blender.py --out out

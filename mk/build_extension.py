@@ -12,10 +12,11 @@ lists one version per platform) and ``blender_ext.py server-generate`` writes it
 *Remote Repository* in Blender (docs/blender.md, "A repository users can add").
 
 The linux-x64 zip also carries numba's cache of the kernels, compiled for a generic x86-64 CPU
-(``moebius_addon/core/kernel_cache``; ``core/compilation/shipped_cache.py`` says how it is found): the
-staged package runs ``core.compilation.warmup`` under each Python of ``--kernel-cache`` (by default this
-one; ``make`` adds the 3.13 of the Blender 5.2 venv) with the numba and llvmlite wheels it
-ships, so that the first session after installing loads the kernels instead of compiling them.
+(``moebius_addon/core/kernel_cache``; ``core/compilation/shipped_cache.py`` says how it is
+found): the staged package runs ``core.compilation.warmup`` under each Python of
+``--kernel-cache`` (by default this one; ``make`` adds the 3.13 of the Blender 5.2 venv) with
+the numba and llvmlite wheels it ships, so that the first session after installing loads the
+kernels instead of compiling them.
 The zips of the other platforms carry none (they compile on first use, saying so).
 
 Usage::
@@ -129,7 +130,8 @@ def stage(dest: Path, platforms: list[str], pythons: list[str] | None = None,
     return wheels
 
 
-# The generic CPU the shipped kernels are compiled for (core/compilation/shipped_cache.py: GENERIC_CPU).
+# The generic CPU the shipped kernels are compiled for (core/compilation/shipped_cache.py:
+# GENERIC_CPU).
 GENERIC_CPU = "x86-64-v3"
 # The platform whose zip carries the kernel cache: the one this build machine can run.
 CACHE_PLATFORM = "linux-x64"
@@ -196,7 +198,8 @@ def ship_kernel_cache(work: Path, stage_dir: Path) -> None:
     if scipy_kernels:
         sys.exit("kernel cache: these kernels call LAPACK or BLAS through scipy, which "
                  "Blender's Python does not have: " + ", ".join(map(str, scipy_kernels)))
-    # the name the kernels' modules had here, which the loader renames (core/compilation/shipped_cache.py)
+    # the name the kernels' modules had here, which the loader renames
+    # (core/compilation/shipped_cache.py)
     (shipped / "package.txt").write_text(stage_dir.name + "\n")
     size = sum(f.stat().st_size for f in shipped.rglob("*") if f.is_file())
     print(f"kernel cache: {len(list(shipped.rglob('*.nbc')))} kernels, {size / 1e6:.1f} MB",
@@ -204,12 +207,13 @@ def ship_kernel_cache(work: Path, stage_dir: Path) -> None:
 
 
 def _shipped_cache():
-    """``moebius_addon.core.compilation.shipped_cache`` of this checkout, loaded by path (importing the
-    package would need numba in the build's Python)."""
+    """``moebius_addon.core.compilation.shipped_cache`` of this checkout, loaded by path
+    (importing the package would need numba in the build's Python)."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
-        "_moebius_shipped_cache", ROOT / "moebius_addon" / "core" / "compilation" / "shipped_cache.py")
+        "_moebius_shipped_cache",
+        ROOT / "moebius_addon" / "core" / "compilation" / "shipped_cache.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

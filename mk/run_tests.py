@@ -107,13 +107,14 @@ def plan(args) -> list[tuple[str, list[str], dict | None, bool]]:
     # the slowest tests of each part are listed, to see where CI's minutes go
     pytest = ["-m", "pytest", "-q", "--durations=15"]
     # the core suite loads the kernels of the test zip (compiled for the generic CPU, as users
-    # on linux-x64 run them) instead of compiling every one natively (core/compilation/shipped_cache.py);
-    # the Blender tests install the zip, whose own cache they test, so they are not pointed
+    # on linux-x64 run them) instead of compiling every one natively
+    # (core/compilation/shipped_cache.py); the Blender tests install the zip, whose own cache
+    # they test, so they are not pointed
     core_env = {"MOEBIUS_KERNEL_CACHE": str(ROOT / "build" / "test-kernel-cache")}
     parts = [("test repository", [*make, f"{args.repo}/index.json"], None, False),
              # make lint's check (seconds): outside CI, three findings had come in unseen
              ("lint (ruff)", [args.python, "-m", "ruff", "check", "moebius_addon", "tests",
-                              "bench"], None, False)]
+                              "bench", "mk"], None, False)]
     if not args.no_ui:
         parts.append(("UI test, Blender 3.4 window", [*make, "ui-test"], None, False))
     # the core suite in two halves, one per worker once the repository is built: run whole,

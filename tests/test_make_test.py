@@ -20,8 +20,8 @@ def test_every_part_is_planned_in_order():
     needs_repo = {name for name, _, _, needs in parts if needs}
     assert not needs_repo & {"test repository", "lint (ruff)", "UI test, Blender 3.4 window"}
     lint = dict((p[0], p) for p in parts)["lint (ruff)"]
-    assert lint[1][1:] == ["-m", "ruff", "check", "moebius_addon", "tests", "bench"]
-    assert "$(PY) -m ruff check moebius_addon tests bench" in (ROOT / "Makefile").read_text()
+    assert lint[1][1:] == ["-m", "ruff", "check", "moebius_addon", "tests", "bench", "mk"]
+    assert "$(PY) -m ruff check moebius_addon tests bench mk\n" in (ROOT / "Makefile").read_text()
     halves = [p for p in parts if p[0].startswith("core suite")]
     assert all("MOEBIUS_KERNEL_CACHE" in p[2] and p[3] for p in halves)
     files = [[a for a in p[1] if a.startswith("tests/")] for p in halves]
