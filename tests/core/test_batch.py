@@ -363,8 +363,11 @@ def test_ctrl_c_says_what_finished_and_how_to_resume(tmp_path, workers):
             "--dashboard", "", "--out", str(out)]
     env = {**os.environ,
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    # as a terminal starts it: Ctrl-C's default action (a suite started in the background of a
+    # non-interactive shell, `make test &`, hands its children SIGINT ignored)
     proc = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+                            text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     lines = []
     for line in proc.stdout:  # interrupt once the first task has finished
         lines.append(line)
