@@ -87,7 +87,8 @@ def baseline(kwargs: dict, seconds: float, engine: str) -> float:
     return (run.nit - n) / (time.perf_counter() - t0)
 
 
-def measure(kwargs: dict, seconds: float, pause: float, use_bpy: bool, engine: str) -> dict:
+def measure(kwargs: dict, seconds: float, pause: float, use_bpy: bool, engine: str,
+            threads: int | None = None) -> dict:
     t = time.perf_counter()
     run = LiveRelaxation(engine=engine, **kwargs)
     setup = time.perf_counter() - t
@@ -98,7 +99,7 @@ def measure(kwargs: dict, seconds: float, pause: float, use_bpy: bool, engine: s
     writer = Writer(parts, kwargs.get("closed", True), use_bpy)
     pins = run.pin_positions.copy()
     edge = float(np.mean(np.linalg.norm(np.diff(parts[0], axis=0), axis=1)))
-    drv = LiveDriver(run, pause=pause)
+    drv = LiveDriver(run, pause=pause, threads=threads)
     late, shown, latencies = [], 0, []
     pending = None  # (target, posted at)
     t0 = time.perf_counter()
@@ -150,15 +151,19 @@ def main(argv=None) -> None:
                     help="seconds the run's thread sleeps after each state (LiveDriver)")
     ap.add_argument("--engine", default="auto")
     ap.add_argument("--bpy", action="store_true", help="write into a real bpy curve")
+    ap.add_argument("--threads", type=int, default=None,
+                    help="numba threads of the live run (default LiveDriver's: one fewer than "
+                         "numba has)")
     args = ap.parse_args(argv)
     print(f"cores {os.cpu_count()}, numba threads {os.environ.get('NUMBA_NUM_THREADS', '-')}, "
           f"load {' '.join(f'{x:.2f}' for x in os.getloadavg())}, pause {args.pause} s, "
-          f"writes into {'a bpy curve' if args.bpy else 'numpy'}")
+          f"writes into {'a bpy curve' if args.bpy else 'numpy'}, live run's numba threads "
+          f"{args.threads or 'LiveDriver default'}")
     scenes = {"knot": knot_scene, "cables": cables_scene}
     for name in (scenes if args.scene == "all" else [args.scene]):
         kwargs, words = scenes[name]()
         base = baseline(kwargs, min(args.seconds, 4.0), args.engine)
-        r = measure(kwargs, args.seconds, args.pause, args.bpy, args.engine)
+        r = measure(kwargs, args.seconds, args.pause, args.bpy, args.engine, args.threads)
         lat = r["lat"]
         print(f"{words} ({r['engine']} engine): {r['updates']:.1f} viewport updates/s, "
               f"{r['steps']:.1f} iterations/s; pin move to first frame showing it: median "

@@ -381,11 +381,21 @@ class LiveDriver:
     pause : float
         Seconds the thread sleeps after each state, so that the caller's thread gets the GIL
         (numba's kernels hold it while they run).
+    threads : int or None
+        numba threads of the run's kernels (numba's setting is per thread: the caller's stay
+        as they are); None: one fewer than numba has, at least one, leaving a core to the
+        caller's timer and drawing, which otherwise stalled the parallel kernels
+        (docs/blender.md, "Live relax").
     """
 
-    def __init__(self, run: LiveRelaxation, record: bool = False, pause: float = 0.002):
+    def __init__(self, run: LiveRelaxation, record: bool = False, pause: float = 0.002,
+                 threads: int | None = None):
+        import numba
+
         self.run = run
         self.pause = float(pause)
+        most = numba.config.NUMBA_NUM_THREADS
+        self.threads = max(1, most - 1) if threads is None else min(max(1, int(threads)), most)
         self.recording = bool(record)
         self.record: list[LiveFrame] = []
         #: an exception the thread met (the run stops then); None while all is well
@@ -461,6 +471,9 @@ class LiveDriver:
         self._latest = frame
 
     def _work(self) -> None:
+        import numba
+
+        numba.set_num_threads(self.threads)
         run = self.run
         try:
             while not self._quit.is_set():
