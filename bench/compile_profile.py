@@ -1,9 +1,9 @@
 """Where a first session's compile time goes: runs warm-up paths
 (``moebius_addon.core.compilation.warmup``) in a fresh numba cache and prints each path's
-wall seconds and the kernels that took longest to compile, each kernel's own seconds (the
-kernels it calls and compiles on the way are counted to them, not to it) and how many
-signatures it compiled. A kernel listed with more compiles than it has uses (a literal
-argument typed ``Literal[int]``, say) compiles twice for nothing.
+CPU seconds (as the warm-up prints them) and the kernels that took longest to compile: each
+kernel's own seconds (the kernels it calls and compiles on the way are counted to them, not
+to it) and how many signatures it compiled. A kernel listed with more compiles than it has
+uses (a literal argument typed ``Literal[int]``, say) compiles twice for nothing.
 
     NUMBA_CPU_NAME=x86-64-v3 NUMBA_CPU_FEATURES="" \\
         python bench/compile_profile.py [PATH ...] [--top 30]
@@ -48,14 +48,10 @@ def main() -> None:
                     stack[-1][1] += seconds
 
         event.register("numba:compile", Listener())
-        paths = args.paths or list(warmup.PATHS)
         total = time.perf_counter()
-        for path in paths:
-            t0 = time.perf_counter()
-            warmup.PATHS[path]()
-            print(f"{path:16s} {time.perf_counter() - t0:7.1f} s", flush=True)
-        print(f"{'all':16s} {time.perf_counter() - total:7.1f} s, compiling "
-              f"{sum(own.values()):.1f} s ({len(own)} kernels)")
+        warmup.warm(args.paths or tuple(warmup.PATHS))  # prints each path's CPU seconds
+        print(f"all: {time.perf_counter() - total:.1f} s, compiling {sum(own.values()):.1f} s "
+              f"({len(own)} kernels)")
         print("\n  own s  compiles  kernel")
         for name, seconds in own.most_common(args.top):
             print(f"{seconds:7.1f}  {count[name]:8d}  {name}")

@@ -40,6 +40,7 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from ..geometry.obstacles import ObstacleField, auto_obstacle_tol
@@ -390,8 +391,6 @@ class LiveDriver:
 
     def __init__(self, run: LiveRelaxation, record: bool = False, pause: float = 0.002,
                  threads: int | None = None):
-        import numba
-
         self.run = run
         self.pause = float(pause)
         most = numba.config.NUMBA_NUM_THREADS
@@ -471,8 +470,6 @@ class LiveDriver:
         self._latest = frame
 
     def _work(self) -> None:
-        import numba
-
         numba.set_num_threads(self.threads)
         run = self.run
         try:
