@@ -154,14 +154,21 @@ def main(argv=None) -> None:
     ap.add_argument("--threads", type=int, default=None,
                     help="numba threads of the live run (default LiveDriver's: one fewer than "
                          "numba has)")
+    ap.add_argument("--growth", type=float, nargs="+", default=[None],
+                    help="step growths to compare, one run each (default the live run's own, "
+                         "core.runs.live.LIVE_GROWTH)")
     args = ap.parse_args(argv)
     print(f"cores {os.cpu_count()}, numba threads {os.environ.get('NUMBA_NUM_THREADS', '-')}, "
           f"load {' '.join(f'{x:.2f}' for x in os.getloadavg())}, pause {args.pause} s, "
           f"writes into {'a bpy curve' if args.bpy else 'numpy'}, live run's numba threads "
           f"{args.threads or 'LiveDriver default'}")
     scenes = {"knot": knot_scene, "cables": cables_scene}
-    for name in (scenes if args.scene == "all" else [args.scene]):
+    for name, growth in [(n, g) for n in (scenes if args.scene == "all" else [args.scene])
+                         for g in args.growth]:
         kwargs, words = scenes[name]()
+        if growth is not None:
+            kwargs["growth"] = growth
+            words += f", growth {growth:g}"
         base = baseline(kwargs, min(args.seconds, 4.0), args.engine)
         r = measure(kwargs, args.seconds, args.pause, args.bpy, args.engine, args.threads)
         lat = r["lat"]

@@ -25,9 +25,10 @@ from .relaxation import check_converted
 from .rest import set_rest_shape
 
 #: Settings of ``relax_settings`` a live run takes (the rest are the limits and methods of a
-#: finite run: a live run is the projected gradient without an end).
+#: finite run: a live run is the projected gradient without an end; its step growth is its own,
+#: ``core.runs.live.LIVE_GROWTH``, since every accepted step is a viewport update).
 LIVE_OPTIONS = ("energy", "alpha", "beta", "metric", "engine", "theta", "initial_step", "armijo",
-                "growth", "backproject_iter", "backproject_tol", "edge_lengths", "barycenter",
+                "backproject_iter", "backproject_tol", "edge_lengths", "barycenter",
                 "thickness", "pin_selected", "pin_tangents", "obstacles", "obstacle_weight",
                 "container")
 
