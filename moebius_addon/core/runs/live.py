@@ -113,7 +113,8 @@ class LiveRelaxation(Relaxation):
     P, metric, tol, **options
         As in :class:`.solvers.projected.Relaxation` (``pinned``, ``pin_tangents``,
         ``obstacles``, ``container``, ``thickness``, ``energy`` …; ``growth`` defaults to
-        :data:`LIVE_GROWTH`); there is no iteration limit. A converged run rests (:attr:`done`) until a move gives it something to do.
+        :data:`LIVE_GROWTH`); there is no iteration limit. A converged run rests
+        (:attr:`done`) until a move gives it something to do.
 
     Pins move with :meth:`move_pins` (targets for the pins given, in the order of their
     sorted stacked indices, :attr:`handles`; the tangent neighbours of ``pin_tangents`` move
