@@ -40,6 +40,9 @@ def live_settings(settings) -> dict:
     kwargs = relax_settings(settings)
     out = {k: v for k, v in kwargs.items() if k in LIVE_OPTIONS}
     out["tol"] = kwargs.get("tolerance", 1e-6)
+    # the Grow slider's rate (the panel's percent, the core's fraction)
+    if settings.length_growth > 0.0:
+        out["length_growth"] = round(settings.length_growth, 6) / 100.0
     return out
 
 
@@ -180,6 +183,10 @@ class LiveSession:
         #: the newest state shown, and the pins' targets and meshes' placements last posted
         self.frame = self.driver.latest()
         self._posted_pins = self.run.pin_positions
+        #: the *Grow* factor: the curves' total length over their length when Live began,
+        #: approached as the run goes on (set it, then :meth:`sync` posts it)
+        self.grow = 1.0
+        self._posted_grow = 1.0
         self._posted_meshes = {label: np.eye(4) for label in self.run.mesh_labels}
         self._closed_flag = False
 
@@ -239,9 +246,12 @@ class LiveSession:
             self._posted_pins = pins
         else:
             pins = None
-        if pins is not None or placements:
+        grow = None
+        if self.grow != self._posted_grow:
+            grow = self._posted_grow = self.grow
+        if pins is not None or placements or grow is not None:
             self._posted_meshes.update(placements)
-            self.driver.post(pins=pins, placements=placements or None)
+            self.driver.post(pins=pins, placements=placements or None, grow=grow)
         frame = self.driver.latest()
         if frame is None:
             return False
@@ -277,8 +287,12 @@ class LiveSession:
         it = f"iteration {f.nit}, energy {f.energy:.6g}" if f is not None else "starting"
         rest = " (resting)" if self.run.done else ""
         clip = f" — {self.driver.clipped}" if self.driver.clipped else ""
+        if self.driver.refused:
+            clip += f" — {self.driver.refused}"
         rec = f", recording {len(self.driver.record)} states" if self.driver.recording else ""
-        return f"Möbius live: {self.name} {it}{rest}{rec}{clip}"
+        sched = self.run.growth_schedule
+        size = f", {sched.words()}" if sched is not None and not sched.reached else ""
+        return f"Möbius live: {self.name} {it}{size}{rest}{rec}{clip}"
 
     # -- ending ---------------------------------------------------------------------------------
 
@@ -349,7 +363,7 @@ class LiveSession:
                 set_rest_shape(m.obj, m.to_local(last.parts[m.span]))
         return {"states": len(record), "frames": frames, "updates": self.updates,
                 "seconds": time.perf_counter() - self.t0, "clipped": self.driver.clipped,
-                "energy": last.energy, "nit": last.nit}
+                "energy": last.energy, "nit": last.nit, "length": self.run.length}
 
     def _world(self, name: str, placement: np.ndarray) -> np.ndarray:
         return _matrix(self.objects[0].matrix_world) @ placement @ self._rel0[name]
@@ -463,6 +477,7 @@ class MOEBIUS_OT_live(bpy.types.Operator):
         except ValueError as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
+        settings.live_grow = 1.0  # a new live run starts at its own length
         self._error = None
         self._ended = False
         self._header = False
@@ -482,6 +497,7 @@ class MOEBIUS_OT_live(bpy.types.Operator):
         if self._ended:
             return None
         try:
+            self._session.grow = bpy.context.scene.moebius.live_grow
             wrote = self._session.sync()
         except Exception as err:  # noqa: BLE001 - modal() restores and reports it
             self._error = err

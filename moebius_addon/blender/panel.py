@@ -89,6 +89,8 @@ class VIEW3D_PT_moebius(_MoebiusPanel, bpy.types.Panel):
         sub = row.row(align=True)
         sub.enabled = not s.running
         sub.prop(s, "live_record", toggle=True, icon="KEYINGSET")
+        if getattr(s, "live", False):  # read on every update while Live runs
+            layout.prop(s, "live_grow", slider=False)
         # the statistics of the previous run would be mistaken for the running one's
         if s.last_object and not s.running:
             box = layout.box()

@@ -263,6 +263,12 @@ class MoebiusSettings(bpy.types.PropertyGroup):
         description="Live: key every state of the live run on the curves when it ends (and "
                     "the moved obstacles' transforms), from the current frame on: the live "
                     "run becomes an animation in which nothing passes through anything")
+    live_grow: FloatProperty(
+        name="Grow", default=1.0, min=1.0, max=100.0, soft_max=4.0, precision=2,
+        description="Live: the curves' total length as a multiple of their length when Live "
+                    "began; drag it while Live runs and they grow towards it (or shrink back) "
+                    "by Growth per Iteration, every step tested for contact",
+        options={"SKIP_SAVE"})
     # Read-only statistics of the last run
     last_object: StringProperty(name="Object", get=_stat("object", ""))
     last_iterations: IntProperty(name="Iterations", get=_stat("iterations", 0))

@@ -173,3 +173,40 @@ def test_bad_input_is_refused_and_leaves_the_scene(mb, scene):
     with pytest.raises(ValueError, match="not a curve"):
         live(mb).LiveSession([bpy.context.active_object])
     assert bpy.ops.moebius.live.poll() is False  # a mesh is active: greyed out
+
+
+def test_grow_slider_lengthens_the_curve_and_records_it(mb, scene):
+    """*Grow* while Live runs (the operator sets ``session.grow`` from the panel's slider on
+    every tick): the knot grows to 1.25 times its length, the status says how far it is, and
+    the recorded keys as Blender plays them reach that length and never cross."""
+    bpy.ops.moebius.add_knot(kind="3_1", edges=60)
+    knot = bpy.context.active_object
+    bpy.context.scene.moebius.length_growth = 4.0  # percent per iteration
+    kwargs = live(mb).live_settings(bpy.context.scene.moebius)
+    assert kwargs["length_growth"] == pytest.approx(0.04)
+
+    def length(P):
+        return float(np.linalg.norm(np.diff(np.vstack([P, P[:1]]), axis=0), axis=1).sum())
+
+    start = np.array([tuple(p.co) for p in knot.data.splines[0].points])[:, :3]
+    L0 = length(start)
+    session = live(mb).LiveSession([knot], record=True, **kwargs)
+    try:
+        running(session)
+        session.grow = 1.25
+        sync_for(session, 30.0, until=lambda: session.run.growth_schedule is not None)
+        assert "of the target" in session.status() or session.run.growth_schedule.reached
+        sync_for(session, 120.0, until=lambda: abs(length(session.frame.parts[0]) - 1.25 * L0)
+                 < 1e-6 * L0)
+        sync_for(session, 0.2)
+    except BaseException:
+        session.cancel()
+        raise
+    done = session.finish()
+    assert done["length"] == pytest.approx(1.25 * L0, rel=1e-6)
+    frames, points, _ = keyframes(mb).read_flow_keyframes(knot)
+    lengths = [length(P) for P in points]
+    assert lengths[0] == pytest.approx(L0, rel=1e-6)
+    assert max(lengths) == pytest.approx(1.25 * L0, rel=1e-5)  # float32 points
+    assert all(b <= a * 1.04 * (1 + 1e-5) for a, b in zip(lengths, lengths[1:]))
+    certify_record([[P] for P in points], [True])

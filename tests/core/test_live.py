@@ -209,3 +209,61 @@ def test_tangent_point_energy_runs_live():
     assert run.move_pins(T).share == 1.0
     assert run.step()
     certify_move([before], [run.x], [True])
+
+
+def _total_length(parts, closed):
+    return sum(float(np.linalg.norm(np.diff(np.vstack([P, P[:1]]) if closed else P, axis=0),
+                                    axis=1).sum()) for P in parts)
+
+
+def test_grow_lengthens_then_shrinks_back_never_crossing():
+    """The Grow slider: the length reaches factor × the start's (measured here from the
+    coordinates), shrinks back when the factor is lowered, and the driver's record of the
+    whole run passes the crossing certificate."""
+    P = core.resample(core.knots.named("3_1", 200), 48)
+    run = LiveRelaxation(P, pinned=[0, 24], length_growth=0.05)
+    L0 = _total_length([run.x], True)
+    drv = LiveDriver(run, record=True)
+    try:
+        drv.post(grow=1.3)
+        assert _wait(lambda: abs(_total_length(drv.latest(new_only=False).parts, True)
+                                 - 1.3 * L0) < 1e-6 * L0)
+        high = drv.latest(new_only=False).seq
+        drv.post(grow=1.1)
+        assert _wait(lambda: abs(_total_length(drv.latest(new_only=False).parts, True)
+                                 - 1.1 * L0) < 1e-6 * L0)
+        time.sleep(0.1)
+    finally:
+        drv.close()
+    assert drv.error is None
+    assert run.length_factor == 1.1
+    lengths = [_total_length(f.parts, True) for f in drv.record]
+    assert max(lengths) == pytest.approx(1.3 * L0, rel=1e-6)
+    # growth by at most 5 % per state, and the shrink after the high point
+    assert all(b <= a * 1.05 * (1 + 1e-9) for a, b in zip(lengths, lengths[1:]))
+    assert min(lengths[high:]) == pytest.approx(1.1 * L0, rel=1e-6)
+    certify_record([f.parts for f in drv.record], [True], None)
+
+
+def test_grow_refusals():
+    P = core.resample(core.knots.named("3_1", 200), 48)
+    run = LiveRelaxation(P, pinned=[0, 24])
+    with pytest.raises(ValueError, match="factor"):
+        run.grow(0.5)
+    with pytest.raises(ValueError, match="grow"):
+        LiveDriver.post(LiveDriver.__new__(LiveDriver), grow=float("nan"))
+    with pytest.raises(ValueError, match="length_growth"):
+        LiveRelaxation(P, length_growth=0.0)
+    # a cable pinned at every vertex has nothing that can grow: the driver says so and runs on
+    C = cable(8)
+    every = LiveRelaxation([C, C + [0.5, 0.0, 0.0]], pinned=[list(range(len(C))), [0]],
+                           closed=False)
+    drv = LiveDriver(every)
+    try:
+        drv.post(grow=1.5)
+        assert _wait(lambda: "grow refused" in drv.refused)
+        assert "component 0 cannot grow" in drv.refused
+        assert drv.error is None and drv.alive
+    finally:
+        drv.close()
+    assert every.growth_schedule is None and every.length_factor == 1.0

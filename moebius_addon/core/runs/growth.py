@@ -117,18 +117,34 @@ class LengthGrowth:
             raise ValueError(f"component {int(stuck[0])} cannot grow: every edge of it lies "
                              "between two pinned vertices; unpin some")
         self.scale = float(scale)
+        #: per component: the length of the growing edges at the start (the least goal)
+        self.free0 = self.free.copy()
         #: mean length of a growing edge at the start (run units): the split rule's yardstick
         self.start_edge = float(lengths0[grows].mean()) if grows.any() else 1.0
+
+    def retarget(self, factor: float) -> None:
+        """A new goal: every component's length ``factor`` (≥ 1) times its length at the
+        start; below the length reached the growing edges shrink back towards it at the same
+        rate (Live's *Grow* slider, which may be dragged both ways)."""
+        factor = check_number("factor", factor, 1.0)
+        goal = (self.free0 + self.fixed) * factor - self.fixed
+        stuck = np.flatnonzero((goal > self.free0) & (self.free0 == 0.0))
+        if stuck.size:
+            raise ValueError(f"component {int(stuck[0])} cannot grow: every edge of it lies "
+                             "between two pinned vertices; unpin some")
+        self.goal = goal
 
     @property
     def reached(self) -> bool:
         """Whether every component has reached its target (it is held from then on)."""
-        return bool(np.all(self.free >= self.goal))
+        return bool(np.all(self.free == self.goal))
 
     def propose(self, rate: float) -> np.ndarray:
         """The free length of each component after one growth at ``rate`` (capped at its
-        goal; components that reached it stay)."""
-        return np.minimum(self.free * (1.0 + rate), self.goal)
+        goal; components that reached it stay), or one shrink by ``1 + rate`` towards a goal
+        below it (:meth:`retarget`)."""
+        return np.where(self.free <= self.goal, np.minimum(self.free * (1.0 + rate), self.goal),
+                        np.maximum(self.free / (1.0 + rate), self.goal))
 
     def constraints(self, con: Constraints, free: np.ndarray) -> Constraints:
         """``con`` with the growing edges' targets scaled to the free lengths ``free``, and
@@ -141,8 +157,9 @@ class LengthGrowth:
                                    barycenter0=con.barycenter0 * f[:, None])
 
     def commit(self, free: np.ndarray) -> None:
-        """The growth to ``free`` was made (exactly the goal where it was capped)."""
-        self.free = np.where(free >= self.goal, self.goal, free)
+        """The growth to ``free`` (of :meth:`propose`: exactly the goal where it was capped)
+        was made."""
+        self.free = free.copy()
 
     def edge_ratio(self, lengths0: np.ndarray) -> float:
         """Longest growing target edge over the start's mean growing edge."""

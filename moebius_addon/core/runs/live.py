@@ -45,6 +45,7 @@ import numpy as np
 
 from ..geometry.obstacles import ObstacleField, auto_obstacle_tol
 from .base import Status
+from .checks import check_number
 from .projected import Relaxation
 
 #: A pin move that fails its tests is halved up to this many times until a share passes …
@@ -113,7 +114,8 @@ class LiveRelaxation(Relaxation):
     P, metric, tol, **options
         As in :class:`.solvers.projected.Relaxation` (``pinned``, ``pin_tangents``,
         ``obstacles``, ``container``, ``thickness``, ``energy`` …; ``growth`` defaults to
-        :data:`LIVE_GROWTH`); there is no iteration limit. A converged run rests
+        :data:`LIVE_GROWTH`; ``length_growth`` is also the rate of :meth:`grow`); there is no
+        iteration limit. A converged run rests
         (:attr:`done`) until a move gives it something to do.
 
     Pins move with :meth:`move_pins` (targets for the pins given, in the order of their
@@ -126,6 +128,11 @@ class LiveRelaxation(Relaxation):
     def __init__(self, P, metric: str = "hs", tol: float = 1e-6, **options):
         options.pop("max_iter", None)
         options.setdefault("growth", LIVE_GROWTH)
+        rate = options.get("length_growth")
+        if rate is not None:
+            check_number("length_growth", rate, 0.0, above=True)
+        if options.get("length_target") is None:  # the rate of grow(), when it is called
+            options.pop("length_growth", None)
         super().__init__(P, metric, LIVE_MAX_ITER, tol, **options)
         layout = self.layout
         given = options.get("pinned")
@@ -165,6 +172,10 @@ class LiveRelaxation(Relaxation):
         self._obstacle_tol = options.get("obstacle_tol")
         #: the number of constraint moves made (pins or meshes), for the caller's record
         self.moves = 0
+        self._edge_lengths = options.get("edge_lengths", True)
+        self._growth_rate = rate
+        #: the goal of :meth:`grow`: the total length over the length at the start
+        self.length_factor = 1.0
 
     # -- what the caller reads ---------------------------------------------------------------
 
@@ -329,18 +340,58 @@ class LiveRelaxation(Relaxation):
         new.fixed = self.pinned
         self.engine.obstacles = new
 
+    # -- growing -------------------------------------------------------------------------------
+
+    def grow(self, factor: float) -> None:
+        """Grow the curves' total length towards ``factor`` (≥ 1) times their length at the
+        start as the flow goes on, by ``length_growth`` (default 1 %) per iteration, or
+        shrink it back towards a smaller factor (Live's *Grow* slider). Each grown polygon is
+        reached by a straight path tested for contact like a step's; growth with no room
+        halves and, blocked :data:`.projected._GROWTH_PATIENCE` iterations in a row, rests
+        until the next move or call.
+
+        Raises
+        ------
+        ValueError
+            ``factor`` below 1 or not finite, or a run that cannot grow (without edge-length
+            constraints, or with every edge of a component between two pins).
+        """
+        sched = self.growth_schedule
+        if sched is None:
+            if factor == 1.0:
+                return
+            ln = self.lengths0[self.layout.real] if self.layout.has_open else self.lengths0
+            start = float(ln.sum()) * self._scale
+            sched = self._check_growth(start, self._growth_rate, self._edge_lengths)
+        sched.retarget(factor)
+        self.growth_schedule = sched
+        self.length_factor = float(factor)
+        self._blocked = 0
+        if self._growing:
+            self._wake()
+
+    @property
+    def length(self) -> float:
+        """The curves' total length now (caller's units)."""
+        ln = self.lengths0[self.layout.real] if self.layout.has_open else self.lengths0
+        return float(ln.sum()) * self._scale
+
     # -- shared ----------------------------------------------------------------------------------
+
+    def _wake(self) -> None:
+        """A rested run goes on (something was moved or changed)."""
+        self._settle_from = None
+        self._still = 0
+        if self.done:
+            self.done, self.success, self.message = False, False, ""
+            self.status = Status.NOT_FINISHED
 
     def _commit(self, Q: np.ndarray) -> None:
         """``Q`` (feasible, reached by a tested path) becomes the iterate; a rested run goes
         on."""
         self._prepare(Q, *self.engine.energy_gradient(Q))
         self.moves += 1
-        self._settle_from = None
-        self._still = 0
-        if self.done:
-            self.done, self.success, self.message = False, False, ""
-            self.status = Status.NOT_FINISHED
+        self._wake()
 
 
 def _is_mesh(obj) -> bool:
@@ -409,11 +460,14 @@ class LiveDriver:
         self.error: BaseException | None = None
         #: why the last move was cut, while it is (empty otherwise)
         self.clipped = ""
+        #: why the last growth asked for was refused (empty otherwise)
+        self.refused = ""
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._quit = threading.Event()
         self._pins = None
         self._placements: dict = {}
+        self._grow = None
         self._seq = 0
         self._latest = self._frame("start")
         if self.recording:
@@ -423,10 +477,17 @@ class LiveDriver:
         self._thread = threading.Thread(target=self._work, name="moebius-live", daemon=True)
         self._thread.start()
 
-    def post(self, pins=None, placements: Mapping | None = None) -> None:
+    def post(self, pins=None, placements: Mapping | None = None,
+             grow: float | None = None) -> None:
         """New targets: ``pins`` for :meth:`LiveRelaxation.move_pins`, ``placements`` (label
-        → 4 × 4) for :meth:`LiveRelaxation.move_meshes`; None keeps the earlier ones."""
+        → 4 × 4) for :meth:`LiveRelaxation.move_meshes`, ``grow`` for
+        :meth:`LiveRelaxation.grow` (checked here: a bad factor raises in the caller's
+        thread); None keeps the earlier ones."""
+        if grow is not None:
+            grow = float(check_number("grow", grow, 1.0))
         with self._lock:
+            if grow is not None:
+                self._grow = grow
             if pins is not None:
                 self._pins = np.array(pins, dtype=np.float64)
             if placements:
@@ -483,7 +544,16 @@ class LiveDriver:
         try:
             while not self._quit.is_set():
                 with self._lock:
-                    pins, placements = self._pins, dict(self._placements)
+                    pins, placements, grow = self._pins, dict(self._placements), self._grow
+                if grow is not None and grow != run.length_factor:
+                    try:
+                        run.grow(grow)
+                        self.refused = ""
+                    except ValueError as err:  # the run goes on at its length
+                        self.refused = f"grow refused: {err}"
+                        with self._lock:
+                            if self._grow == grow:
+                                self._grow = None
                 did = False
                 cut = []
                 if pins is not None and not run.pins_at(pins):
