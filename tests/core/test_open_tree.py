@@ -270,3 +270,25 @@ OUT = [E.hex(), G.tobytes().hex()]
 def test_bitwise_identical_across_thread_counts():
     here, there = out_here_and_in_one_thread(CODE)
     assert there == here
+
+
+@pytest.mark.parametrize("name", ["cable", "cables"])
+def test_open_near_field_gives_the_full_kernels_bits(name, rng):
+    """Every component open: the near field's length-part kernel (near_field._near_lanes_open)
+    gives the bits of the full kernel with zero edge vectors, energy and gradient."""
+    parts, closed = _layouts(name, rng)
+    X, layout = as_layout(parts, closed)
+    frame = bh.Frame(X, layout)
+    assert frame._all_open
+    E1, G1 = frame.energy_gradient(X)
+    frame._all_open = False
+    E0, G0 = frame.energy_gradient(X)
+    assert E1 == E0 and np.array_equal(G1, G0)
+    mixed, flags = _layouts("mixed", rng)
+    assert not bh.Frame(*as_layout(mixed, flags))._all_open
+
+
+def test_open_layouts_bitwise_identical_across_thread_counts():
+    code = CODE.replace("parts.append(", "_ = (").replace("[False] * 6 + [True]", "False")
+    here, there = out_here_and_in_one_thread(code)
+    assert there == here
