@@ -150,11 +150,12 @@ def main(argv=None) -> int:
     certify_record([f.parts for f in record], [False] * len(parts))  # raises on a crossing
     apart = between_cables([f.parts for f in record])
     reached = np.linalg.norm(record[-1].parts[c][top] - path[-1])
-    print(f"{args.cables} cables x {args.edges} edges, tubes {obj.data.bevel_depth:g} thick: "
+    print(f"{args.cables} cables x {args.edges} edges, tubes of radius {obj.data.bevel_depth:g}: "
           f"{rate:.1f} viewport updates/s while dragging (renders included), {done['states']} "
           f"states keyed (frames {done['frames'].start}-{done['frames'].stop - 1}), every move "
           f"between two keys certified crossing-free, least distance between two cables over "
-          f"the keys {apart:.4g} (tube diameter {2 * obj.data.bevel_depth:.3g}), dragged end {reached:.3g} from the mouse's last place; "
+          f"the keys {apart:.4g} (tube diameter {2 * obj.data.bevel_depth:.3g}), dragged end "
+          f"{reached:.3g} from the mouse's last place; "
           f"{session.driver.clipped or 'no move clipped at the end'}; images in {out}")
     return 0
 
