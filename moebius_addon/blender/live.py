@@ -35,10 +35,11 @@ LIVE_OPTIONS = ("energy", "alpha", "beta", "metric", "engine", "theta", "initial
 
 def live_settings(settings) -> dict:
     """The keyword arguments of :class:`LiveSession` from the panel's ``scene.moebius``."""
-    from .options import relax_settings
+    from .options import energy_settings, relax_settings
 
     kwargs = relax_settings(settings)
     out = {k: v for k, v in kwargs.items() if k in LIVE_OPTIONS}
+    out.update(energy_settings(settings))  # the energy and its records' options (stiffness)
     out["tol"] = kwargs.get("tolerance", 1e-6)
     # the Grow slider's rate (the panel's percent, the core's fraction)
     if settings.length_growth > 0.0:

@@ -210,3 +210,18 @@ def test_grow_slider_lengthens_the_curve_and_records_it(mb, scene):
     assert max(lengths) == pytest.approx(1.25 * L0, rel=1e-5)  # float32 points
     assert all(b <= a * 1.04 * (1 + 1e-5) for a, b in zip(lengths[:-1], lengths[1:], strict=True))
     certify_record([[P] for P in points], [True])
+
+
+def test_live_takes_the_stiffness(mb, scene):
+    """*Stiffness* reaches a live run as it reaches *Relax* (the energy's records' options)."""
+    bpy.ops.moebius.add_knot(kind="3_1", edges=60)
+    knot = bpy.context.active_object
+    bpy.context.scene.moebius.stiffness = 0.5
+    kwargs = live(mb).live_settings(bpy.context.scene.moebius)
+    assert kwargs["stiffness"] == pytest.approx(0.5)
+    session = live(mb).LiveSession([knot], **kwargs)
+    try:
+        running(session)
+        assert "bending" in session.run.energy_choice.label
+    finally:
+        session.cancel()
