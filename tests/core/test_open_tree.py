@@ -274,16 +274,20 @@ def test_bitwise_identical_across_thread_counts():
 
 @pytest.mark.parametrize("name", ["cable", "cables"])
 def test_open_near_field_gives_the_full_kernels_bits(name, rng):
-    """Every component open: the near field's length-part kernel (near_field._near_lanes_open)
-    gives the bits of the full kernel with zero edge vectors, energy and gradient."""
+    """Every component open: the near and far fields' length-part kernels
+    (near_field._near_lanes_open, far_field._far_lanes_open) give the bits of the full
+    kernels with zero edge vectors, energy and gradient."""
     parts, closed = _layouts(name, rng)
     X, layout = as_layout(parts, closed)
     frame = bh.Frame(X, layout)
     assert frame._all_open
+    assert frame.far_pairs > 100  # the far field is exercised
     E1, G1 = frame.energy_gradient(X)
+    e1 = frame.energy(X)
     frame._all_open = False
     E0, G0 = frame.energy_gradient(X)
     assert E1 == E0 and np.array_equal(G1, G0)
+    assert frame.energy(X) == e1
     mixed, flags = _layouts("mixed", rng)
     assert not bh.Frame(*as_layout(mixed, flags))._all_open
 

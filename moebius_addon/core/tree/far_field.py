@@ -557,6 +557,80 @@ def _stage(W, j, rows, a, b, same):
 
 
 @nb.njit(cache=True, inline="always")
+def _far_lanes_open(W, grad, La, Qa):
+    """:func:`_far_lanes` where every component is open (cables): every partner is staged with
+    ``S = D = T = 0`` (:func:`_stage_open` leaves them out), so every pair is the length part
+    alone and the tangent terms and their derivatives are zeros. What is left is computed in
+    the full kernel's operations and order: the same bits (``tests/core/test_open_tree.py``);
+    the sums of the target's ``S``, ``D`` and ``T`` derivatives stay 0."""
+    trqa = Qa[0] + Qa[4] + Qa[8]
+    for j in range(_LANES):
+        sb = _W_STAGE + j
+        x0 = W[sb + _LANES * _MC]
+        x1 = W[sb + _LANES * (_MC + 1)]
+        x2 = W[sb + _LANES * (_MC + 2)]
+        Lb = W[sb + _LANES * _ML]
+        Qb = _lane9(W, sb + _LANES * _MQ)
+        r2 = x0 * x0 + x1 * x1 + x2 * x2
+        inv = 1.0 / r2
+        i2 = inv * inv
+        i3 = i2 * inv
+        trqb = Qb[0] + Qb[4] + Qb[8]
+        va0 = Qa[0] * x0 + Qa[1] * x1 + Qa[2] * x2
+        va1 = Qa[3] * x0 + Qa[4] * x1 + Qa[5] * x2
+        va2 = Qa[6] * x0 + Qa[7] * x1 + Qa[8] * x2
+        vb0 = Qb[0] * x0 + Qb[1] * x1 + Qb[2] * x2
+        vb1 = Qb[3] * x0 + Qb[4] * x1 + Qb[5] * x2
+        vb2 = Qb[6] * x0 + Qb[7] * x1 + Qb[8] * x2
+        xqa = x0 * va0 + x1 * va1 + x2 * va2
+        xqb = x0 * vb0 + x1 * vb1 + x2 * vb2
+        trq = Lb * trqa + La * trqb
+        xqx = Lb * xqa + La * xqb
+        e = 4.0 * i3 * xqx - i2 * trq
+        # the pair kernel with both S zero (SPLIT): f = L_A L_B / |x|², ∂f/∂x = −2 f x / |x|²
+        f = (La * Lb) * inv
+        e += f
+        a = _W_SUMS + j
+        W[a + _LANES * _AE] += e
+        if grad:
+            cd = -2.0 * f
+            W[a + _LANES * _AL] += 4.0 * i3 * xqb - i2 * trqb + Lb * inv
+            c0 = 4.0 * i3 * trq - 24.0 * i3 * inv * xqx
+            W[a + _LANES * _AC] += (c0 * x0 + 8.0 * i3 * (Lb * va0 + La * vb0)
+                                    + (cd * x0) * inv)
+            W[a + _LANES * (_AC + 1)] += (c0 * x1 + 8.0 * i3 * (Lb * va1 + La * vb1)
+                                          + (cd * x1) * inv)
+            W[a + _LANES * (_AC + 2)] += (c0 * x2 + 8.0 * i3 * (Lb * va2 + La * vb2)
+                                          + (cd * x2) * inv)
+            xx0 = x0 * x0
+            xx1 = x0 * x1
+            xx2 = x0 * x2
+            xx3 = x1 * x1
+            xx4 = x1 * x2
+            xx5 = x2 * x2
+            lb3 = Lb * i3
+            W[a + _LANES * _AQ] += lb3 * xx0
+            W[a + _LANES * (_AQ + 1)] += lb3 * xx1
+            W[a + _LANES * (_AQ + 2)] += lb3 * xx2
+            W[a + _LANES * (_AQ + 3)] += lb3 * xx3
+            W[a + _LANES * (_AQ + 4)] += lb3 * xx4
+            W[a + _LANES * (_AQ + 5)] += lb3 * xx5
+            W[a + _LANES * _AQL] += Lb * i2
+
+
+@nb.njit(cache=True, inline="always")
+def _stage_open(W, j, rows, a, b):
+    """:func:`_stage` of a partner of an open component: the centre, ``L`` and ``Q`` (what
+    :func:`_far_lanes_open` reads)."""
+    s = _W_STAGE + j
+    for k in range(3):
+        W[s + _LANES * (_MC + k)] = rows[a, _MC + k] - rows[b, _MC + k]
+    W[s + _LANES * _ML] = rows[b, _ML]
+    for k in range(_MQ, _MQ + 9):
+        W[s + _LANES * k] = rows[b, k]
+
+
+@nb.njit(cache=True, inline="always")
 def _empty_lane(W, j):
     """A lane with no partner: no length and no moments add exactly 0 (every term of F has a
     factor from each side), at a centre 1 away (a finite 1/|x|²)."""
@@ -573,14 +647,15 @@ def _empty_lane(W, j):
 # "contract" alone too). error_model="numpy": no zero test on the divisions, which kept the
 # loop over lanes from vectorizing.
 @nb.njit(cache=True, parallel=True, error_model="numpy")
-def _far(L, C, S, D, Q, T, nc, foff, fpart, grad):
+def _far(L, C, S, D, Q, T, nc, foff, fpart, grad, opened):
     """Per target node: Σ_B F(A, B) and, with ``grad``, twice Σ_B ∂F(A, B)/∂(L_A, S_A, c_A, D_A,
     Q_A, T_A) (the derivative of the ordered sum: F is symmetric). F: both parts of the kernel
     expanded to second order in the cluster sizes around the centres, the same order for
     both: they cancel for two pieces of one straight line (exact F = 0), and expanding one
     part further than the other measured larger errors. The partners are evaluated eight at a
     time (:func:`_far_lanes`), each lane summing its own, the lanes added in order at the end:
-    the same bits for any thread count."""
+    the same bits for any thread count. ``opened``: every component is open, every pair the
+    length part alone (:func:`_far_lanes_open`: the same bits, fewer operations)."""
     m = L.shape[0]
     rows = _moment_rows(L, C, S, D, Q, T)
     eF = np.zeros(m)
@@ -610,12 +685,19 @@ def _far(L, C, S, D, Q, T, nc, foff, fpart, grad):
             for p0 in range(foff[a], foff[a + 1], _LANES):
                 for j in range(_LANES):
                     p = p0 + j
-                    if p < foff[a + 1]:
+                    if p >= foff[a + 1]:
+                        _empty_lane(W, j)
+                    elif opened:
+                        _stage_open(W, j, rows, a, fpart[p])
+                    else:
                         # one closed component: the whole kernel (else O'Hara's, length part)
                         _stage(W, j, rows, a, fpart[p], nc[fpart[p]] == nc[a] and nc[a] >= 0)
+                if opened:
+                    if grad:
+                        _far_lanes_open(W, True, La, Qa)
                     else:
-                        _empty_lane(W, j)
-                if grad:
+                        _far_lanes_open(W, False, La, Qa)
+                elif grad:
                     _far_lanes(W, True, La, sa0, sa1, sa2, Da, Qa, Ta)
                 else:
                     _far_lanes(W, False, La, sa0, sa1, sa2, Da, Qa, Ta)

@@ -442,7 +442,7 @@ class Frame:
         # the near field's components: an open component's edges match no other edge (its
         # pairs take O'Hara's kernel, as edges of two components)
         self._near_cp = edges[3]
-        #: every component open: the near field's pairs take the length part alone
+        #: every component open: the near and far fields' pairs take the length part alone
         self._all_open = bool(layout.has_open and not layout.closed.any())
         if layout.has_open:
             cp = layout.comp[tree.perm]
@@ -499,7 +499,8 @@ class Frame:
             clusters = self._clusters(edges)
         E, M, ln = edges[:3]
         L, C, S, D, Q, T, nc = clusters
-        eF, gL, gS, gC, gD, gQ, gT = _far(L, C, S, D, Q, T, nc, self.foff, self.fpart, grad)
+        eF, gL, gS, gC, gD, gQ, gT = _far(L, C, S, D, Q, T, nc, self.foff, self.fpart, grad,
+                                          self._all_open)
         part = _near(E, M, ln, self._near_cp, tree.lo, tree.hi, *self._near_lists, grad,
                      self._all_open)
         energy = 4.0 * self._closed_count + float(np.sum(part[0])) + float(np.sum(eF))
