@@ -484,7 +484,8 @@ class TreeEngine(DenseEngine):
             self._saddle = hs_solve.HsSaddle(
                 hs_tree.HsOperator(X, self.layout, self.metric,
                                    order=self.energy_choice.metric_order,
-                                   single=self.layout.n >= SINGLE_WEIGHTS_FROM),
+                                   single=True if self.layout.n >= SINGLE_WEIGHTS_FROM
+                                   else None),
                 jac, rtol=self.krylov_rtol,
                 exact_backprojection=self.exact_backprojection, log=self._tree_krylov,
                 recycle=old if isinstance(old, hs_solve.HsSaddle) else None, X=X)

@@ -56,6 +56,11 @@ from .moebius import _by_target
 THETA = 0.5
 #: Edges per leaf at most.
 LEAF_SIZE = 8
+#: ``HsOperator(single=None)`` stores its near weights in single precision from this many on
+#: (two arrays of them; 320 MB in double): a dense crowd of strands stores about 2 000 per
+#: vertex where a knot stores 33–39, and every Krylov step reads them all. 1 000 strands of 30
+#: edges (62 million): 2.13–2.14 s per iteration in double, 1.94–1.96 s in single.
+SINGLE_WEIGHTS_CELLS = 20_000_000
 #: Pairs whose arc length exceeds this many times their distance are "folded" (strands that
 #: come close again along the curve, or other components): the lower-order weights of those
 #: pairs alone enter the preconditioner's diagonal (see :meth:`HsOperator.preconditioner_parts`).
@@ -496,16 +501,17 @@ class HsOperator:
     theta : float
         Admissibility of the far field (see the module's text).
     leaf_size : int
-    single : bool
+    single : bool or None
         The near pairs' weights stored in single precision (the products still sum in
         double; the row sums, the diagonal and :meth:`preconditioner_parts` are the same):
         half of the operator's memory, 0.42 GB at 10⁶ vertices, for a change of the metric
-        of the order of 1e-7 relative, far below the far field's.
+        of the order of 1e-7 relative, far below the far field's. None: from
+        :data:`SINGLE_WEIGHTS_CELLS` stored weights on.
     """
 
     def __init__(self, X: np.ndarray, layout: Layout, metric: str = "hs",
                  order: float = PAPER_ORDER, theta: float = THETA,
-                 leaf_size: int = LEAF_SIZE, single: bool = False):
+                 leaf_size: int = LEAF_SIZE, single: bool | None = False):
         if metric not in ("hs", "hs_pure"):
             raise ValueError(f"{metric!r} is not computed by the tree's metric (hs, hs_pure)")
         self.layout = layout
@@ -537,6 +543,8 @@ class HsOperator:
         cells = np.where(tree.left < 0, size * width, 0)
         self.rowoff = np.concatenate(([0], np.cumsum(cells)[:-1])).astype(np.int64)
         total = int(cells.sum())
+        if single is None:
+            single = total >= SINGLE_WEIGHTS_CELLS
         self.w = np.empty(total, np.float32 if single else np.float64)
         self.v = np.empty(total, self.w.dtype)
         rows = np.empty((3, lay.n))
