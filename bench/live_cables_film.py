@@ -13,26 +13,20 @@ another) and where the dragged end ended. Prints measurements; not a test::
 from __future__ import annotations
 
 import argparse
-import atexit
-import os
-import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-if "BLENDER_USER_RESOURCES" not in os.environ:  # never the user's own preferences
-    _USER = tempfile.mkdtemp(prefix="moebius-film-user-")
-    os.environ["BLENDER_USER_RESOURCES"] = _USER
-    atexit.register(shutil.rmtree, _USER, ignore_errors=True)
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
+
+# first: demo_blender gives Blender a throw-away user directory before bpy is imported
+from demo_blender import frame_camera, render, setup_render  # noqa: E402, I001
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
 from cables_tree import plates_scene  # noqa: E402
-from demo_blender import frame_camera, render, setup_render  # noqa: E402
 
 import moebius_addon  # noqa: E402
 from moebius_addon.blender import live  # noqa: E402

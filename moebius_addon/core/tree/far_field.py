@@ -562,7 +562,9 @@ def _far_lanes_open(W, grad, La, Qa):
     ``S = D = T = 0`` (:func:`_stage_open` leaves them out), so every pair is the length part
     alone and the tangent terms and their derivatives are zeros. What is left is computed in
     the full kernel's operations and order: the same bits (``tests/core/test_open_tree.py``);
-    the sums of the target's ``S``, ``D`` and ``T`` derivatives stay 0."""
+    the sums of the target's ``S``, ``D`` and ``T`` derivatives stay 0. The length part
+    repeats :func:`_far_lanes`' lines: as inline helpers of both, the full kernel's energy
+    measured 8 % slower (35 → 38 ms, 100 cables × 200 edges) and this one no faster."""
     trqa = Qa[0] + Qa[4] + Qa[8]
     for j in range(_LANES):
         sb = _W_STAGE + j

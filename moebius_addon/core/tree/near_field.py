@@ -94,7 +94,9 @@ def _near_lanes_open(W, rx, ry, rz, lj, r, own):
     """:func:`_near_lanes` where every edge is of an open component (cables): every pair takes
     the length part ``f = l_I l_J / |d|²`` alone, and its edge-vector partials are zero, so
     only ``f``, ``∂f/∂m`` and ``∂f/∂l`` are computed and stored — in the operations and order
-    the full kernel makes of them with zero edge vectors: the same bits."""
+    the full kernel makes of them with zero edge vectors: the same bits. Its first lines
+    repeat :func:`_near_lanes`' own: as one inline helper of both, this kernel measured 262
+    against 122 ms (100 cables × 200 edges, two threads; its lane loop no longer vectorized)."""
     for j in range(_LANES):
         px = W[j]
         py = W[_LANES + j]
