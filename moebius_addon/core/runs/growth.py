@@ -46,6 +46,15 @@ def _as_targets(length_target, k: int) -> np.ndarray | float:
     return check_number("length_target", length_target, 0, above=True)
 
 
+def _refuse_stuck(goal: np.ndarray, free: np.ndarray) -> None:
+    """ValueError for a component asked to grow (``goal`` above ``free``) with no edge that
+    can (``free`` 0: every edge between two pins)."""
+    stuck = np.flatnonzero((goal > free) & (free == 0.0))
+    if stuck.size:
+        raise ValueError(f"component {int(stuck[0])} cannot grow: every edge of it lies "
+                         "between two pinned vertices; unpin some")
+
+
 class LengthGrowth:
     """The growth schedule of one run.
 
@@ -112,10 +121,7 @@ class LengthGrowth:
             goal = np.maximum(start, targets)
         #: per component: the length the growing edges reach at the target (run units)
         self.goal = np.maximum(goal / scale - self.fixed, self.free)
-        stuck = np.flatnonzero((self.goal > self.free) & (self.free == 0.0))
-        if stuck.size:
-            raise ValueError(f"component {int(stuck[0])} cannot grow: every edge of it lies "
-                             "between two pinned vertices; unpin some")
+        _refuse_stuck(self.goal, self.free)
         self.scale = float(scale)
         #: per component: the length of the growing edges at the start (the least goal)
         self.free0 = self.free.copy()
@@ -128,10 +134,7 @@ class LengthGrowth:
         rate (Live's *Grow* slider, which may be dragged both ways)."""
         factor = check_number("factor", factor, 1.0)
         goal = (self.free0 + self.fixed) * factor - self.fixed
-        stuck = np.flatnonzero((goal > self.free0) & (self.free0 == 0.0))
-        if stuck.size:
-            raise ValueError(f"component {int(stuck[0])} cannot grow: every edge of it lies "
-                             "between two pinned vertices; unpin some")
+        _refuse_stuck(goal, self.free0)
         self.goal = goal
 
     @property

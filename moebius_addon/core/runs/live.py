@@ -360,9 +360,7 @@ class LiveRelaxation(Relaxation):
         if sched is None:
             if factor == 1.0:
                 return
-            ln = self.lengths0[self.layout.real] if self.layout.has_open else self.lengths0
-            start = float(ln.sum()) * self._scale
-            sched = self._check_growth(start, self._growth_rate, self._edge_lengths)
+            sched = self._check_growth(self.length, self._growth_rate, self._edge_lengths)
         sched.retarget(factor)
         self.growth_schedule = sched
         self.length_factor = float(factor)
