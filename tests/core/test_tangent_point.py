@@ -145,33 +145,40 @@ def test_energy_gradient_sums_the_pairs_once(monkeypatch):
         core.energy(P, engine="tree")
 
 
+# relative errors allowed (energy, gradient in the 2-norm) on the trefoil below, by θ: for α = 2
+# the far field of second order on both sides (measured at 0.1 / the default 0.4 / 0.5:
+# 1.2e-7 / 1.5e-5 / 6.6e-6 and 4.9e-6 / 3.7e-4 / 6.6e-4 with β = 4), for α = 2.5 edge against
+# cluster (3.5e-5 / 2.7e-4 / 4.6e-4 and 1.0e-5 / 5.5e-4 / 9.9e-4)
+TOLERANCES = {2.0: {0.1: (1e-6, 2e-5), THETA: (1e-4, 2e-3), 0.5: (1e-4, 4e-3)},
+              2.5: {0.1: (3e-4, 1e-3), THETA: (1e-3, 2e-3), 0.5: (5e-3, 1e-2)}}
+
+
 @pytest.mark.parametrize("alpha, beta", [(2.0, 4.0), (2.5, 5.0)])
 def test_tree_against_exact(alpha, beta):
-    # the tolerances documented in docs/lab/tangent-point.md ("Tangent-point energy: cluster against
-    # cluster"): at the default theta (0.25) relative errors below 1e-3 (energy) and 2e-3
-    # (gradient, 2-norm) on this trefoil; at 0.1 below 3e-4 and 1e-3, at 0.5 5e-3 and 1e-2;
-    # smaller theta, smaller error. alpha = 2 is the cluster-cluster far field, 2.5 the
-    # edge-vs-cluster one
+    # smaller theta, smaller error (docs/lab/tangent-point.md)
     P = trefoil(1200) + 0.002 * np.random.default_rng(4).standard_normal((1200, 3))
     X, lay = as_layout(P)
     e, g = tp_energy_gradient_x(X, lay, alpha, beta)
     errs = []
-    for theta in (0.1, THETA, 0.5):
+    for theta, (te, tg) in TOLERANCES[alpha].items():
         frame = TangentPointFrame(X, lay, alpha, beta, theta)
         et, gt = frame.energy_gradient(X)
-        assert frame.energy(X) == et
+        # the energy alone and the gradient's pass compile apart (fused multiply-adds where
+        # each finds them): equal within rounding, not always to the bit (nor were they
+        # before the far field's second order, on other curves)
+        assert frame.energy(X) == pytest.approx(et, rel=1e-14)
         assert frame.far_pairs > 0
         eg = np.linalg.norm(gt - g) / np.linalg.norm(g)
         errs.append(eg)
-        assert abs(et - e) <= {0.1: 3e-4, THETA: 1e-3, 0.5: 5e-3}[theta] * e, theta
-        assert eg <= {0.1: 1e-3, THETA: 2e-3, 0.5: 1e-2}[theta], theta
+        assert abs(et - e) <= te * e, theta
+        assert eg <= tg, theta
     assert errs[0] < errs[1] < errs[2]
     assert core.energy(P, energy="tangent_point", alpha=alpha, beta=beta, engine="tree") == (
         TangentPointFrame(X, lay, alpha, beta).energy(X))
     # a chain of three rings (bench/tree_bench.py's link3): far pairs between components too.
     # Round rings are nearly critical: the gradient is a small sum of large terms (a single
-    # round ring's is 0), and the far field's error relative to it is large (measured: 11.7 %
-    # at the default theta with alpha = 2, 1.0 % at 0.1)
+    # round ring's is 0), and the far field's error relative to it is large (measured at the
+    # default theta: 15 % for (2, 4), 8.1 % for (2.5, 5); 0.26 % and 0.73 % at 0.1)
     s = np.linspace(0, 2 * np.pi, 400, endpoint=False)
     ring = np.stack([np.cos(s), np.sin(s), 0 * s], axis=1)
     link = [ring, ring[:, [0, 2, 1]] + np.array([1.2, 0.0, 0.0]), ring + np.array([2.4, 0, 0])]
@@ -179,10 +186,50 @@ def test_tree_against_exact(alpha, beta):
     e, g = tp_energy_gradient_x(X, lay, alpha, beta)
     et, gt = TangentPointFrame(X, lay, alpha, beta).energy_gradient(X)
     assert abs(et - e) <= 2e-3 * e
-    assert np.linalg.norm(gt - g) <= 0.15 * np.linalg.norm(g)
+    assert np.linalg.norm(gt - g) <= 0.25 * np.linalg.norm(g)
     et, gt = TangentPointFrame(X, lay, alpha, beta, 0.1).energy_gradient(X)
     assert abs(et - e) <= 3e-4 * e
     assert np.linalg.norm(gt - g) <= 2e-2 * np.linalg.norm(g)
+
+
+def _varied_curves(n):
+    """``(name, parts, closed)`` of about ``n`` edges each: knots of the table (one of ten
+    crossings), the FHW unknot, a chain of three round rings, one round ring (nearly critical:
+    every cluster curved alike), ten open cables and a trefoil with noise."""
+    rng = np.random.default_rng(20261203)
+    out = [(k, core.resample(core.knots.named(k), n), True) for k in ("3_1", "7_2", "10_132")]
+    out.append(("fhw", core.knots.freedman_unknot(n), True))
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    ring = np.c_[np.cos(t), np.sin(t), 0 * t]
+    out.append(("three rings", core.resample([ring, ring[:, [0, 2, 1]] + [1.2, 0, 0],
+                                              ring + [2.4, 0, 0]], [n // 3] * 3), True))
+    out.append(("round ring", core.resample(ring, n), True))
+    s = np.linspace(0, 1, 50)
+    cables = [np.c_[0.1 * (c % 4) + rng.uniform(-0.02, 0.02) * np.sin(np.pi * s),
+                    0.1 * (c // 4) + rng.uniform(-0.02, 0.02) * np.sin(2 * np.pi * s), s]
+              for c in range(10)]
+    out.append(("ten cables", core.resample(cables, [n // 10 + 1] * 10, closed=False), False))
+    P = core.resample(core.knots.named("3_1"), n)
+    h = float(np.linalg.norm(P[1] - P[0]))
+    out.append(("noisy trefoil", P + 0.1 * h * rng.standard_normal(P.shape), True))
+    return out
+
+
+def test_default_theta_error_over_varied_curves():
+    # the bound docs/api.md gives at the default theta and (alpha, beta): the energy within
+    # 1e-3 of the exact sum on any curve, the gradient within 2e-2 (2-norm). Measured here at
+    # 2 000 edges: energy at most 3.1e-4 (the round ring), gradient at most 1.3e-2 (the three
+    # rings); the first-order far field it replaced, at this theta: 1.8e-2 and 3.0e-2.
+    # bench/tp_accuracy.py at 5 000 and 20 000 edges: 3.3e-4 / 7.5e-3 and 2.5e-4 / 7.6e-3 at
+    # most (docs/lab/tangent-point.md, "Second order on both sides")
+    worst = {}
+    for name, P, closed in _varied_curves(2000):
+        X, lay = as_layout(P, closed)
+        e, g = tp_energy_gradient_x(X, lay)
+        et, gt = TangentPointFrame(X, lay).energy_gradient(X)
+        worst[name] = (abs(et - e) / e, np.linalg.norm(gt - g) / np.linalg.norm(g))
+    assert max(v[0] for v in worst.values()) <= 1e-3, worst
+    assert max(v[1] for v in worst.values()) <= 2e-2, worst
 
 
 @pytest.mark.parametrize("leaf_size", [3, 9])

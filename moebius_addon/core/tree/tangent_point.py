@@ -10,26 +10,27 @@ the same hierarchy, the same dual traversal, the same near and far lists), and s
 * **far pairs** ``(A, B)`` (clusters apart, ``max(diam) ≤ θ · gap``), for ``α = 2``: **cluster
   against cluster**, one kernel per ordered pair of clusters (O(N) kernels). With ``α = 2``,
   ``f_IJ = l_I l_J dᵀ P_I d / |d|^β`` (``P_I = 1 − T_I T_Iᵀ``), so ``A`` enters through its
-  projector moments ``G = Σ e eᵀ/l`` and ``W = Σ (e eᵀ/l) ⊗ δ`` (``δ = m − c_A``), ``B`` through
-  ``L_B``, ``c_B``; the pair sum is expanded to first order on both sides around ``d = c_A −
-  c_B`` (B's first order vanishes), error second order in ``diam / |d|`` on both sides (the
-  formula in the block comment above :func:`_cc_node`).
+  moments ``G = Σ e eᵀ/l``, ``W = Σ (e eᵀ/l) ⊗ δ``, ``V = Σ (e eᵀ/l) ⊗ δ ⊗ δ`` and ``S = Σ l δ
+  δᵀ`` (``δ = m − c_A``), ``B`` through ``L_B``, ``c_B`` and ``S_B``; the pair sum is
+  expanded to second order on both sides around ``d = c_A − c_B``, error third order in
+  ``diam / |d|`` (the formula in the block comment above :func:`_cc_node`).
 * far pairs for other ``α`` (``|T × d|^α`` is no polynomial in ``T``, no moments make it
   separable): every *edge* ``I`` of ``A`` against ``B`` as one point, the pair kernel with
   ``l_J = L_B`` and ``m_J = c_B`` (the monopole of ``B``, its first order vanishes; the
   target side exact), one kernel per edge of ``A``, O(N log N).
 
 Errors and times of both measured in docs/lab/tangent-point.md ("Tangent-point energy: cluster
-against cluster").
+against cluster", "Second order on both sides").
 
 The gradient is the exact derivative of this approximated sum for the fixed split: the far
 field's derivatives in the clusters' moments go to their edges by the chain rule
-(``∂L/∂l_J = 1``, ``∂c/∂m_J = l_J/L``, ``∂c/∂l_J = (m_J − c)/L``, ``G`` and ``W`` through
-``e eᵀ/l`` and ``δ``, ``∂W_abk/∂c_k = −G_ab``): for ``α = 2`` summed down the tree once
-(:func:`_cc_push`), for other ``α`` each edge walking up its ancestors. Every edge's and
-every target cluster's own sums are sequential; what a pair gives its second edge or source
-cluster goes to rows of the same fixed piece of the leaves or to fixed buffers per piece,
-added in a fixed order: the same bits for every thread count.
+(``∂L/∂l_J = 1``, ``∂c/∂m_J = l_J/L``, ``∂c/∂l_J = (m_J − c)/L``, ``G``, ``W``, ``V`` through
+``e eᵀ/l`` and ``δ``, ``S`` through ``l δ δᵀ``, ``∂W_abk/∂c_k = −G_ab``, ``∂V/∂c`` through
+``W``): for ``α = 2`` summed down the tree once (:func:`_cc_push`), for other ``α`` each edge
+walking up its ancestors. Every edge's and every target cluster's own sums are sequential;
+what a pair gives its second edge or source cluster goes to rows of the same fixed piece of
+the leaves or to fixed buffers per piece, added in a fixed order: the same bits for every
+thread count.
 """
 
 from __future__ import annotations
@@ -479,124 +480,213 @@ def _far_sources(M, ln, L, C, lo, hi, leaves, parent, gnode, rows):
 # the cluster–cluster far field (α = 2)
 #
 # For α = 2, f_IJ = l_I l_J dᵀ P_I d / |d|^β with P_I = 1 − T_I T_Iᵀ, so a cluster's edges enter
-# a far pair through projector moments. Per node: L and c (as the Möbius tree), G = Σ e eᵀ/l
-# (Σ l P = L·1 − G) and the first projector moment W = Σ (e eᵀ/l) ⊗ δ (δ = m − c). A far pair
-# (A, B) is Σ_IJ l_I l_J φ_I(d + δ_I − δ_J), d = c_A − c_B, expanded to first order on both
-# sides; B's first order vanishes (Σ l δ = 0), A's is −W (Σ l P ⊗ δ = −W):
+# a far pair through moments. Per node: L and c (as the Möbius tree), G = Σ e eᵀ/l (Σ l P =
+# L·1 − G), W = Σ (e eᵀ/l) ⊗ δ, S = Σ l δ δᵀ and V = Σ (e eᵀ/l) ⊗ δ ⊗ δ (δ = m − c). A far
+# pair (A, B) is Σ_IJ l_I l_J φ_I(d + δ_I − δ_J), d = c_A − c_B, φ_I(x) = xᵀ P_I x |x|^−β,
+# expanded to second order on both sides. The first orders: B's vanishes (Σ l δ = 0), A's is
+# −W; the mixed second order vanishes too. With ρ = |d|^−β, ρ₂ = ρ/|d|², ρ₄ = ρ₂/|d|²:
 #
-#   F(A, B) = L_B [L_A |d|^(2−β) − |d|^−β dᵀG_A d − 2 |d|^−β <v_A, d> + β |d|^(−β−2) W_A(d, d, d)]
+#   F = L_B [L_A |d|² ρ − ρ dᵀG_A d − 2ρ <v_A, d> + β ρ₂ W_A(d, d, d)]           (orders 0, 1)
+#     + ½ L_B [κ_A ρ + ρ₂ dᵀR_A d − β(β+2) ρ₄ V_A(d, d, d, d)]                  (A's order 2)
+#     + ρ Q_A:S_B − ½β ρ₂ [4 dᵀQ_A S_B d + tr S_B dᵀQ_A d] + ½β(β+2) ρ₄ dᵀQ_A d dᵀS_B d
+#                                                                                (B's order 2)
 #
-# with v_a = Σ_b W_abb: one kernel per pair of clusters (O(N) kernels, not one per edge and
-# cluster), error of second order in diam / |d| on both sides (docs/lab/tangent-point.md,
-# "Tangent-point energy: cluster against cluster").
+# with v_a = Σ_b W_abb, Q_A = L_A·1 − G_A, κ = (2 − β) tr S − 2 Σ_ab V_abab and R = β(β − 2) S +
+# β (2 (N + Nᵀ) + K), N_bl = Σ_a V_abal, K_ab = Σ_k V_abkk (:func:`_cc_coeffs`): one kernel per
+# pair of clusters (O(N) kernels), error of third order in diam / |d| (the first order's terms
+# of order two came to 1e-3–7e-3 of the energy at θ 0.25, the second order's are 1e-4 at most;
+# docs/lab/tangent-point.md, "Second order on both sides").
+
+# the pairs ab of a symmetric index pair, in the order 00, 01, 02, 11, 12, 22, and back
+_PA = np.array([0, 0, 0, 1, 1, 2])
+_PB = np.array([0, 1, 2, 1, 2, 2])
+_PI = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+# the fifteen monomials of degree four in d, x⁴, x³y, x³z, x²y², x²yz, x²z², xy³, xy²z, xyz²,
+# xz³, y⁴, y³z, y²z², yz³, z⁴: the one of each index quadruple
+_MONO = np.zeros((3, 3, 3, 3), np.int64)
+for _i, _e in enumerate([(4, 0, 0), (3, 1, 0), (3, 0, 1), (2, 2, 0), (2, 1, 1), (2, 0, 2),
+                         (1, 3, 0), (1, 2, 1), (1, 1, 2), (1, 0, 3), (0, 4, 0), (0, 3, 1),
+                         (0, 2, 2), (0, 1, 3), (0, 0, 4)]):
+    for _q in np.ndindex(3, 3, 3, 3):
+        if tuple(sum(1 for t in _q if t == k) for k in range(3)) == _e:
+            _MONO[_q] = _i
+del _i, _e, _q
+# the entries of V that make N_ij + N_ji (N_bl = Σ_a V_abal), per pair ij; the monomial of each
+# entry (ab, kl) of V and how many index quadruples it stands for
+_N_AT = np.array([[6 * _PI[a, i] + _PI[a, j] for a in range(3)]
+                  + [6 * _PI[a, j] + _PI[a, i] for a in range(3)]
+                  for i, j in zip(_PA, _PB)])
+_Q_AT = np.array([_MONO[_PA[p], _PB[p], _PA[s], _PB[s]] for p in range(6) for s in range(6)])
+_Q_W = np.array([(1.0 if _PA[p] == _PB[p] else 2.0) * (1.0 if _PA[s] == _PB[s] else 2.0)
+                 for p in range(6) for s in range(6)])
 
 
 @nb.njit(cache=True, inline="always")
-def _cc_node(node, E, M, ln, lo, hi, left, right, C, G, Wm):
-    """``G`` and ``W`` of one node about its centre ``C[node]``, both symmetric in ``a, b``
-    and stored by the pair ``ab`` (:data:`_SYM_W`): ``G`` six entries, ``W`` eighteen (index
-    3 ab + c). A leaf from its edges, a parent from its children's moved to its centre
-    (``W = W_l + W_r + G_l ⊗ (c_l − c) + G_r ⊗ (c_r − c)``), each entry written once."""
+def _cc_shift(node, ch, L, C, G, Wm, Sm, V):
+    """Child ``ch``'s ``G``, ``W``, ``S``, ``V`` moved to the centre of ``node`` (``u = c_ch −
+    c``: ``W += G ⊗ u``, ``S += L u uᵀ``, ``V += W ⊗ u + u ⊗ W + G ⊗ u ⊗ u``), added to its
+    rows."""
+    u0 = C[ch, 0] - C[node, 0]
+    u1 = C[ch, 1] - C[node, 1]
+    u2 = C[ch, 2] - C[node, 2]
+    uu0, uu1, uu2, uu3, uu4, uu5 = u0 * u0, u0 * u1, u0 * u2, u1 * u1, u1 * u2, u2 * u2
+    lc = L[ch]
+    Sm[node, 0] += lc * uu0
+    Sm[node, 1] += lc * uu1
+    Sm[node, 2] += lc * uu2
+    Sm[node, 3] += lc * uu3
+    Sm[node, 4] += lc * uu4
+    Sm[node, 5] += lc * uu5
+    for p in range(6):
+        g = G[ch, p]
+        w0, w1, w2 = Wm[ch, 3 * p], Wm[ch, 3 * p + 1], Wm[ch, 3 * p + 2]
+        Wm[node, 3 * p] += g * u0
+        Wm[node, 3 * p + 1] += g * u1
+        Wm[node, 3 * p + 2] += g * u2
+        k = 6 * p
+        V[node, k] += 2.0 * w0 * u0 + g * uu0
+        V[node, k + 1] += w0 * u1 + w1 * u0 + g * uu1
+        V[node, k + 2] += w0 * u2 + w2 * u0 + g * uu2
+        V[node, k + 3] += 2.0 * w1 * u1 + g * uu3
+        V[node, k + 4] += w1 * u2 + w2 * u1 + g * uu4
+        V[node, k + 5] += 2.0 * w2 * u2 + g * uu5
+
+
+@nb.njit(cache=True, inline="always")
+def _cc_node(node, E, M, ln, lo, hi, left, right, L, C, G, Wm, Sm, V):
+    """``G``, ``W``, ``S`` and ``V`` of one node about its centre ``C[node]``, symmetric in
+    their index pairs and stored by the pair (:data:`_SYM_W`): ``G`` and ``S`` six entries,
+    ``W`` eighteen (index 3 ab + c), ``V`` 36 (index 6 ab + kl). A leaf from its edges (one
+    pair ab at a time, its sums in registers), a parent from its children's moved to its
+    centre (:func:`_cc_shift`), each entry written once before it is added to."""
+    c0, c1, c2 = C[node, 0], C[node, 1], C[node, 2]
     if left[node] < 0:
-        c0, c1, c2 = C[node, 0], C[node, 1], C[node, 2]
-        g00 = g01 = g02 = g11 = g12 = g22 = 0.0
-        w000 = w001 = w002 = w010 = w011 = w012 = w020 = w021 = w022 = 0.0
-        w110 = w111 = w112 = w120 = w121 = w122 = w220 = w221 = w222 = 0.0
+        s0 = s1 = s2 = s3 = s4 = s5 = 0.0
         for q in range(lo[node], hi[node]):
-            il = 1.0 / ln[q]
-            e0, e1, e2 = E[q, 0], E[q, 1], E[q, 2]
+            lq = ln[q]
             d0, d1, d2 = M[q, 0] - c0, M[q, 1] - c1, M[q, 2] - c2
-            f0, f1, f2 = e0 * il, e1 * il, e2 * il
-            t00, t01, t02, t11, t12, t22 = e0 * f0, e0 * f1, e0 * f2, e1 * f1, e1 * f2, e2 * f2
-            g00 += t00
-            g01 += t01
-            g02 += t02
-            g11 += t11
-            g12 += t12
-            g22 += t22
-            w000 += t00 * d0
-            w001 += t00 * d1
-            w002 += t00 * d2
-            w010 += t01 * d0
-            w011 += t01 * d1
-            w012 += t01 * d2
-            w020 += t02 * d0
-            w021 += t02 * d1
-            w022 += t02 * d2
-            w110 += t11 * d0
-            w111 += t11 * d1
-            w112 += t11 * d2
-            w120 += t12 * d0
-            w121 += t12 * d1
-            w122 += t12 * d2
-            w220 += t22 * d0
-            w221 += t22 * d1
-            w222 += t22 * d2
-        G[node, 0], G[node, 1], G[node, 2] = g00, g01, g02
-        G[node, 3], G[node, 4], G[node, 5] = g11, g12, g22
-        Wm[node, 0], Wm[node, 1], Wm[node, 2] = w000, w001, w002
-        Wm[node, 3], Wm[node, 4], Wm[node, 5] = w010, w011, w012
-        Wm[node, 6], Wm[node, 7], Wm[node, 8] = w020, w021, w022
-        Wm[node, 9], Wm[node, 10], Wm[node, 11] = w110, w111, w112
-        Wm[node, 12], Wm[node, 13], Wm[node, 14] = w120, w121, w122
-        Wm[node, 15], Wm[node, 16], Wm[node, 17] = w220, w221, w222
+            s0 += lq * d0 * d0
+            s1 += lq * d0 * d1
+            s2 += lq * d0 * d2
+            s3 += lq * d1 * d1
+            s4 += lq * d1 * d2
+            s5 += lq * d2 * d2
+        Sm[node, 0], Sm[node, 1], Sm[node, 2] = s0, s1, s2
+        Sm[node, 3], Sm[node, 4], Sm[node, 5] = s3, s4, s5
+        for p in range(6):
+            i, j = _PA[p], _PB[p]
+            g = w0 = w1 = w2 = v0 = v1 = v2 = v3 = v4 = v5 = 0.0
+            for q in range(lo[node], hi[node]):
+                t = E[q, i] * (E[q, j] * (1.0 / ln[q]))
+                d0, d1, d2 = M[q, 0] - c0, M[q, 1] - c1, M[q, 2] - c2
+                t0, t1, t2 = t * d0, t * d1, t * d2
+                g += t
+                w0 += t0
+                w1 += t1
+                w2 += t2
+                v0 += t0 * d0
+                v1 += t0 * d1
+                v2 += t0 * d2
+                v3 += t1 * d1
+                v4 += t1 * d2
+                v5 += t2 * d2
+            G[node, p] = g
+            Wm[node, 3 * p], Wm[node, 3 * p + 1], Wm[node, 3 * p + 2] = w0, w1, w2
+            k = 6 * p
+            V[node, k], V[node, k + 1], V[node, k + 2] = v0, v1, v2
+            V[node, k + 3], V[node, k + 4], V[node, k + 5] = v3, v4, v5
     else:
         a0, b0 = left[node], right[node]
-        u0, u1, u2 = C[a0, 0] - C[node, 0], C[a0, 1] - C[node, 1], C[a0, 2] - C[node, 2]
-        v0, v1, v2 = C[b0, 0] - C[node, 0], C[b0, 1] - C[node, 1], C[b0, 2] - C[node, 2]
-        for k in range(6):
-            ga = G[a0, k]
-            gb = G[b0, k]
-            G[node, k] = ga + gb
-            Wm[node, 3 * k] = Wm[a0, 3 * k] + Wm[b0, 3 * k] + ga * u0 + gb * v0
-            Wm[node, 3 * k + 1] = Wm[a0, 3 * k + 1] + Wm[b0, 3 * k + 1] + ga * u1 + gb * v1
-            Wm[node, 3 * k + 2] = Wm[a0, 3 * k + 2] + Wm[b0, 3 * k + 2] + ga * u2 + gb * v2
+        for s in range(6):
+            G[node, s] = G[a0, s] + G[b0, s]
+            Sm[node, s] = Sm[a0, s] + Sm[b0, s]
+        for k in range(18):
+            Wm[node, k] = Wm[a0, k] + Wm[b0, k]
+        for k in range(36):
+            V[node, k] = V[a0, k] + V[b0, k]
+        _cc_shift(node, a0, L, C, G, Wm, Sm, V)
+        _cc_shift(node, b0, L, C, G, Wm, Sm, V)
 
 
 @nb.njit(cache=True, parallel=True, fastmath={"contract"})
-def _cc_moments(E, M, ln, lo, hi, left, right, C):
-    """Per node ``G`` and ``W`` (:func:`_cc_node`), bottom-up one depth at a time (each node
-    writes its own row)."""
+def _cc_moments(E, M, ln, lo, hi, left, right, L, C):
+    """Per node ``G``, ``W``, ``S`` and ``V`` (:func:`_cc_node`), bottom-up one depth at a
+    time (each node writes its own row)."""
     m = lo.shape[0]
     G = np.empty((m, 6))
     Wm = np.empty((m, 18))
+    Sm = np.empty((m, 6))
+    V = np.empty((m, 36))
     order, offsets = _levels(left, right)
     for d in range(offsets.shape[0] - 2, -1, -1):
         if offsets[d + 1] - offsets[d] >= 256:
             for t in nb.prange(offsets[d], offsets[d + 1]):
-                _cc_node(order[t], E, M, ln, lo, hi, left, right, C, G, Wm)
+                _cc_node(order[t], E, M, ln, lo, hi, left, right, L, C, G, Wm, Sm, V)
         else:
             for t in range(offsets[d], offsets[d + 1]):
-                _cc_node(order[t], E, M, ln, lo, hi, left, right, C, G, Wm)
-    return G, Wm
+                _cc_node(order[t], E, M, ln, lo, hi, left, right, L, C, G, Wm, Sm, V)
+    return G, Wm, Sm, V
+
+
+@nb.njit(cache=True, parallel=True)
+def _cc_coeffs(Sm, V, beta):
+    """Per node what its second order as a target needs (the formula above): ``κ``, ``R``
+    (six, by the pair) and the fifteen coefficients of ``V(d, d, d, d)`` (:data:`_MONO`), by
+    the tables :data:`_N_AT`, :data:`_Q_AT` and :data:`_Q_W`."""
+    m = Sm.shape[0]
+    T = np.empty((m, 22))
+    b2 = beta * (beta - 2.0)
+    for nn in nb.prange(m):
+        n = np.int64(nn)
+        tr1 = V[n, 0] + V[n, 21] + V[n, 35] + 2.0 * (V[n, 7] + V[n, 14] + V[n, 28])
+        T[n, 0] = (2.0 - beta) * (Sm[n, 0] + Sm[n, 3] + Sm[n, 5]) - 2.0 * tr1
+        for s in range(6):
+            nij = 0.0
+            for t in range(6):
+                nij += V[n, _N_AT[s, t]]
+            kij = V[n, 6 * s] + V[n, 6 * s + 3] + V[n, 6 * s + 5]
+            T[n, 1 + s] = b2 * Sm[n, s] + beta * (2.0 * nij + kij)
+        for k in range(15):
+            T[n, 7 + k] = 0.0
+        for f in range(36):
+            T[n, 7 + _Q_AT[f]] += _Q_W[f] * V[n, f]
+    return T
 
 
 # The cluster–cluster far field's lanes (the idea of ``_near_field``): up to this many partners
 # of one target at a time. One work array per parallel piece: lane j's partner at W[_CL k + j]
-# (k: L, c), its sums at W[_CW_SUMS + _CL k + j] (energy; ∂/∂L_A, ∂/∂c_A; −2 L ρ d; −L ρ d dᵀ,
-# six; β L ρ₂ d ⊗ d ⊗ d, ten) and what the pair gives the partner at W[_CW_OUT + _CL k + j]
-# (∂/∂L_B, ∂/∂c_B), added over the lanes in lane order. Lanes past the last partner repeat it
-# with L = 0: every term is a multiple of L_B.
+# (k: L, c; |d|^−β at _CW_RHO; S, six, at _CW_S; 1 / |d|² at _CW_INV), its sums at W[_CW_SUMS + _CL k + j] (energy;
+# ∂/∂L_A, ∂/∂c_A; −2 L ρ d; ∂/∂G_A, six; β L ρ₂ d ⊗ d ⊗ d, ten; L ρ; L ρ₂ d dᵀ, six; L ρ₄ d⁴,
+# fifteen) and what the pair gives the partner at W[_CW_OUT + _CL k + j] (∂/∂L_B, ∂/∂c_B,
+# ∂/∂S_B), added over the lanes in lane order. Lanes past the last partner repeat it with L = 0
+# and S = 0: every term is a multiple of one of them.
 _CL = 4
 _CW_RHO = 4 * _CL
-_CW_SUMS = 5 * _CL
-_CW_OUT = 29 * _CL
-_CW_SIZE = 33 * _CL
-# G, W and their derivatives are symmetric in their first two indices (Σ e eᵀ/l): stored by
-# the pair ab in the order 00, 01, 02, 11, 12, 22 (six of nine entries, 18 of 27: the far
-# field's per-node arrays a third smaller); a sum over a, b takes the pairs off the diagonal
-# twice (_SYM_W)
+_CW_S = 5 * _CL
+_CW_INV = 11 * _CL
+_CW_SUMS = 12 * _CL
+_NSUMS = 46
+_CW_OUT = _CW_SUMS + _NSUMS * _CL
+_NOUT = 10
+_CW_SIZE = _CW_OUT + _NOUT * _CL
+# G, W, S, V and their derivatives are symmetric in their index pairs: stored by the pair ab
+# in the order 00, 01, 02, 11, 12, 22 (six of nine entries, 18 of 27, 36 of 81); a sum over
+# a, b takes the pairs off the diagonal twice (_SYM_W). The derivatives are those in the full
+# tensor's entries (∂/∂G_ab = ∂/∂G_ba), so the sums over full indices use _SYM_W too.
 _SYM_W = np.array([1.0, 2.0, 2.0, 1.0, 2.0, 1.0])
 
 
 @nb.njit(cache=True, inline="always")
 def _cc_radial_k(W, cax, cay, caz, beta, kind, lanes):
-    """Per lane ``|d|^−β`` (:func:`.energies.tangent_point.radial`) to ``W[_CW_RHO + j]``."""
+    """Per lane ``|d|^−β`` and ``1 / |d|²`` (:func:`.energies.tangent_point.radial`) to
+    ``W[_CW_RHO + j]`` and ``W[_CW_INV + j]``."""
     for j in range(lanes):
         dx = cax - W[_CL + j]
         dy = cay - W[2 * _CL + j]
         dz = caz - W[3 * _CL + j]
-        W[_CW_RHO + j] = radial(dx * dx + dy * dy + dz * dz, beta, kind)[1]
+        inv, rb = radial(dx * dx + dy * dy + dz * dz, beta, kind)
+        W[_CW_RHO + j] = rb
+        W[_CW_INV + j] = inv
 
 
 @nb.njit(cache=True, inline="always")
@@ -646,9 +736,10 @@ def _cc_slots(foff, fpart, m, nchunks):
     return fslot, soff, sidx
 
 
+
 @nb.njit(cache=True, error_model="numpy", inline="always")
-def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, eF, gt,
-               gG, gW, lanes):
+def _cc_target(a, W, S, L, C, G, Wm, Sm, T2, foff, fpart, beta, kind, grad, gs, fslot, eF, gt,
+               gG, gW, gS, gD, lanes):
     """Target ``a`` against its far partners, by lanes (see above); ``S`` scratch for the
     lanes' sums; ``gs[fslot[p]]`` the source row of pair ``p`` (:func:`_cc_slots`). Rows are
     indexed in place, not taken as views: a view per partner counted its reference up and
@@ -666,6 +757,14 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, e
     v0 = a000 + a011 + a022
     v1 = a010 + a111 + a122
     v2 = a020 + a121 + a222
+    kap = T2[a, 0]
+    r00, r01, r02, r11, r12, r22 = T2[a, 1], T2[a, 2], T2[a, 3], T2[a, 4], T2[a, 5], T2[a, 6]
+    q0, q1, q2, q3, q4 = T2[a, 7], T2[a, 8], T2[a, 9], T2[a, 10], T2[a, 11]
+    q5, q6, q7, q8, q9 = T2[a, 12], T2[a, 13], T2[a, 14], T2[a, 15], T2[a, 16]
+    q10, q11, q12, q13, q14 = T2[a, 17], T2[a, 18], T2[a, 19], T2[a, 20], T2[a, 21]
+    b2 = beta + 2.0
+    b4 = beta + 4.0
+    bb2 = beta * b2
     W[_CW_SUMS:_CW_OUT] = 0.0
     p1 = foff[a + 1]
     for p0 in range(foff[a], p1, _CL):
@@ -676,6 +775,8 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, e
             W[_CL + j] = C[b, 0]
             W[2 * _CL + j] = C[b, 1]
             W[3 * _CL + j] = C[b, 2]
+            for k in range(6):
+                W[_CW_S + k * _CL + j] = Sm[b, k] if j < cnt else 0.0
         _cc_radial(W, cax, cay, caz, beta, kind, lanes)
         # a run-time count for the energy alone (as the near field's: a constant was unrolled)
         for j in range(_CL if grad else lanes):
@@ -683,9 +784,13 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, e
             dx = cax - W[_CL + j]
             dy = cay - W[2 * _CL + j]
             dz = caz - W[3 * _CL + j]
+            s00, s01, s02 = W[_CW_S + j], W[_CW_S + _CL + j], W[_CW_S + 2 * _CL + j]
+            s11, s12, s22 = W[_CW_S + 3 * _CL + j], W[_CW_S + 4 * _CL + j], W[_CW_S + 5 * _CL + j]
             r2 = dx * dx + dy * dy + dz * dz
             rho = W[_CW_RHO + j]
-            rho2 = rho / r2
+            inv = W[_CW_INV + j]
+            rho2 = rho * inv
+            rho4 = rho2 * inv
             gdx = g00 * dx + g01 * dy + g02 * dz
             gdy = g01 * dx + g11 * dy + g12 * dz
             gdz = g02 * dx + g12 * dy + g22 * dz
@@ -703,45 +808,101 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, e
             w2 = d02 * dx + d12 * dy + d22 * dz
             s = w0 * dx + w1 * dy + w2 * dz
             inner = la * r2 * rho - rho * dgd - 2.0 * rho * vd + beta * rho2 * s
-            W[_CW_SUMS + j] += lb * inner
+            # A's second order: R d, and V(d, d, d, d) by its gradient (the cubic monomials)
+            rx0 = r00 * dx + r01 * dy + r02 * dz
+            rx1 = r01 * dx + r11 * dy + r12 * dz
+            rx2 = r02 * dx + r12 * dy + r22 * dz
+            xrx = dx * rx0 + dy * rx1 + dz * rx2
+            xx = dx * dx
+            yy = dy * dy
+            zz = dz * dz
+            m0, m1, m2, m3, m4 = xx * dx, xx * dy, xx * dz, dx * yy, dx * dy * dz
+            m5, m6, m7, m8, m9 = dx * zz, yy * dy, yy * dz, dy * zz, zz * dz
+            gv0 = (4.0 * q0 * m0 + 3.0 * q1 * m1 + 3.0 * q2 * m2 + 2.0 * q3 * m3 + 2.0 * q4 * m4
+                   + 2.0 * q5 * m5 + q6 * m6 + q7 * m7 + q8 * m8 + q9 * m9)
+            gv1 = (q1 * m0 + 2.0 * q3 * m1 + q4 * m2 + 3.0 * q6 * m3 + 2.0 * q7 * m4 + q8 * m5
+                   + 4.0 * q10 * m6 + 3.0 * q11 * m7 + 2.0 * q12 * m8 + q13 * m9)
+            gv2 = (q2 * m0 + q4 * m1 + 2.0 * q5 * m2 + q7 * m3 + 2.0 * q8 * m4 + 3.0 * q9 * m5
+                   + q11 * m6 + 2.0 * q12 * m7 + 3.0 * q13 * m8 + 4.0 * q14 * m9)
+            v4 = 0.25 * (dx * gv0 + dy * gv1 + dz * gv2)
+            a2 = 0.5 * (rho * kap + rho2 * xrx - bb2 * rho4 * v4)
+            # B's second order: S_B d, Q_A = L_A·1 − G_A
+            sx0 = s00 * dx + s01 * dy + s02 * dz
+            sx1 = s01 * dx + s11 * dy + s12 * dz
+            sx2 = s02 * dx + s12 * dy + s22 * dz
+            xsx = dx * sx0 + dy * sx1 + dz * sx2
+            trs = s00 + s11 + s22
+            qs = la * trs - (g00 * s00 + g11 * s11 + g22 * s22
+                             + 2.0 * (g01 * s01 + g02 * s02 + g12 * s12))
+            qx = la * r2 - dgd
+            xqsx = la * xsx - (gdx * sx0 + gdy * sx1 + gdz * sx2)
+            f2b = rho * qs - 0.5 * beta * rho2 * (4.0 * xqsx + trs * qx) + 0.5 * bb2 * rho4 * qx * xsx
+            W[_CW_SUMS + j] += lb * (inner + a2) + f2b
             if grad:
                 # u_c = Σ_ab W_abc d_a d_b
-                xx = dx * dx
-                yy = dy * dy
-                zz = dz * dz
                 xy = 2.0 * dx * dy
                 xz = 2.0 * dx * dz
                 yz = 2.0 * dy * dz
                 u0 = a000 * xx + a110 * yy + a220 * zz + a010 * xy + a020 * xz + a120 * yz
                 u1 = a001 * xx + a111 * yy + a221 * zz + a011 * xy + a021 * xz + a121 * yz
                 u2 = a002 * xx + a112 * yy + a222 * zz + a012 * xy + a022 * xz + a122 * yz
-                # ∂/∂d of inner (docs: the derivation beside this kernel)
+                rho6 = rho4 * inv
+                # ∂/∂d of the orders 0 and 1, of A's second order and of B's
                 c1 = (la * rho * (2.0 - beta) + beta * rho2 * dgd + 2.0 * beta * rho2 * vd
-                      - beta * (beta + 2.0) * rho2 / r2 * s)
-                hx = lb * (c1 * dx - 2.0 * rho * gdx - 2.0 * rho * v0
-                           + beta * rho2 * (2.0 * w0 + u0))
-                hy = lb * (c1 * dy - 2.0 * rho * gdy - 2.0 * rho * v1
-                           + beta * rho2 * (2.0 * w1 + u1))
-                hz = lb * (c1 * dz - 2.0 * rho * gdz - 2.0 * rho * v2
-                           + beta * rho2 * (2.0 * w2 + u2))
+                      - beta * b2 * rho4 * s)
+                ca = 0.5 * (-beta * rho2 * kap - b2 * rho4 * xrx + bb2 * b4 * rho6 * v4)
+                qx0 = la * dx - gdx
+                qx1 = la * dy - gdy
+                qx2 = la * dz - gdz
+                cb = (-beta * rho2 * qs + 0.5 * beta * b2 * rho4 * (4.0 * xqsx + trs * qx)
+                      - 0.5 * bb2 * b4 * rho6 * qx * xsx)
+                # (Q S + S Q) d = 2 L_A S d − G S d − S G d
+                e0 = 2.0 * la * sx0 - (g00 * sx0 + g01 * sx1 + g02 * sx2) - (
+                    s00 * gdx + s01 * gdy + s02 * gdz)
+                e1 = 2.0 * la * sx1 - (g01 * sx0 + g11 * sx1 + g12 * sx2) - (
+                    s01 * gdx + s11 * gdy + s12 * gdz)
+                e2 = 2.0 * la * sx2 - (g02 * sx0 + g12 * sx1 + g22 * sx2) - (
+                    s02 * gdx + s12 * gdy + s22 * gdz)
+                kb = beta * rho2 * trs
+                kq = bb2 * rho4 * xsx
+                kr = bb2 * rho4 * qx
+                hx = (lb * (c1 * dx - 2.0 * rho * gdx - 2.0 * rho * v0 + beta * rho2 * (2.0 * w0 + u0)
+                            + ca * dx + rho2 * rx0 - 0.5 * bb2 * rho4 * gv0)
+                      + cb * dx - 2.0 * beta * rho2 * e0 - kb * qx0 + kq * qx0 + kr * sx0)
+                hy = (lb * (c1 * dy - 2.0 * rho * gdy - 2.0 * rho * v1 + beta * rho2 * (2.0 * w1 + u1)
+                            + ca * dy + rho2 * rx1 - 0.5 * bb2 * rho4 * gv1)
+                      + cb * dy - 2.0 * beta * rho2 * e1 - kb * qx1 + kq * qx1 + kr * sx1)
+                hz = (lb * (c1 * dz - 2.0 * rho * gdz - 2.0 * rho * v2 + beta * rho2 * (2.0 * w2 + u2)
+                            + ca * dz + rho2 * rx2 - 0.5 * bb2 * rho4 * gv2)
+                      + cb * dz - 2.0 * beta * rho2 * e2 - kb * qx2 + kq * qx2 + kr * sx2)
+                # ∂/∂Q_A of B's second order: ρ S_B − β ρ₂ (S_B d dᵀ + d dᵀ S_B) + ½ (β(β+2) ρ₄
+                # dᵀS_B d − β ρ₂ tr S_B) d dᵀ; its trace to ∂/∂L_A, minus it to ∂/∂G_A
+                br = beta * rho2
+                hq = 0.5 * (kq - kb)
+                dq00 = rho * s00 - 2.0 * br * sx0 * dx + hq * xx
+                dq01 = rho * s01 - br * (sx0 * dy + dx * sx1) + hq * dx * dy
+                dq02 = rho * s02 - br * (sx0 * dz + dx * sx2) + hq * dx * dz
+                dq11 = rho * s11 - 2.0 * br * sx1 * dy + hq * yy
+                dq12 = rho * s12 - br * (sx1 * dz + dy * sx2) + hq * dy * dz
+                dq22 = rho * s22 - 2.0 * br * sx2 * dz + hq * zz
                 k = -lb * rho
                 k3 = beta * lb * rho2
                 kx = k3 * xx
                 ky = k3 * yy
                 kz = k3 * zz
-                W[_CW_SUMS + _CL + j] += lb * r2 * rho
+                W[_CW_SUMS + _CL + j] += lb * r2 * rho + dq00 + dq11 + dq22
                 W[_CW_SUMS + 2 * _CL + j] += hx
                 W[_CW_SUMS + 3 * _CL + j] += hy
                 W[_CW_SUMS + 4 * _CL + j] += hz
                 W[_CW_SUMS + 5 * _CL + j] += 2.0 * k * dx
                 W[_CW_SUMS + 6 * _CL + j] += 2.0 * k * dy
                 W[_CW_SUMS + 7 * _CL + j] += 2.0 * k * dz
-                W[_CW_SUMS + 8 * _CL + j] += k * xx
-                W[_CW_SUMS + 9 * _CL + j] += k * dx * dy
-                W[_CW_SUMS + 10 * _CL + j] += k * dx * dz
-                W[_CW_SUMS + 11 * _CL + j] += k * yy
-                W[_CW_SUMS + 12 * _CL + j] += k * dy * dz
-                W[_CW_SUMS + 13 * _CL + j] += k * zz
+                W[_CW_SUMS + 8 * _CL + j] += k * xx - dq00
+                W[_CW_SUMS + 9 * _CL + j] += k * dx * dy - dq01
+                W[_CW_SUMS + 10 * _CL + j] += k * dx * dz - dq02
+                W[_CW_SUMS + 11 * _CL + j] += k * yy - dq11
+                W[_CW_SUMS + 12 * _CL + j] += k * dy * dz - dq12
+                W[_CW_SUMS + 13 * _CL + j] += k * zz - dq22
                 W[_CW_SUMS + 14 * _CL + j] += kx * dx
                 W[_CW_SUMS + 15 * _CL + j] += kx * dy
                 W[_CW_SUMS + 16 * _CL + j] += kx * dz
@@ -752,10 +913,45 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, e
                 W[_CW_SUMS + 21 * _CL + j] += ky * dz
                 W[_CW_SUMS + 22 * _CL + j] += kz * dy
                 W[_CW_SUMS + 23 * _CL + j] += kz * dz
-                W[_CW_OUT + j] = inner
+                # for ∂/∂S_A and ∂/∂V_A (:func:`_cc_second`): L ρ, L ρ₂ d dᵀ, L ρ₄ d⁴
+                l2 = lb * rho2
+                l4 = lb * rho4
+                W[_CW_SUMS + 24 * _CL + j] += lb * rho
+                W[_CW_SUMS + 25 * _CL + j] += l2 * xx
+                W[_CW_SUMS + 26 * _CL + j] += l2 * dx * dy
+                W[_CW_SUMS + 27 * _CL + j] += l2 * dx * dz
+                W[_CW_SUMS + 28 * _CL + j] += l2 * yy
+                W[_CW_SUMS + 29 * _CL + j] += l2 * dy * dz
+                W[_CW_SUMS + 30 * _CL + j] += l2 * zz
+                W[_CW_SUMS + 31 * _CL + j] += l4 * dx * m0
+                W[_CW_SUMS + 32 * _CL + j] += l4 * dx * m1
+                W[_CW_SUMS + 33 * _CL + j] += l4 * dx * m2
+                W[_CW_SUMS + 34 * _CL + j] += l4 * dx * m3
+                W[_CW_SUMS + 35 * _CL + j] += l4 * dx * m4
+                W[_CW_SUMS + 36 * _CL + j] += l4 * dx * m5
+                W[_CW_SUMS + 37 * _CL + j] += l4 * dx * m6
+                W[_CW_SUMS + 38 * _CL + j] += l4 * dx * m7
+                W[_CW_SUMS + 39 * _CL + j] += l4 * dx * m8
+                W[_CW_SUMS + 40 * _CL + j] += l4 * dx * m9
+                W[_CW_SUMS + 41 * _CL + j] += l4 * dy * m6
+                W[_CW_SUMS + 42 * _CL + j] += l4 * dy * m7
+                W[_CW_SUMS + 43 * _CL + j] += l4 * dy * m8
+                W[_CW_SUMS + 44 * _CL + j] += l4 * dy * m9
+                W[_CW_SUMS + 45 * _CL + j] += l4 * dz * m9
+                # to the partner: ∂/∂L_B, ∂/∂d (c_B's with the sign turned), ∂/∂S_B = ρ Q_A −
+                # β ρ₂ (Q_A d dᵀ + d dᵀ Q_A) − ½ β ρ₂ dᵀQ_A d · 1 + ½ β(β+2) ρ₄ dᵀQ_A d · d dᵀ
+                hs = 0.5 * kr
+                ht = 0.5 * br * qx
+                W[_CW_OUT + j] = inner + a2
                 W[_CW_OUT + _CL + j] = hx
                 W[_CW_OUT + 2 * _CL + j] = hy
                 W[_CW_OUT + 3 * _CL + j] = hz
+                W[_CW_OUT + 4 * _CL + j] = rho * (la - g00) - 2.0 * br * qx0 * dx + hs * xx - ht
+                W[_CW_OUT + 5 * _CL + j] = -rho * g01 - br * (qx0 * dy + dx * qx1) + hs * dx * dy
+                W[_CW_OUT + 6 * _CL + j] = -rho * g02 - br * (qx0 * dz + dx * qx2) + hs * dx * dz
+                W[_CW_OUT + 7 * _CL + j] = rho * (la - g11) - 2.0 * br * qx1 * dy + hs * yy - ht
+                W[_CW_OUT + 8 * _CL + j] = -rho * g12 - br * (qx1 * dz + dy * qx2) + hs * dy * dz
+                W[_CW_OUT + 9 * _CL + j] = rho * (la - g22) - 2.0 * br * qx2 * dz + hs * zz - ht
         if grad:
             for j in range(cnt):
                 r = fslot[p0 + j]
@@ -763,12 +959,14 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, e
                 gs[r, 1] -= W[_CW_OUT + _CL + j]
                 gs[r, 2] -= W[_CW_OUT + 2 * _CL + j]
                 gs[r, 3] -= W[_CW_OUT + 3 * _CL + j]
+                for k in range(4, _NOUT):
+                    gs[r, k] += W[_CW_OUT + k * _CL + j]
     e = 0.0
     for j in range(_CL):
         e += W[_CW_SUMS + j]
     eF[a] = e
     if grad:
-        for k in range(1, 24):
+        for k in range(1, _NSUMS):
             t = 0.0
             for j in range(_CL):
                 t += W[_CW_SUMS + k * _CL + j]
@@ -787,31 +985,66 @@ def _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, grad, gs, fslot, e
         gW[a, 9], gW[a, 10], gW[a, 11] = S[17], S[20] + S[6], S[21]
         gW[a, 12], gW[a, 13], gW[a, 14] = S[18], S[21] + h7, S[22] + h6
         gW[a, 15], gW[a, 16], gW[a, 17] = S[19], S[22], S[23] + S[7]
+        _cc_second(a, S, beta, gS, gD)
+
+
+@nb.njit(cache=True, inline="always")
+def _cc_second(a, S, beta, gS, gD):
+    """∂/∂S_A and ∂/∂V_A of A's second order as a target, from the lanes' sums ``s₀ = Σ L_B
+    ρ`` (``S[24]``), ``X = Σ L_B ρ₂ d dᵀ`` (``S[25 …]``, by the pair) and ``Σ L_B ρ₄ d⁴``
+    (``S[31 …]``, :data:`_MONO`): ``½ Σ_B L_B ∂²(d_a d_b ρ)/∂d_k∂d_l`` is ``½ (s₀ (δ_ak δ_bl +
+    δ_al δ_bk) − β (δ_ak X_bl + δ_bk X_al + δ_al X_bk + δ_bl X_ak + X_ab δ_kl) + β(β+2) X⁴_abkl)``;
+    ``V`` enters with it turned, ``S`` with it summed over ``a = b``."""
+    s0 = S[24]
+    for s in range(6):
+        k, l = _PA[s], _PB[s]
+        gS[a, s] = 0.5 * ((2.0 - beta) * s0 * (1.0 if k == l else 0.0)
+                          + beta * (beta - 2.0) * S[25 + s])
+    for p in range(6):
+        i, j = _PA[p], _PB[p]
+        for s in range(6):
+            k, l = _PA[s], _PB[s]
+            c = s0 * ((1.0 if (i == k and j == l) else 0.0) + (1.0 if (i == l and j == k) else 0.0))
+            t = 0.0
+            if i == k:
+                t += S[25 + _PI[j, l]]
+            if j == k:
+                t += S[25 + _PI[i, l]]
+            if i == l:
+                t += S[25 + _PI[j, k]]
+            if j == l:
+                t += S[25 + _PI[i, k]]
+            if k == l:
+                t += S[25 + p]
+            gD[a, 6 * p + s] = -0.5 * (c - beta * t + beta * (beta + 2.0) * S[31 + _MONO[i, j, k, l]])
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
-def _cc_far(L, C, G, Wm, foff, fpart, fslot, rows, beta, kind, grad, lanes):
-    """Every node ``A`` against its far partners ``B`` (:func:`_cc_node`'s moments): per node
-    the energy of its pairs as target; with ``grad`` the derivatives of the sum in its own
-    ``L`` (column 0 of ``gt``), ``c`` (1–3), ``G`` (``gG``) and ``W`` (``gW``) as a target,
-    and, per fixed piece of the targets, in every partner's ``L`` and ``c`` as a source
-    (``gs``, ``rows`` rows of :func:`_cc_slots`, ``fslot`` the row of each pair). Each
-    target's sums are its own: the same bits for any thread count. ``lanes``: always
-    :data:`_CL`, passed at run time."""
+def _cc_far(L, C, G, Wm, Sm, T2, foff, fpart, fslot, rows, beta, kind, grad, lanes):
+    """Every node ``A`` against its far partners ``B`` (:func:`_cc_node`'s moments, ``T2``
+    :func:`_cc_coeffs`'): per node the energy of its pairs as target; with ``grad`` the
+    derivatives of the sum in its own ``L`` (column 0 of ``gt``), ``c`` (1–3), ``G`` (``gG``),
+    ``W`` (``gW``), ``S`` (``gS``) and ``V`` (``gD``) as a target, and, per fixed piece of the
+    targets, in every partner's ``L``, ``c`` and ``S`` as a source (``gs``, ``rows`` rows of
+    :func:`_cc_slots`, ``fslot`` the row of each pair). Each target's sums are its own: the
+    same bits for any thread count. ``lanes``: always :data:`_CL`, passed at run time."""
     m = L.shape[0]
     nchunks = min(m, _FAR_CHUNKS)
     # every row written below (a target's own, zeros where it has no partner): np.zeros
     # cleared the 16 MB of these at 10⁵ edges once more (docs/lab/repulsor.md, "The near field's
     # divisions overlap, no reference counting in the loops, …")
     eF = np.empty(m)
-    gt = np.empty((m if grad else 0, 4))
-    gG = np.empty((m if grad else 0, 6))
-    gW = np.empty((m if grad else 0, 18))
-    gs = np.zeros((rows if grad else 0, 4))
+    mg = m if grad else 0
+    gt = np.empty((mg, 4))
+    gG = np.empty((mg, 6))
+    gW = np.empty((mg, 18))
+    gS = np.empty((mg, 6))
+    gD = np.empty((mg, 36))
+    gs = np.zeros((rows if grad else 0, _NOUT))
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
         W = np.zeros(_CW_SIZE)
-        S = np.zeros(24)
+        S = np.zeros(_NSUMS)
         for a in range(ch * m // nchunks, (ch + 1) * m // nchunks):
             if foff[a + 1] == foff[a]:
                 eF[a] = 0.0
@@ -819,23 +1052,26 @@ def _cc_far(L, C, G, Wm, foff, fpart, fslot, rows, beta, kind, grad, lanes):
                     gt[a] = 0.0
                     gG[a] = 0.0
                     gW[a] = 0.0
+                    gS[a] = 0.0
+                    gD[a] = 0.0
                 continue
             if grad:  # a constant at each call (the branches fold away)
-                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, True, gs,
-                           fslot, eF, gt, gG, gW, lanes)
+                _cc_target(a, W, S, L, C, G, Wm, Sm, T2, foff, fpart, beta, kind, True, gs,
+                           fslot, eF, gt, gG, gW, gS, gD, lanes)
             else:
-                _cc_target(a, W, S, L, C, G, Wm, foff, fpart, beta, kind, False, gs,
-                           fslot, eF, gt, gG, gW, lanes)
-    return eF, gt, gG, gW, gs
+                _cc_target(a, W, S, L, C, G, Wm, Sm, T2, foff, fpart, beta, kind, False, gs,
+                           fslot, eF, gt, gG, gW, gS, gD, lanes)
+    return eF, gt, gG, gW, gS, gD, gs
 
 
 @nb.njit(cache=True, parallel=True)
-def _cc_node_grad(L, G, gt, gs, soff, sidx, gG, gW):
-    """Per node, the derivatives the edges need: ``∂/∂L`` (target and source parts) and
-    ``∂/∂c`` with ``W``'s dependence on ``c`` (``∂W_abk/∂c_k = −G_ab``) folded in."""
+def _cc_node_grad(L, G, Wm, gt, gs, soff, sidx, gG, gW, gS, gD):
+    """Per node, the derivatives the edges need: ``∂/∂L`` (target and source parts),
+    ``∂/∂c`` with ``W``'s and ``V``'s dependence on ``c`` folded in (``∂W_abk/∂c_j = −δ_jk
+    G_ab``, ``∂V_abkl/∂c_j = −δ_jk W_abl − δ_jl W_abk``; ``S``'s vanishes, ``Σ l δ = 0``), and
+    the source part of ``∂/∂S`` added to ``gS`` in place."""
     m = L.shape[0]
     out = np.empty((m, 4))  # every row written
-    nchunks = min(m, _FAR_CHUNKS)
     for bb in nb.prange(m):
         b = np.int64(bb)
         s0 = gt[b, 0]
@@ -848,17 +1084,24 @@ def _cc_node_grad(L, G, gt, gs, soff, sidx, gG, gW):
             s1 += gs[r, 1]
             s2 += gs[r, 2]
             s3 += gs[r, 3]
-        if soff[b + 1] - soff[b] < nchunks:
-            # the zeros of the pieces that never met b (a −0.0 sum becomes +0.0, as before)
-            s0 += 0.0
-            s1 += 0.0
-            s2 += 0.0
-            s3 += 0.0
+            for q in range(6):
+                gS[b, q] += gs[r, 4 + q]
         for ab in range(6):  # Σ over a, b: the pairs off the diagonal twice
             w = G[b, ab] * _SYM_W[ab]
             s1 -= gW[b, 3 * ab] * w
             s2 -= gW[b, 3 * ab + 1] * w
             s3 -= gW[b, 3 * ab + 2] * w
+            # −2 Σ_l D_ab,jl W_ab,l for j = 0, 1, 2
+            w2 = 2.0 * _SYM_W[ab]
+            t0 = t1 = t2 = 0.0
+            for l in range(3):
+                wl = Wm[b, 3 * ab + l]
+                t0 += gD[b, 6 * ab + _PI[0, l]] * wl
+                t1 += gD[b, 6 * ab + _PI[1, l]] * wl
+                t2 += gD[b, 6 * ab + _PI[2, l]] * wl
+            s1 -= w2 * t0
+            s2 -= w2 * t1
+            s3 -= w2 * t2
         out[b, 0] = s0
         out[b, 1] = s1
         out[b, 2] = s2
@@ -867,13 +1110,15 @@ def _cc_node_grad(L, G, gt, gs, soff, sidx, gG, gW):
 
 
 @nb.njit(cache=True)
-def _cc_push(L, C, parent, gn, gG, gW):
+def _cc_push(L, C, parent, gn, gG, gW, gS, gD):
     """The nodes' derivatives summed down to the leaves, in place, each node's sum about its
-    own centre: the terms :func:`_cc_to_edges` adds per edge and ancestor are affine in the
-    edge's midpoint (``L`` and ``c`` through ``m − c``, ``G`` and ``W`` through ``δ = m −
-    c``), so a parent's sum moves to a child's centre by ``h = c_child − c``. After it, per
-    node: ``gn`` column 0 the ``∂/∂l`` constant, 1–3 ``Σ g_c / L``; ``gG`` ``Σ gG + gW · h``,
-    ``gW`` ``Σ gW``. Parents first (a parent's index is below its children's)."""
+    own centre: the terms :func:`_cc_to_edges` adds per edge and ancestor are polynomials in
+    the edge's midpoint (``L`` and ``c`` through ``m − c``, ``S`` through ``l δ δᵀ``, ``G``,
+    ``W`` and ``V`` through ``δ = m − c``), so a parent's sum moves to a child's centre by
+    ``h = c_child − c`` (``δ = δ_child + h``). After it, per node: ``gn`` column 0 the
+    ``∂/∂l`` constant, 1–3 the coefficient of ``l δ``; ``gS`` of ``l δ δᵀ``; ``gG``, ``gW``
+    and ``gD`` of ``e eᵀ/l``, ``e eᵀ/l ⊗ δ`` and ``e eᵀ/l ⊗ δ ⊗ δ``. Parents first (a
+    parent's index is below its children's)."""
     for b in range(L.shape[0]):
         il = 1.0 / L[b]
         for k in range(1, 4):
@@ -881,25 +1126,51 @@ def _cc_push(L, C, parent, gn, gG, gW):
         p = parent[b]
         if p < 0:
             continue
-        h0 = C[b, 0] - C[p, 0]
-        h1 = C[b, 1] - C[p, 1]
-        h2 = C[b, 2] - C[p, 2]
-        gn[b, 0] += gn[p, 0] + gn[p, 1] * h0 + gn[p, 2] * h1 + gn[p, 3] * h2
-        for k in range(1, 4):
-            gn[b, k] += gn[p, k]
+        h = (C[b, 0] - C[p, 0], C[b, 1] - C[p, 1], C[b, 2] - C[p, 2])
+        hsh = 0.0
+        for s in range(6):
+            hsh += _SYM_W[s] * gS[p, s] * h[_PA[s]] * h[_PB[s]]
+        gn[b, 0] += gn[p, 0] + gn[p, 1] * h[0] + gn[p, 2] * h[1] + gn[p, 3] * h[2] + hsh
+        for k in range(3):
+            sh = gS[p, _PI[k, 0]] * h[0] + gS[p, _PI[k, 1]] * h[1] + gS[p, _PI[k, 2]] * h[2]
+            gn[b, 1 + k] += gn[p, 1 + k] + 2.0 * sh
+        for s in range(6):
+            gS[b, s] += gS[p, s]
         for ab in range(6):
-            gG[b, ab] += (gG[p, ab] + gW[p, 3 * ab] * h0 + gW[p, 3 * ab + 1] * h1
-                          + gW[p, 3 * ab + 2] * h2)
-        for k in range(18):
-            gW[b, k] += gW[p, k]
+            dh0 = gD[p, 6 * ab] * h[0] + gD[p, 6 * ab + 1] * h[1] + gD[p, 6 * ab + 2] * h[2]
+            dh1 = gD[p, 6 * ab + 1] * h[0] + gD[p, 6 * ab + 3] * h[1] + gD[p, 6 * ab + 4] * h[2]
+            dh2 = gD[p, 6 * ab + 2] * h[0] + gD[p, 6 * ab + 4] * h[1] + gD[p, 6 * ab + 5] * h[2]
+            gG[b, ab] += (gG[p, ab] + gW[p, 3 * ab] * h[0] + gW[p, 3 * ab + 1] * h[1]
+                          + gW[p, 3 * ab + 2] * h[2] + dh0 * h[0] + dh1 * h[1] + dh2 * h[2])
+            gW[b, 3 * ab] += gW[p, 3 * ab] + 2.0 * dh0
+            gW[b, 3 * ab + 1] += gW[p, 3 * ab + 1] + 2.0 * dh1
+            gW[b, 3 * ab + 2] += gW[p, 3 * ab + 2] + 2.0 * dh2
+        for k in range(36):
+            gD[b, k] += gD[p, k]
+
+
+@nb.njit(cache=True, inline="always")
+def _cc_edge_pair(b, ab, gG, gW, gD, x0, x1, x2):
+    """For the pair ``ab`` of leaf ``b`` at an edge's ``δ``: ``H_ab = gG + Σ_c (gW + Dδ)_c
+    δ_c`` and ``(gW + 2 Dδ)_c``, c = 0, 1, 2 (``Dδ_c = Σ_l gD_ab,cl δ_l``)."""
+    k0 = 6 * ab
+    y0 = gD[b, k0] * x0 + gD[b, k0 + 1] * x1 + gD[b, k0 + 2] * x2
+    y1 = gD[b, k0 + 1] * x0 + gD[b, k0 + 3] * x1 + gD[b, k0 + 4] * x2
+    y2 = gD[b, k0 + 2] * x0 + gD[b, k0 + 4] * x1 + gD[b, k0 + 5] * x2
+    w0 = gW[b, 3 * ab]
+    w1 = gW[b, 3 * ab + 1]
+    w2 = gW[b, 3 * ab + 2]
+    h = gG[b, ab] + (w0 + y0) * x0 + (w1 + y1) * x1 + (w2 + y2) * x2
+    return h, w0 + 2.0 * y0, w1 + 2.0 * y1, w2 + 2.0 * y2
 
 
 @nb.njit(cache=True, parallel=True, fastmath={"contract"})
-def _cc_to_edges(E, M, ln, C, lo, hi, leaves, gn, gG, gW, rows):
+def _cc_to_edges(E, M, ln, C, lo, hi, leaves, gn, gG, gW, gS, gD, rows):
     """The nodes' derivatives, summed to the leaves (:func:`_cc_push`), passed to their edges:
-    ``L`` and ``c`` as in :func:`_far_sources`; ``G`` and ``W`` through ``e eᵀ / l`` (edge
-    vector rows 1–3, length row 7) and ``δ = m − c`` (midpoint rows 4–6). Last, the length
-    row's part of the edge vector's rows (``∂l/∂e = e/l``): ``rows`` is then complete."""
+    ``L`` and ``c`` as in :func:`_far_sources`, ``S`` through ``l δ δᵀ``; ``G``, ``W`` and
+    ``V`` through ``e eᵀ / l`` (edge vector rows 1–3, length row 7) and ``δ = m − c``
+    (midpoint rows 4–6). Last, the length row's part of the edge vector's rows (``∂l/∂e =
+    e/l``): ``rows`` is then complete."""
     nl = leaves.shape[0]
     for tt in nb.prange(nl):
         b = leaves[np.int64(tt)]
@@ -909,18 +1180,33 @@ def _cc_to_edges(E, M, ln, C, lo, hi, leaves, gn, gG, gW, rows):
             x0 = M[q, 0] - C[b, 0]
             x1 = M[q, 1] - C[b, 1]
             x2 = M[q, 2] - C[b, 2]
-            gl = gn[b, 0] + gn[b, 1] * x0 + gn[b, 2] * x1 + gn[b, 3] * x2
-            gm0 = gn[b, 1] * ln[q]
-            gm1 = gn[b, 2] * ln[q]
-            gm2 = gn[b, 3] * ln[q]
-            # H = gG + gW·δ (symmetric, by the pair ab): ∂(eᵀHe/l)/∂e = 2 H e / l,
-            # ∂/∂l = −eᵀHe/l², ∂/∂m_c = Σ_ab gW_abc e_a e_b / l
-            h0 = gG[b, 0] + gW[b, 0] * x0 + gW[b, 1] * x1 + gW[b, 2] * x2
-            h1 = gG[b, 1] + gW[b, 3] * x0 + gW[b, 4] * x1 + gW[b, 5] * x2
-            h2 = gG[b, 2] + gW[b, 6] * x0 + gW[b, 7] * x1 + gW[b, 8] * x2
-            h3 = gG[b, 3] + gW[b, 9] * x0 + gW[b, 10] * x1 + gW[b, 11] * x2
-            h4 = gG[b, 4] + gW[b, 12] * x0 + gW[b, 13] * x1 + gW[b, 14] * x2
-            h5 = gG[b, 5] + gW[b, 15] * x0 + gW[b, 16] * x1 + gW[b, 17] * x2
+            # S: l δᵀ gS δ
+            sx0 = gS[b, 0] * x0 + gS[b, 1] * x1 + gS[b, 2] * x2
+            sx1 = gS[b, 1] * x0 + gS[b, 3] * x1 + gS[b, 4] * x2
+            sx2 = gS[b, 2] * x0 + gS[b, 4] * x1 + gS[b, 5] * x2
+            gl = (gn[b, 0] + gn[b, 1] * x0 + gn[b, 2] * x1 + gn[b, 3] * x2
+                  + sx0 * x0 + sx1 * x1 + sx2 * x2)
+            gm0 = (gn[b, 1] + 2.0 * sx0) * ln[q]
+            gm1 = (gn[b, 2] + 2.0 * sx1) * ln[q]
+            gm2 = (gn[b, 3] + 2.0 * sx2) * ln[q]
+            # per pair ab, y_abc = gW_abc + Σ_l gD_ab,cl δ_l: H = gG + Σ_c (gW + Dδ)_c δ_c
+            # (symmetric, by the pair ab); ∂(eᵀHe/l)/∂e = 2 H e / l, ∂/∂l = −eᵀHe/l²,
+            # ∂/∂m_c = Σ_ab (gW + 2 Dδ)_abc e_a e_b / l
+            t00 = e0 * e0 * il
+            t01 = 2.0 * e0 * e1 * il
+            t02 = 2.0 * e0 * e2 * il
+            t11 = e1 * e1 * il
+            t12 = 2.0 * e1 * e2 * il
+            t22 = e2 * e2 * il
+            h0, y00, y01, y02 = _cc_edge_pair(b, 0, gG, gW, gD, x0, x1, x2)
+            h1, y10, y11, y12 = _cc_edge_pair(b, 1, gG, gW, gD, x0, x1, x2)
+            h2, y20, y21, y22 = _cc_edge_pair(b, 2, gG, gW, gD, x0, x1, x2)
+            h3, y30, y31, y32 = _cc_edge_pair(b, 3, gG, gW, gD, x0, x1, x2)
+            h4, y40, y41, y42 = _cc_edge_pair(b, 4, gG, gW, gD, x0, x1, x2)
+            h5, y50, y51, y52 = _cc_edge_pair(b, 5, gG, gW, gD, x0, x1, x2)
+            gm0 += y00 * t00 + y10 * t01 + y20 * t02 + y30 * t11 + y40 * t12 + y50 * t22
+            gm1 += y01 * t00 + y11 * t01 + y21 * t02 + y31 * t11 + y41 * t12 + y51 * t22
+            gm2 += y02 * t00 + y12 * t01 + y22 * t02 + y32 * t11 + y42 * t12 + y52 * t22
             he0 = h0 * e0 + h1 * e1 + h2 * e2
             he1 = h1 * e0 + h3 * e1 + h4 * e2
             he2 = h2 * e0 + h4 * e1 + h5 * e2
@@ -928,18 +1214,6 @@ def _cc_to_edges(E, M, ln, C, lo, hi, leaves, gn, gG, gW, rows):
             ga0 = 2.0 * he0 * il
             ga1 = 2.0 * he1 * il
             ga2 = 2.0 * he2 * il
-            t00 = e0 * e0 * il
-            t01 = 2.0 * e0 * e1 * il
-            t02 = 2.0 * e0 * e2 * il
-            t11 = e1 * e1 * il
-            t12 = 2.0 * e1 * e2 * il
-            t22 = e2 * e2 * il
-            gm0 += (gW[b, 0] * t00 + gW[b, 3] * t01 + gW[b, 6] * t02 + gW[b, 9] * t11
-                    + gW[b, 12] * t12 + gW[b, 15] * t22)
-            gm1 += (gW[b, 1] * t00 + gW[b, 4] * t01 + gW[b, 7] * t02 + gW[b, 10] * t11
-                    + gW[b, 13] * t12 + gW[b, 16] * t22)
-            gm2 += (gW[b, 2] * t00 + gW[b, 5] * t01 + gW[b, 8] * t02 + gW[b, 11] * t11
-                    + gW[b, 14] * t12 + gW[b, 17] * t22)
             gl -= ehe * il * il
             rows[4, q] += gm0
             rows[5, q] += gm1
@@ -950,6 +1224,7 @@ def _cc_to_edges(E, M, ln, C, lo, hi, leaves, gn, gG, gW, rows):
             rows[1, q] = (rows[1, q] + ga0) + t * e0
             rows[2, q] = (rows[2, q] + ga1) + t * e1
             rows[3, q] = (rows[3, q] + ga2) + t * e2
+
 
 
 class TangentPointFrame(Frame):
@@ -1025,21 +1300,24 @@ class TangentPointFrame(Frame):
             rows[1:4] += rows[7] / ln * E.T  # ∂l/∂e = e/l
         else:
             if own and self._cc_own is not None:
-                G, Wm = self._cc_own
+                G, Wm, Sm, T2 = self._cc_own
             else:
-                G, Wm = _cc_moments(E, M, ln, tree.lo, tree.hi, tree.left, tree.right, C)
+                G, Wm, Sm, V = _cc_moments(E, M, ln, tree.lo, tree.hi, tree.left, tree.right,
+                                           L, C)
+                T2 = _cc_coeffs(Sm, V, self.beta)
                 if own:
-                    self._cc_own = (G, Wm)
+                    self._cc_own = (G, Wm, Sm, T2)
             fslot, soff, sidx = self._cc_slots
-            eF, gt, gG, gW, gs = _cc_far(L, C, G, Wm, self.foff, self.fpart, fslot,
-                                         sidx.shape[0], self.beta, self.kind, grad, _CL)
+            eF, gt, gG, gW, gS, gD, gs = _cc_far(L, C, G, Wm, Sm, T2, self.foff, self.fpart,
+                                                 fslot, sidx.shape[0], self.beta, self.kind,
+                                                 grad, _CL)
             energy = float(np.sum(rows[0])) + float(np.sum(eF))
             if not grad:
                 return energy, None
-            gn = _cc_node_grad(L, G, gt, gs, soff, sidx, gG, gW)
-            _cc_push(L, C, self.parent, gn, gG, gW)
+            gn = _cc_node_grad(L, G, Wm, gt, gs, soff, sidx, gG, gW, gS, gD)
+            _cc_push(L, C, self.parent, gn, gG, gW, gS, gD)
             # with ∂l/∂e = e/l of every sum (numpy's three temporaries took about 1 ms at 10⁵)
-            _cc_to_edges(E, M, ln, C, tree.lo, tree.hi, self.leaves, gn, gG, gW, rows)
+            _cc_to_edges(E, M, ln, C, tree.lo, tree.hi, self.leaves, gn, gG, gW, gS, gD, rows)
         return energy, _to_vertices(rows, lay.prv, self._at)
 
 
