@@ -515,7 +515,7 @@ del _i, _e, _q
 # entry (ab, kl) of V and how many index quadruples it stands for
 _N_AT = np.array([[6 * _PI[a, i] + _PI[a, j] for a in range(3)]
                   + [6 * _PI[a, j] + _PI[a, i] for a in range(3)]
-                  for i, j in zip(_PA, _PB)])
+                  for i, j in zip(_PA, _PB, strict=True)])
 _Q_AT = np.array([_MONO[_PA[p], _PB[p], _PA[s], _PB[s]] for p in range(6) for s in range(6)])
 _Q_W = np.array([(1.0 if _PA[p] == _PB[p] else 2.0) * (1.0 if _PA[s] == _PB[s] else 2.0)
                  for p in range(6) for s in range(6)])
@@ -655,7 +655,8 @@ def _cc_coeffs(Sm, V, beta):
 
 # The cluster–cluster far field's lanes (the idea of ``_near_field``): up to this many partners
 # of one target at a time. One work array per parallel piece: lane j's partner at W[_CL k + j]
-# (k: L, c; |d|^−β at _CW_RHO; S, six, at _CW_S; 1 / |d|² at _CW_INV), its sums at W[_CW_SUMS + _CL k + j] (energy;
+# (k: L, c; |d|^−β at _CW_RHO; S, six, at _CW_S; 1 / |d|² at _CW_INV), its sums at
+# W[_CW_SUMS + _CL k + j] (energy;
 # ∂/∂L_A, ∂/∂c_A; −2 L ρ d; ∂/∂G_A, six; β L ρ₂ d ⊗ d ⊗ d, ten; L ρ; L ρ₂ d dᵀ, six; L ρ₄ d⁴,
 # fifteen) and what the pair gives the partner at W[_CW_OUT + _CL k + j] (∂/∂L_B, ∂/∂c_B,
 # ∂/∂S_B), added over the lanes in lane order. Lanes past the last partner repeat it with L = 0
@@ -836,7 +837,8 @@ def _cc_target(a, W, S, L, C, G, Wm, Sm, T2, foff, fpart, beta, kind, grad, gs, 
                              + 2.0 * (g01 * s01 + g02 * s02 + g12 * s12))
             qx = la * r2 - dgd
             xqsx = la * xsx - (gdx * sx0 + gdy * sx1 + gdz * sx2)
-            f2b = rho * qs - 0.5 * beta * rho2 * (4.0 * xqsx + trs * qx) + 0.5 * bb2 * rho4 * qx * xsx
+            f2b = (rho * qs - 0.5 * beta * rho2 * (4.0 * xqsx + trs * qx)
+                   + 0.5 * bb2 * rho4 * qx * xsx)
             W[_CW_SUMS + j] += lb * (inner + a2) + f2b
             if grad:
                 # u_c = Σ_ab W_abc d_a d_b
@@ -866,13 +868,16 @@ def _cc_target(a, W, S, L, C, G, Wm, Sm, T2, foff, fpart, beta, kind, grad, gs, 
                 kb = beta * rho2 * trs
                 kq = bb2 * rho4 * xsx
                 kr = bb2 * rho4 * qx
-                hx = (lb * (c1 * dx - 2.0 * rho * gdx - 2.0 * rho * v0 + beta * rho2 * (2.0 * w0 + u0)
+                hx = (lb * (c1 * dx - 2.0 * rho * gdx - 2.0 * rho * v0
+                            + beta * rho2 * (2.0 * w0 + u0)
                             + ca * dx + rho2 * rx0 - 0.5 * bb2 * rho4 * gv0)
                       + cb * dx - 2.0 * beta * rho2 * e0 - kb * qx0 + kq * qx0 + kr * sx0)
-                hy = (lb * (c1 * dy - 2.0 * rho * gdy - 2.0 * rho * v1 + beta * rho2 * (2.0 * w1 + u1)
+                hy = (lb * (c1 * dy - 2.0 * rho * gdy - 2.0 * rho * v1
+                            + beta * rho2 * (2.0 * w1 + u1)
                             + ca * dy + rho2 * rx1 - 0.5 * bb2 * rho4 * gv1)
                       + cb * dy - 2.0 * beta * rho2 * e1 - kb * qx1 + kq * qx1 + kr * sx1)
-                hz = (lb * (c1 * dz - 2.0 * rho * gdz - 2.0 * rho * v2 + beta * rho2 * (2.0 * w2 + u2)
+                hz = (lb * (c1 * dz - 2.0 * rho * gdz - 2.0 * rho * v2
+                            + beta * rho2 * (2.0 * w2 + u2)
                             + ca * dz + rho2 * rx2 - 0.5 * bb2 * rho4 * gv2)
                       + cb * dz - 2.0 * beta * rho2 * e2 - kb * qx2 + kq * qx2 + kr * sx2)
                 # ∂/∂Q_A of B's second order: ρ S_B − β ρ₂ (S_B d dᵀ + d dᵀ S_B) + ½ (β(β+2) ρ₄
@@ -997,26 +1002,27 @@ def _cc_second(a, S, beta, gS, gD):
     ``V`` enters with it turned, ``S`` with it summed over ``a = b``."""
     s0 = S[24]
     for s in range(6):
-        k, l = _PA[s], _PB[s]
-        gS[a, s] = 0.5 * ((2.0 - beta) * s0 * (1.0 if k == l else 0.0)
+        k, q = _PA[s], _PB[s]
+        gS[a, s] = 0.5 * ((2.0 - beta) * s0 * (1.0 if k == q else 0.0)
                           + beta * (beta - 2.0) * S[25 + s])
     for p in range(6):
         i, j = _PA[p], _PB[p]
         for s in range(6):
-            k, l = _PA[s], _PB[s]
-            c = s0 * ((1.0 if (i == k and j == l) else 0.0) + (1.0 if (i == l and j == k) else 0.0))
+            k, q = _PA[s], _PB[s]
+            c = s0 * ((1.0 if (i == k and j == q) else 0.0) + (1.0 if (i == q and j == k) else 0.0))
             t = 0.0
             if i == k:
-                t += S[25 + _PI[j, l]]
+                t += S[25 + _PI[j, q]]
             if j == k:
-                t += S[25 + _PI[i, l]]
-            if i == l:
+                t += S[25 + _PI[i, q]]
+            if i == q:
                 t += S[25 + _PI[j, k]]
-            if j == l:
+            if j == q:
                 t += S[25 + _PI[i, k]]
-            if k == l:
+            if k == q:
                 t += S[25 + p]
-            gD[a, 6 * p + s] = -0.5 * (c - beta * t + beta * (beta + 2.0) * S[31 + _MONO[i, j, k, l]])
+            gD[a, 6 * p + s] = -0.5 * (c - beta * t
+                                       + beta * (beta + 2.0) * S[31 + _MONO[i, j, k, q]])
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
@@ -1094,11 +1100,11 @@ def _cc_node_grad(L, G, Wm, gt, gs, soff, sidx, gG, gW, gS, gD):
             # −2 Σ_l D_ab,jl W_ab,l for j = 0, 1, 2
             w2 = 2.0 * _SYM_W[ab]
             t0 = t1 = t2 = 0.0
-            for l in range(3):
-                wl = Wm[b, 3 * ab + l]
-                t0 += gD[b, 6 * ab + _PI[0, l]] * wl
-                t1 += gD[b, 6 * ab + _PI[1, l]] * wl
-                t2 += gD[b, 6 * ab + _PI[2, l]] * wl
+            for c in range(3):
+                wl = Wm[b, 3 * ab + c]
+                t0 += gD[b, 6 * ab + _PI[0, c]] * wl
+                t1 += gD[b, 6 * ab + _PI[1, c]] * wl
+                t2 += gD[b, 6 * ab + _PI[2, c]] * wl
             s1 -= w2 * t0
             s2 -= w2 * t1
             s3 -= w2 * t2
