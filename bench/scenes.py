@@ -746,6 +746,10 @@ def main(argv=None) -> int:
                     help="tube radii in mean edge lengths, comma-separated: each scene runs "
                          "once per radius, in turn, in this process (the Untangle Cables "
                          "preset's bevel is 0.3)")
+    ap.add_argument("--theta", type=float, default=None,
+                    help="the tree's θ for every scene (default: the scene's own, the cables' "
+                         "the Untangle Cables preset's 0.3, else the energy's default); 0: "
+                         "the energy's default everywhere")
     ap.add_argument("--no-check", action="store_true")
     ap.add_argument("--render", type=Path, default=None,
                     help="render the runs saved under this folder into docs/img/scene_*.png")
@@ -762,6 +766,11 @@ def main(argv=None) -> int:
     for name in names:
         for radius in radii:
             scene = make(name, a)
+            if a.theta is not None:
+                scene.options.pop("theta", None)
+                if a.theta:
+                    scene.options["theta"] = a.theta
+                scene.note += f"; theta {a.theta:g}" if a.theta else "; the default theta"
             if radius:
                 scene.options["thickness"] = radius * mean_edge(scene.parts, scene.closed)
                 scene.note += f"; thickness {radius:g} mean edges"
