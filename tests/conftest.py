@@ -22,6 +22,34 @@ def trefoil(n: int) -> np.ndarray:
     return np.c_[np.sin(t) + 2 * np.sin(2 * t), np.cos(t) - 2 * np.cos(2 * t), -np.sin(3 * t)]
 
 
+def varied_curves(n: int, rng: np.random.Generator):
+    """``(name, parts, closed)`` of about ``n`` edges each, for the tangent-point tree's error
+    (tests/core/test_tangent_point.py, bench/tp_accuracy.py): knots of the table (two of ten
+    crossings), the FHW unknot, a chain of three round rings, one round ring (nearly critical:
+    every cluster curved alike), ten open cables and a trefoil with noise."""
+    from moebius_addon import core
+
+    out = [(k, core.resample(core.knots.named(k), n), True)
+           for k in ("3_1", "7_2", "10_1", "10_132")]
+    out.append(("fhw", core.knots.freedman_unknot(n), True))
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    ring = np.c_[np.cos(t), np.sin(t), 0 * t]
+    out.append(("three rings", core.resample([ring, ring[:, [0, 2, 1]] + [1.2, 0, 0],
+                                              ring + [2.4, 0, 0]], [n // 3] * 3), True))
+    out.append(("round ring", core.resample(ring, n), True))
+    s = np.linspace(0, 1, 4 * n // 10 + 1)
+    cables = []
+    for c in range(10):
+        w = rng.uniform(-0.02, 0.02, 2)
+        cables.append(np.c_[0.1 * (c % 4) + w[0] * np.sin(np.pi * s),
+                            0.1 * (c // 4) + w[1] * np.sin(2 * np.pi * s), s])
+    out.append(("ten cables", core.resample(cables, [n // 10 + 1] * 10, closed=False), False))
+    P = core.resample(core.knots.named("3_1"), n)
+    h = float(np.linalg.norm(P[1] - P[0]))
+    out.append(("noisy trefoil", P + 0.1 * h * rng.standard_normal(P.shape), True))
+    return out
+
+
 def ngon(n: int) -> np.ndarray:
     t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
     return np.c_[np.cos(t), np.sin(t), np.zeros(n)]

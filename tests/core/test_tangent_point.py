@@ -15,7 +15,7 @@ from moebius_addon import core
 from moebius_addon.core.energies.tangent_point_dense import tp_energy_gradient_x, tp_energy_x
 from moebius_addon.core.geometry.layout import as_layout
 from moebius_addon.core.tree.tangent_point import THETA, TangentPointFrame
-from tests.conftest import ROOT, out_here_and_in_one_thread, trefoil
+from tests.conftest import ROOT, out_here_and_in_one_thread, trefoil, varied_curves
 
 EXPONENTS = [(2.0, 4.0), (3.0, 6.0), (2.5, 5.0)]
 
@@ -192,38 +192,15 @@ def test_tree_against_exact(alpha, beta):
     assert np.linalg.norm(gt - g) <= 2e-2 * np.linalg.norm(g)
 
 
-def _varied_curves(n):
-    """``(name, parts, closed)`` of about ``n`` edges each: knots of the table (one of ten
-    crossings), the FHW unknot, a chain of three round rings, one round ring (nearly critical:
-    every cluster curved alike), ten open cables and a trefoil with noise."""
-    rng = np.random.default_rng(20261203)
-    out = [(k, core.resample(core.knots.named(k), n), True) for k in ("3_1", "7_2", "10_132")]
-    out.append(("fhw", core.knots.freedman_unknot(n), True))
-    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
-    ring = np.c_[np.cos(t), np.sin(t), 0 * t]
-    out.append(("three rings", core.resample([ring, ring[:, [0, 2, 1]] + [1.2, 0, 0],
-                                              ring + [2.4, 0, 0]], [n // 3] * 3), True))
-    out.append(("round ring", core.resample(ring, n), True))
-    s = np.linspace(0, 1, 50)
-    cables = [np.c_[0.1 * (c % 4) + rng.uniform(-0.02, 0.02) * np.sin(np.pi * s),
-                    0.1 * (c // 4) + rng.uniform(-0.02, 0.02) * np.sin(2 * np.pi * s), s]
-              for c in range(10)]
-    out.append(("ten cables", core.resample(cables, [n // 10 + 1] * 10, closed=False), False))
-    P = core.resample(core.knots.named("3_1"), n)
-    h = float(np.linalg.norm(P[1] - P[0]))
-    out.append(("noisy trefoil", P + 0.1 * h * rng.standard_normal(P.shape), True))
-    return out
-
-
 def test_default_theta_error_over_varied_curves():
     # the bound docs/api.md gives at the default theta and (alpha, beta): the energy within
     # 1e-3 of the exact sum on any curve, the gradient within 2e-2 (2-norm). Measured here at
     # 2 000 edges: energy at most 3.1e-4 (the round ring), gradient at most 1.3e-2 (the three
-    # rings); the first-order far field it replaced, at this theta: 1.8e-2 and 3.0e-2.
+    # rings); the first-order far field it replaced, at this theta: 1.8e-2 and 3.7e-2.
     # bench/tp_accuracy.py at 5 000 and 20 000 edges: 3.3e-4 / 7.5e-3 and 2.5e-4 / 7.6e-3 at
     # most (docs/lab/tangent-point.md, "Second order on both sides")
     worst = {}
-    for name, P, closed in _varied_curves(2000):
+    for name, P, closed in varied_curves(2000, np.random.default_rng(20261202)):
         X, lay = as_layout(P, closed)
         e, g = tp_energy_gradient_x(X, lay)
         et, gt = TangentPointFrame(X, lay).energy_gradient(X)
