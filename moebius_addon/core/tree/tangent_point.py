@@ -656,11 +656,10 @@ def _cc_coeffs(Sm, V, beta):
 # The cluster–cluster far field's lanes (the idea of ``_near_field``): up to this many partners
 # of one target at a time. One work array per parallel piece: lane j's partner at W[_CL k + j]
 # (k: L, c; |d|^−β at _CW_RHO; S, six, at _CW_S; 1 / |d|² at _CW_INV), its sums at
-# W[_CW_SUMS + _CL k + j] (energy;
-# ∂/∂L_A, ∂/∂c_A; −2 L ρ d; ∂/∂G_A, six; β L ρ₂ d ⊗ d ⊗ d, ten; L ρ; L ρ₂ d dᵀ, six; L ρ₄ d⁴,
-# fifteen) and what the pair gives the partner at W[_CW_OUT + _CL k + j] (∂/∂L_B, ∂/∂c_B,
-# ∂/∂S_B), added over the lanes in lane order. Lanes past the last partner repeat it with L = 0
-# and S = 0: every term is a multiple of one of them.
+# W[_CW_SUMS + _CL k + j] (energy; ∂/∂L_A, ∂/∂c_A; −2 L ρ d; ∂/∂G_A, six; β L ρ₂ d ⊗ d ⊗ d,
+# ten; L ρ; L ρ₂ d dᵀ, six; L ρ₄ d⁴, fifteen) and what the pair gives the partner at
+# W[_CW_OUT + _CL k + j] (∂/∂L_B, ∂/∂c_B, ∂/∂S_B), added over the lanes in lane order. Lanes
+# past the last partner repeat it with L = 0 and S = 0: every term is a multiple of one of them.
 _CL = 4
 _CW_RHO = 4 * _CL
 _CW_S = 5 * _CL
