@@ -436,7 +436,11 @@ def test_lean_iterations_are_the_same_iterates(monkeypatch):
     P = core.resample(core.knots.named("5_2"), 1200)
     monkeypatch.setattr(hs_solve, "MULTILEVEL_FROM", 600)
     whole = core.relax(P, max_iter=8, engine="tree")
+    from moebius_addon.core.runs import engine as engines
+
     shed = _lean(monkeypatch, single=False)
+    trims = []
+    monkeypatch.setattr(engines, "give_back", lambda: trims.append(1))
     lean = core.relax(P, max_iter=8, engine="tree")
     assert shed and all(shed)  # every iterate's solver let go of its operator
     assert lean.stats["lean"] is True and "lean" not in whole.stats
@@ -444,6 +448,14 @@ def test_lean_iterations_are_the_same_iterates(monkeypatch):
     assert lean.x.tobytes() == whole.x.tobytes()
     assert lean.history["energy"] == whole.history["energy"]
     assert lean.stats["krylov_iterations"] == whole.stats["krylov_iterations"]
+    # short of memory it also gave the heap's pages back; with memory to spare (the default
+    # from LEAN_FROM on) it does not, and the iterates are the same
+    assert len(trims) >= 8
+    monkeypatch.setattr(engines, "LEAN_SHARE", 1e12)
+    n_shed, n_trims = len(shed), len(trims)
+    roomy = core.relax(P, max_iter=8, engine="tree")
+    assert len(shed) > n_shed and len(trims) == n_trims
+    assert roomy.stats["lean"] is True and roomy.x.tobytes() == whole.x.tobytes()
 
 
 def test_a_shed_solver_is_built_again_for_a_later_solve(monkeypatch):
@@ -508,18 +520,19 @@ def test_lean_run_with_single_weights_follows_the_double_run(monkeypatch):
     assert max(lean.history["constraint_residual"]) <= 1e-10
 
 
-def test_a_run_is_lean_where_memory_is_short(monkeypatch):
+def test_a_run_is_lean_from_its_size_and_trims_where_memory_is_short(monkeypatch):
     from moebius_addon.core.runs import engine as engines
 
+    assert engines.lean_run(engines.LEAN_FROM) and not engines.lean_run(engines.LEAN_FROM - 1)
     gb = 1e9
     monkeypatch.setattr(engines, "available_memory", lambda: 20 * gb)
-    assert not engines.lean_run(engines.LEAN_FROM - 1)
-    assert not engines.lean_run(10**6)  # 4.6 GB of 20 available
-    assert engines.lean_run(3 * 10**6)  # 13.8 GB
+    assert not engines.trim_run(engines.LEAN_FROM - 1)
+    assert not engines.trim_run(10**6)  # 4.6 GB of 20 available
+    assert engines.trim_run(3 * 10**6)  # 13.8 GB
     monkeypatch.setattr(engines, "available_memory", lambda: 8 * gb)
-    assert engines.lean_run(10**6) and not engines.lean_run(5 * 10**5)
+    assert engines.trim_run(10**6) and not engines.trim_run(5 * 10**5)
     monkeypatch.setattr(engines, "available_memory", lambda: None)  # the system does not say
-    assert engines.lean_run(engines.LEAN_FROM) and not engines.lean_run(1000)
+    assert engines.trim_run(engines.LEAN_FROM) and not engines.trim_run(1000)
     from moebius_addon.core.runs.memory import available_memory
 
     assert available_memory() > 0

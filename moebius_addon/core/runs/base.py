@@ -474,7 +474,7 @@ class Run:
 
     def _stats(self) -> dict:
         """``result().stats``; subclasses add their counters. ``lean``: True where the tree
-        engine held less at once because memory is short (``engine.lean_run``)."""
+        engine held less at once (``engine.lean_run``: from 200 000 vertices on)."""
         stats = {"engine": self.engine.name}
         if self.engine.lean:
             stats["lean"] = True

@@ -265,8 +265,8 @@ class DenseEngine:
         """Factor the current iterate's system afresh (a stale one may be what failed)."""
         self.solver.refactor()
 
-    #: Whether the engine holds less at once because memory is short (the tree's
-    #: :func:`lean_run`); never for the dense engine.
+    #: Whether the engine holds less at once (the tree's :func:`lean_run`); never for the
+    #: dense engine.
     lean = False
 
     def shed(self) -> None:
@@ -334,22 +334,22 @@ GRADIENT_REUSE = 4.0
 #: / 0.160, 0.185; FHW 10 000 0.295, 0.328 / 0.231, 0.269; 100 cables of 200 (off) 1.7×
 #: faster than before (docs/lab/cables-and-obstacles.md).
 EARLY_TEST_BELOW = 5000
-#: From this many vertices on, a run on the tree that is short of memory is *lean*
-#: (:func:`lean_run`): it keeps only what each phase of an iteration needs
-#: (:meth:`TreeEngine.shed`, :meth:`TreeEngine.update`): the hs operator and the coarse levels
-#: go once the direction is solved, the last frame while the next iterate's solver is built
-#: and used (built again, the same, if a trial asks for its split). The iterates are the same.
-#: FHW at 10⁶ vertices, 2 threads: peak 4.54–4.59 → 3.84–3.87 GB, but 1.17× the seconds
-#: per iteration here (32.2 against 27.6 s, three alternated pairs: memory let go early
-#: comes back without the transparent huge pages the full run reuses; with numpy's huge
-#: pages off both took 28.3–31.5 s). Docs: docs/lab/tree-engine.md, "Memory at 10⁶ edges: where it
-#: goes, and what was tried".
+#: From this many vertices on a run on the tree is *lean* (:func:`lean_run`): it keeps only
+#: what each phase of an iteration needs (:meth:`TreeEngine.shed`, :meth:`TreeEngine.update`):
+#: the hs operator and the coarse levels go once the direction is solved, the last frame while
+#: the next iterate's solver is built and used (built again, the same, if a trial asks for
+#: its split). The iterates are the same. FHW at 10⁶ vertices, 2 threads: peak 3.81 → 3.21 GB
+#: at the same seconds per iteration (18.4 and 18.6 s); docs/lab/tree-engine.md, "Memory at
+#: 10⁶ edges: where it goes, and what was tried".
 LEAN_FROM = 200_000
 #: Peak resident memory per vertex of a run on the tree that is not lean (FHW at 10⁶
-#: vertices, 2 threads: 4.54–4.59 GB for the whole process).
+#: vertices, 2 threads: 4.54–4.59 GB for the whole process, before single-precision weights).
 FULL_BYTES_PER_VERTEX = 4_600
-#: A run is lean when its full peak would take more than this share of the memory the system
-#: has available when the engine is made.
+#: A lean run also returns the heap's free pages between its phases (``malloc_trim``,
+#: :func:`trim_run`) when a full run's peak would take more than this share of the memory the
+#: system has available when the engine is made: the pages come back as small pages, 1.2×
+#: the seconds (FHW at 10⁶: 38.2 against 31.1–31.5 s for setup and one iteration), and the
+#: peak did not fall (3.19 against 3.21 GB).
 LEAN_SHARE = 0.5
 #: From this many vertices on the hs operator stores its near weights in single precision
 #: (``HsOperator(single=True)``): 0.42 GB less at 10⁶ vertices and faster products; the
@@ -364,9 +364,14 @@ BANDED_NEWTON = Fraction(6, 5)
 
 
 def lean_run(n: int) -> bool:
-    """Whether a tree run of ``n`` vertices is lean (:data:`LEAN_FROM`): from that size on,
-    when its full peak (:data:`FULL_BYTES_PER_VERTEX`) would exceed :data:`LEAN_SHARE` of the
-    memory available now, or where the system does not say."""
+    """Whether a tree run of ``n`` vertices is lean (:data:`LEAN_FROM`)."""
+    return n >= LEAN_FROM
+
+
+def trim_run(n: int) -> bool:
+    """Whether a lean run of ``n`` vertices returns the heap's free pages between its phases
+    (:data:`LEAN_SHARE`): when a full run's peak (:data:`FULL_BYTES_PER_VERTEX`) would exceed
+    :data:`LEAN_SHARE` of the memory available now, or where the system does not say."""
     if n < LEAN_FROM:
         return False
     available = available_memory()
@@ -430,6 +435,8 @@ class TreeEngine(DenseEngine):
         super().__init__(layout, metric, **options)
         self._tree_krylov: list[int] = []  # per solve: Krylov iterations (0: direct)
         self.lean = lean_run(layout.n)
+        #: a lean run short of memory also returns the heap's free pages (:func:`trim_run`)
+        self.trim = self.lean and trim_run(layout.n)
 
     @classmethod
     def holds_dense(cls, metric: str) -> bool:
@@ -472,7 +479,7 @@ class TreeEngine(DenseEngine):
         old, self._saddle = self._saddle, None  # its memory is reused: no longer usable
         if old is not None:
             old.release()  # all but the band, before the new one is built
-        if self.lean:
+        if self.trim:
             give_back()
         if self.metric in BANDED_METRICS:
             old = getattr(old, "base", old)
@@ -493,7 +500,8 @@ class TreeEngine(DenseEngine):
 
     def shed(self) -> None:
         if self.lean and isinstance(self._saddle, hs_solve.HsSaddle) and self._saddle.shed():
-            give_back()
+            if self.trim:
+                give_back()
 
     def _whole(self) -> None:
         """The solver able to solve again after :meth:`shed` (built afresh at the iterate)."""
