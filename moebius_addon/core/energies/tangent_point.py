@@ -47,7 +47,7 @@ DEFAULT_BETA = 4.5
 MAX_BETA = 40.0
 #: Default admissibility of the tangent-point tree (with leaves of ``tree.tangent_point.
 #: LEAF_SIZE`` edges). Its far field for α = 2 is of second order on both sides: at 0.4 the
-#: energy erred at most 2.5e-4 and the gradient 7.6e-3 over varied curves (knots, links, a
+#: energy erred at most 3.3e-4 and the gradient 7.6e-3 over varied curves (knots, links, a
 #: round ring, open cables; 5 000 and 20 000 edges), and its E+g took less time than the
 #: first-order field's at 0.25 (docs/lab/tangent-point.md, "Second order on both sides").
 THETA = 0.4
