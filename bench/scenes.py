@@ -247,8 +247,7 @@ def cables_torus(cables: int = 100, edges: int = 200, R: float = 0.25, r: float 
     V = V + np.array([c, c, 0.5])
     return Scene("cables", parts, [False] * cables, [[0, edges] for _ in range(cables)],
                  obstacles=[(V, F)], options={"obstacle_tol": 0.1, "theta": CABLES_THETA},
-                 note=f"torus R {R}, r {r}, start bent to {clear} from its core circle; "
-                      f"theta {CABLES_THETA} (the Untangle Cables preset's)")
+                 note=f"torus R {R}, r {r}, start bent to {clear} from its core circle")
 
 
 # -- the independent check -------------------------------------------------------------------
@@ -770,7 +769,9 @@ def main(argv=None) -> int:
                 scene.options.pop("theta", None)
                 if a.theta:
                     scene.options["theta"] = a.theta
-                scene.note += f"; theta {a.theta:g}" if a.theta else "; the default theta"
+            theta = scene.options.get("theta")
+            scene.note += ("; the energy's default theta" if theta is None else f"; theta {theta:g}"
+                           + (" (the Untangle Cables preset's)" if theta == CABLES_THETA else ""))
             if radius:
                 scene.options["thickness"] = radius * mean_edge(scene.parts, scene.closed)
                 scene.note += f"; thickness {radius:g} mean edges"

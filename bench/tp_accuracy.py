@@ -35,7 +35,7 @@ def main(argv=None) -> int:
     rng = np.random.default_rng(20261202)
     worst = {th: (0.0, 0.0) for th in args.thetas}
     for name, P, closed in varied_curves(args.edges, rng):
-        X, layout = as_layout(P, closed if isinstance(P, list) else closed)
+        X, layout = as_layout(P, closed)
         t = time.perf_counter()
         E0, G0 = tp_energy_gradient_x(X, layout)
         t = time.perf_counter() - t

@@ -436,7 +436,7 @@ class TreeEngine(DenseEngine):
         self._tree_krylov: list[int] = []  # per solve: Krylov iterations (0: direct)
         self.lean = lean_run(layout.n)
         #: a lean run short of memory also returns the heap's free pages (:func:`trim_run`)
-        self.trim = self.lean and trim_run(layout.n)
+        self.trim = trim_run(layout.n)
 
     @classmethod
     def holds_dense(cls, metric: str) -> bool:

@@ -559,8 +559,8 @@ def _cc_node(node, E, M, ln, lo, hi, left, right, L, C, G, Wm, Sm, V):
     ``W`` eighteen (index 3 ab + c), ``V`` 36 (index 6 ab + kl). A leaf from its edges (one
     pair ab at a time, its sums in registers), a parent from its children's moved to its
     centre (:func:`_cc_shift`), each entry written once before it is added to."""
-    c0, c1, c2 = C[node, 0], C[node, 1], C[node, 2]
     if left[node] < 0:
+        c0, c1, c2 = C[node, 0], C[node, 1], C[node, 2]
         s0 = s1 = s2 = s3 = s4 = s5 = 0.0
         for q in range(lo[node], hi[node]):
             lq = ln[q]
