@@ -203,7 +203,7 @@ def _near_schedule(leaves, pairs, m, pieces):
         cnt[min(pos[pairs[p, 0]], pos[pairs[p, 1]]) + 1] += 1
     for t in range(nl):
         cnt[t + 1] += cnt[t]
-    other = np.empty(npairs, np.int64)
+    other = np.empty(npairs, np.int32)  # positions and leaves in 32 bits (fewer pages)
     fill = cnt[:nl].copy()
     for p in range(npairs):
         ta, tb = pos[pairs[p, 0]], pos[pairs[p, 1]]
@@ -218,8 +218,8 @@ def _near_schedule(leaves, pairs, m, pieces):
             koff[_task_key(piece[t], piece[other[k]], pieces) + 1] += 1
     for k in range(nk):
         koff[k + 1] += koff[k]
-    lane = np.empty(npairs, np.int64)
-    part = np.empty(npairs, np.int64)
+    lane = np.empty(npairs, np.int32)
+    part = np.empty(npairs, np.int32)
     kfill = koff[:nk].copy()
     for t in range(nl):
         for k in range(cnt[t], cnt[t + 1]):

@@ -288,7 +288,7 @@ def _near_pieces(leaves, pairs, m, nchunks):
             uoff[min(pairs[p, 0], pairs[p, 1]) + 1] += 1
     for k in range(m):
         uoff[k + 1] += uoff[k]
-    upart = np.empty(uoff[m], np.int64)
+    upart = np.empty(uoff[m], np.int32)
     fill = uoff[:m].copy()
     for p in range(pairs.shape[0]):
         a, b = pairs[p, 0], pairs[p, 1]
@@ -296,7 +296,7 @@ def _near_pieces(leaves, pairs, m, nchunks):
             lo_ = min(a, b)
             upart[fill[lo_]] = max(a, b)
             fill[lo_] += 1
-    uslot = np.empty(uoff[m], np.int64)
+    uslot = np.empty(uoff[m], np.int32)
     slot_leaf = np.empty(uoff[m], np.int64)
     stamp = np.full(m, -1, np.int64)
     slot = np.empty(m, np.int64)
@@ -1025,14 +1025,15 @@ def _cc_second(a, S, beta, gS, gD):
 
 
 @nb.njit(cache=True, parallel=True, error_model="numpy", fastmath={"contract"})
-def _cc_far(L, C, G, Wm, Sm, T2, foff, fpart, fslot, rows, beta, kind, grad, lanes):
+def _cc_far(L, C, G, Wm, Sm, T2, foff, fpart, fslot, rows, beta, kind, grad, lanes, gD):
     """Every node ``A`` against its far partners ``B`` (:func:`_cc_node`'s moments, ``T2``
     :func:`_cc_coeffs`'): per node the energy of its pairs as target; with ``grad`` the
     derivatives of the sum in its own ``L`` (column 0 of ``gt``), ``c`` (1–3), ``G`` (``gG``),
     ``W`` (``gW``), ``S`` (``gS``) and ``V`` (``gD``) as a target, and, per fixed piece of the
     targets, in every partner's ``L``, ``c`` and ``S`` as a source (``gs``, ``rows`` rows of
     :func:`_cc_slots`, ``fslot`` the row of each pair). Each target's sums are its own: the
-    same bits for any thread count. ``lanes``: always :data:`_CL`, passed at run time."""
+    same bits for any thread count. ``lanes``: always :data:`_CL`, passed at run time. ``gD``:
+    an ``(m, 36)`` array (with ``grad``) whose rows are all overwritten."""
     m = L.shape[0]
     nchunks = min(m, _FAR_CHUNKS)
     # every row written below (a target's own, zeros where it has no partner): np.zeros
@@ -1044,7 +1045,6 @@ def _cc_far(L, C, G, Wm, Sm, T2, foff, fpart, fslot, rows, beta, kind, grad, lan
     gG = np.empty((mg, 6))
     gW = np.empty((mg, 18))
     gS = np.empty((mg, 6))
-    gD = np.empty((mg, 36))
     gs = np.zeros((rows if grad else 0, _NOUT))
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
@@ -1304,6 +1304,7 @@ class TangentPointFrame(Frame):
                          gnode.sum(axis=0), rows)
             rows[1:4] += rows[7] / ln * E.T  # ∂l/∂e = e/l
         else:
+            V = None
             if own and self._cc_own is not None:
                 G, Wm, Sm, T2 = self._cc_own
             else:
@@ -1313,9 +1314,13 @@ class TangentPointFrame(Frame):
                 if own:
                     self._cc_own = (G, Wm, Sm, T2)
             fslot, soff, sidx = self._cc_slots
+            # V is read by _cc_coeffs alone: its rows take ∂/∂V (fresh pages cost ~2 µs each
+            # here, and a first call touches every page it writes)
+            if V is None or not grad:
+                V = np.empty((L.shape[0] if grad else 0, 36))
             eF, gt, gG, gW, gS, gD, gs = _cc_far(L, C, G, Wm, Sm, T2, self.foff, self.fpart,
                                                  fslot, sidx.shape[0], self.beta, self.kind,
-                                                 grad, _CL)
+                                                 grad, _CL, V)
             energy = float(np.sum(rows[0])) + float(np.sum(eF))
             if not grad:
                 return energy, None
