@@ -423,8 +423,7 @@ class Frame:
         Edges per leaf at most.
     keep_near : bool
         Keep the near pairs of leaves as :attr:`near` (for checks; the evaluations read only
-        what :meth:`_near_setup` derives from them, at 10⁶ edges 106 MB as
-        64-bit indices, half that in the 32 bits they take now).
+        what :meth:`_near_setup` derives from them; 32-bit indices, 53 MB at 10⁶ edges).
     """
 
     #: Whether open components take O'Hara's arc-length part (:mod:`._arc_field`; the Möbius

@@ -1314,9 +1314,9 @@ class TangentPointFrame(Frame):
                 if own:
                     self._cc_own = (G, Wm, Sm, T2)
             fslot, soff, sidx = self._cc_slots
-            # V is read by _cc_coeffs alone: its rows take ∂/∂V (fresh pages cost ~2 µs each
-            # here, and a first call touches every page it writes)
-            if V is None or not grad:
+            # V is read by _cc_coeffs alone: its rows take ∂/∂V (a first call pays for every
+            # fresh page it writes, ~2 µs each here)
+            if V is None:
                 V = np.empty((L.shape[0] if grad else 0, 36))
             eF, gt, gG, gW, gS, gD, gs = _cc_far(L, C, G, Wm, Sm, T2, self.foff, self.fpart,
                                                  fslot, sidx.shape[0], self.beta, self.kind,
