@@ -310,8 +310,7 @@ def _split(left, right, bmin, bmax, nc, theta2, masks, nchunks, want, cap):
     nn = np.zeros(nchunks, np.int64)
     room = max(cap, 1)
     while True:
-        # node indices in 32 bits: half the pages a first call faults in (and at 10⁶ edges half
-        # the lists' memory)
+        # node indices in 32 bits: half these buffers' pages (a first call faults in each)
         fbuf = np.empty((nchunks, room, 2), np.int32)
         nbuf = np.empty((nchunks, room, 2), np.int32)
         for cc in nb.prange(nchunks):

@@ -1304,20 +1304,18 @@ class TangentPointFrame(Frame):
                          gnode.sum(axis=0), rows)
             rows[1:4] += rows[7] / ln * E.T  # ∂l/∂e = e/l
         else:
-            V = None
             if own and self._cc_own is not None:
                 G, Wm, Sm, T2 = self._cc_own
+                V = np.empty((L.shape[0] if grad else 0, 36))  # room for ∂/∂V
             else:
+                # V is read by _cc_coeffs alone, so its rows take ∂/∂V below (fewer fresh
+                # pages for a first call)
                 G, Wm, Sm, V = _cc_moments(E, M, ln, tree.lo, tree.hi, tree.left, tree.right,
                                            L, C)
                 T2 = _cc_coeffs(Sm, V, self.beta)
                 if own:
                     self._cc_own = (G, Wm, Sm, T2)
             fslot, soff, sidx = self._cc_slots
-            # V is read by _cc_coeffs alone: its rows take ∂/∂V (a first call pays for every
-            # fresh page it writes, ~2 µs each here)
-            if V is None:
-                V = np.empty((L.shape[0] if grad else 0, 36))
             eF, gt, gG, gW, gS, gD, gs = _cc_far(L, C, G, Wm, Sm, T2, self.foff, self.fpart,
                                                  fslot, sidx.shape[0], self.beta, self.kind,
                                                  grad, _CL, V)
