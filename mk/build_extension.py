@@ -16,7 +16,9 @@ The linux-x64 zip also carries numba's cache of the kernels, compiled for a gene
 found): the staged package runs ``core.compilation.warmup`` under each Python of
 ``--kernel-cache`` (by default this one; ``make`` adds the 3.13 of the Blender 5.2 venv) with
 the numba and llvmlite wheels it ships, so that the first session after installing loads the
-kernels instead of compiling them.
+kernels instead of compiling them. Each compiling process then records
+``warmup.fingerprint()`` beside the cache (``fingerprint-py311.txt``), the bits its compiled
+kernels give, which tests compare with the bits of the kernels loaded from the cache.
 The zips of the other platforms carry none (they compile on first use, saying so).
 
 Usage::
@@ -173,10 +175,14 @@ def build_kernel_cache(stage_dir: Path, pythons: dict[str, str]) -> None:
         # reach LAPACK through it fails to compile here instead of aborting a user's Blender
         code = (f"import sys; assert sys.version_info[:2] == {tuple(map(int, version.split('.')))}"
                 f", sys.version; sys.modules['scipy'] = None; "
-                f"from {stage_dir.name}.core.compilation import warmup; sys.exit(warmup.main())")
+                f"from {stage_dir.name}.core.compilation import warmup; "
+                f"sys.exit(warmup.main(sys.argv[1:]))")
         print(f"kernel cache: compiling for {GENERIC_CPU} with Python {version} ({exe})",
               flush=True)
-        procs.append((version, subprocess.Popen([exe, "-c", code], env=env)))
+        # the sums as the kernels compiled in this process give them (warmup.fingerprint)
+        fingerprint = work / f"fingerprint-py{version.replace('.', '')}.txt"
+        procs.append((version, subprocess.Popen(
+            [exe, "-c", code, "--fingerprint", str(fingerprint)], env=env)))
     for version, proc in procs:
         if proc.wait():
             sys.exit(f"the kernel cache could not be built with Python {version}")
@@ -193,6 +199,8 @@ def ship_kernel_cache(work: Path, stage_dir: Path) -> None:
         if (work / name).is_dir():
             shutil.copytree(work / name, shipped / source.relative_to(stage_dir),
                             dirs_exist_ok=True)
+    for fingerprint in work.glob("fingerprint-*.txt"):
+        shutil.copy(fingerprint, shipped / fingerprint.name)
     scipy_kernels = [p.relative_to(shipped) for p in sorted(shipped.rglob("*.nbc"))
                      if _shipped_cache().calls_scipy(p.read_bytes())]
     if scipy_kernels:

@@ -43,7 +43,8 @@ class Runner:
         self.repo_built = threading.Event()
         self.repo_ok = False
         self.lock = threading.Lock()
-        self.results: list[tuple[str, str, float]] = []  # (part, PASS/FAIL, seconds)
+        # (part, PASS/FAIL, seconds, seconds of CPU)
+        self.results: list[tuple[str, str, float, float]] = []
         self.start = time.perf_counter()
 
     def part(self, name: str, argv: list[str], env: dict | None = None,
@@ -57,22 +58,26 @@ class Runner:
         log = LOGS / (name.replace(" ", "-").replace("/", "-") + ".log")
         t0 = time.perf_counter()
         with open(log, "w") as out:
-            rc = subprocess.call(argv, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT,
-                                 env={**os.environ, **(env or {})})
+            proc = subprocess.Popen(argv, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT,
+                                    env={**os.environ, **(env or {})})
+            # wait4: this part's CPU (its process tree), which two parts side by side share
+            _, status, usage = os.wait4(proc.pid, 0)
+            proc.returncode = rc = os.waitstatus_to_exitcode(status)
         seconds = time.perf_counter() - t0
-        self._report(name, "PASS" if rc == 0 else "FAIL", seconds, log.read_text())
+        self._report(name, "PASS" if rc == 0 else "FAIL", seconds, log.read_text(),
+                     usage.ru_utime + usage.ru_stime)
         return rc == 0
 
     def fail(self, name: str, why: str) -> None:
-        self._report(name, "FAIL", 0.0, why + "\n")
+        self._report(name, "FAIL", 0.0, why + "\n", 0.0)
 
-    def _report(self, name: str, verdict: str, seconds: float, text: str) -> None:
+    def _report(self, name: str, verdict: str, seconds: float, text: str, cpu: float) -> None:
         with self.lock:
-            self.results.append((name, verdict, seconds))
+            self.results.append((name, verdict, seconds, cpu))
             bar = "=" * 20
             print(f"\n{bar} {name}: {verdict} {bar}\n{text.rstrip()}", flush=True)
-            print(f"[time] {name}: {seconds:.0f} s (at {self.elapsed():.0f} s of make test)",
-                  flush=True)
+            print(f"[time] {name}: {seconds:.0f} s, {cpu:.0f} s of CPU "
+                  f"(at {self.elapsed():.0f} s of make test)", flush=True)
 
     def elapsed(self) -> float:
         return time.perf_counter() - self.start
@@ -188,10 +193,11 @@ def main() -> int:
     for name in names:  # a part that never reported (its worker died) is a failure too
         if name not in {r[0] for r in run.results}:
             run.fail(name, "did not run")
-    failed = [name for name, verdict, _ in run.results if verdict != "PASS"]
-    print("\nmake test:")
-    for name, verdict, seconds in run.results:
-        print(f"  {verdict}  {seconds:6.0f} s  {name}")
+    failed = [name for name, verdict, *_ in run.results if verdict != "PASS"]
+    print("\nmake test:               wall     CPU")
+    for name, verdict, seconds, cpu in run.results:
+        print(f"  {verdict}  {seconds:6.0f} s  {cpu:6.0f} s  {name}")
+    print(f"  total CPU {sum(r[3] for r in run.results):.0f} s")
     print(f"[time] make test, two workers: {run.elapsed():.0f} s; "
           f"{'failed: ' + ', '.join(failed) if failed else 'every part passed'}", flush=True)
     return 1 if failed else 0

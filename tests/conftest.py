@@ -4,6 +4,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -92,3 +93,44 @@ def out_here_and_in_one_thread(code: str):
                          env=env, cwd=ROOT, capture_output=True, text=True, check=True,
                          timeout=600)
     return here["OUT"], json.loads(out.stdout.strip().splitlines()[-1])
+
+
+
+#: numba's outermost compiles in this process, name → seconds (printed at the end of the
+#: session: where CI's minutes go); None where numba cannot be imported (the Blender venvs)
+_COMPILED: dict[str, float] | None = None
+
+
+def pytest_configure(config):
+    global _COMPILED
+    try:
+        from numba.core import event
+    except ImportError:  # the Blender venvs: numba comes with the extension, later
+        return
+    _COMPILED = {}
+
+    class Compiles(event.Listener):
+        depth, t0 = 0, 0.0
+
+        def on_start(self, ev) -> None:
+            if self.depth == 0:
+                self.t0 = time.perf_counter()
+            self.depth += 1
+
+        def on_end(self, ev) -> None:
+            self.depth -= 1
+            if self.depth == 0:
+                f = ev.data["dispatcher"].py_func
+                name = f"{f.__module__.rsplit('.', 1)[-1]}.{f.__qualname__}"
+                _COMPILED[name] = _COMPILED.get(name, 0.0) + time.perf_counter() - self.t0
+
+    event.register("numba:compile", Compiles())
+
+
+def pytest_terminal_summary(terminalreporter):
+    if _COMPILED is None:
+        return
+    top = sorted(_COMPILED.items(), key=lambda kv: -kv[1])[:8]
+    terminalreporter.write_line(
+        f"numba compiled {len(_COMPILED)} kernels in this process in "
+        f"{sum(_COMPILED.values()):.0f} s" + "".join(f"; {k} {v:.1f} s" for k, v in top))

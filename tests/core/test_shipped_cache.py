@@ -1,6 +1,7 @@
 """What the user's Blender runs: no kernel of the package needs scipy (Blender's Python has none,
 and numba reaches BLAS and LAPACK through it), and a shipped kernel that would is compiled
-instead of run (``core/_shipped_cache.py``)."""
+instead of run (``core/_shipped_cache.py``); the kernels loaded from it give the bits the
+compiled ones gave."""
 
 import ast
 import os
@@ -128,3 +129,39 @@ def test_every_cached_kernel_looks_in_the_shipped_cache(tmp_path):
     assert int(count) > 150 and len(sources) > 30
     assert sources - set(modules) == set()  # every module with kernels was imported
     assert unshipped == []
+
+
+FINGERPRINT = """
+from moebius_addon.core import compiling
+from moebius_addon.core.compilation.warmup import fingerprint
+with compiling() as watch:
+    found = fingerprint()
+print(found, watch.kernels)
+"""
+
+
+def _fingerprint(env) -> tuple[str, int]:
+    """``warmup.fingerprint()`` in a new process with ``env``, and how many kernels it compiled."""
+    out = subprocess.run([sys.executable, "-c", FINGERPRINT], env=env, cwd=ROOT,
+                         capture_output=True, text=True, check=True, timeout=1200)
+    found, kernels = out.stdout.split()[-2:]
+    return found, int(kernels)
+
+
+def test_same_bits_compiled_and_from_the_cache(tmp_path):
+    # the tree's kernels fuse multiply-adds (fast-math "contract"): the code a process compiles
+    # and the code numba's cache gives later processes must agree to the bit (in the Möbius
+    # near field they did not). Under `make test` the suite loads the test zip's kernels, whose
+    # build recorded the bits its freshly compiled kernels gave (warmup.fingerprint): here the
+    # same sums from those kernels loaded from the cache, none compiled. Without that record,
+    # two processes on empty caches: the first compiles every kernel (minutes), the second loads.
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    version = f"{sys.version_info[0]}{sys.version_info[1]}"
+    recorded = _shipped_cache.SHIPPED / f"fingerprint-py{version}.txt"
+    if recorded.exists() and _shipped_cache.host_runs_generic():
+        assert _fingerprint(env) == (recorded.read_text().strip(), 0)
+        return
+    env["MOEBIUS_KERNEL_CACHE"] = str(tmp_path / "no-shipped-kernels")
+    (first, compiled), (again, loaded) = _fingerprint(env), _fingerprint(env)
+    assert (compiled > 0, loaded) == (True, 0)
+    assert again == first

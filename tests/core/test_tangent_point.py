@@ -1,12 +1,8 @@
 """The tangent-point energy (core/energies/tangent_point.py, core/tangent_point_dense.py,
 core/tangent_point_tree.py, core.energy / core.energy_gradient): against a slow numpy sum of
 docs/design.md's formula, its own central differences, its scaling law and rigid motions; the
-tree against the exact sum; the same bits for one and two threads, and from compiled and cached
-kernels; refusals."""
-
-import os
-import subprocess
-import sys
+tree against the exact sum; the same bits for one and two threads (from compiled and cached
+kernels: tests/core/test_shipped_cache.py); refusals."""
 
 import numpy as np
 import pytest
@@ -15,7 +11,7 @@ from moebius_addon import core
 from moebius_addon.core.energies.tangent_point_dense import tp_energy_gradient_x, tp_energy_x
 from moebius_addon.core.geometry.layout import as_layout
 from moebius_addon.core.tree.tangent_point import THETA, TangentPointFrame
-from tests.conftest import ROOT, out_here_and_in_one_thread, trefoil, varied_curves
+from tests.conftest import out_here_and_in_one_thread, trefoil, varied_curves
 
 EXPONENTS = [(2.0, 4.0), (3.0, 6.0), (2.5, 5.0)]
 
@@ -260,37 +256,6 @@ for a, b in ((2.0, 4.0), (2.5, 5.0)):
 def test_same_bits_for_one_and_two_threads():
     here, there = out_here_and_in_one_thread(CODE)
     assert there == here
-
-
-FRESH = """
-import hashlib, numpy as np
-from moebius_addon.core.geometry.layout import as_layout
-from moebius_addon.core.tree.tangent_point import TangentPointFrame, _cc_far, _near
-from tests.conftest import trefoil
-P = trefoil(300) + 0.002 * np.random.default_rng(6).standard_normal((300, 3))
-X, lay = as_layout(P)
-e, g = TangentPointFrame(X, lay, 2.0, 4.0, 0.3).energy_gradient(X)
-hits = sum(f.stats.cache_hits.total() for f in (_near, _cc_far))
-misses = sum(f.stats.cache_misses.total() for f in (_near, _cc_far))
-print(e.hex(), hashlib.sha256(g.tobytes()).hexdigest(), hits, misses)
-"""
-
-
-def test_same_bits_compiled_and_from_the_cache(tmp_path):
-    # the tree's kernels fuse multiply-adds (fast-math "contract"): the code a first process
-    # compiles and the code numba's cache gives later processes must agree to the bit (in the
-    # Möbius near field they did not). The suite itself loads the test zip's kernels
-    # (mk/run_tests.py), so here both caches start empty: every kernel is compiled (about two
-    # minutes), then loaded.
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
-           "MOEBIUS_KERNEL_CACHE": str(tmp_path / "no-shipped-kernels")}
-    runs = [subprocess.run([sys.executable, "-c", FRESH], env=env, cwd=ROOT, capture_output=True,
-                           text=True, check=True, timeout=1200).stdout.split()[-4:]
-            for _ in range(2)]
-    (e0, g0, hits0, misses0), (e1, g1, hits1, misses1) = runs
-    assert (hits0, int(misses0) > 0) == ("0", True)  # compiled
-    assert (int(hits1) > 0, misses1) == (True, "0")  # loaded
-    assert (e1, g1) == (e0, g0)
 
 
 def test_refusals():

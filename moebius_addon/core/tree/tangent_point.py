@@ -77,7 +77,7 @@ _FAR_CHUNKS = 16
 # Of fast-math only "contract" (fused multiply–adds), here and in the far field's kernels
 # (_cc_moments, _cc_far, _cc_to_edges): about 8 % off the sums. Only while the code compiled in
 # a first process and the code numba's cache loads give the same bits
-# (tests/core/test_tangent_point.py); in the Möbius near and far fields they did not
+# (tests/core/test_shipped_cache.py); in the Möbius near and far fields they did not
 # (docs/lab/repulsor.md, "Fused multiply–adds and symmetric moments in the tangent-point tree").
 # For α = 2 the partner edges go two at a time: the radial parts of both (1 / |d|², |d|^−β,
 # the masks) first, each in its own rows (_NW_INV, and _NW_INV + _LANES for the second;
