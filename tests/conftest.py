@@ -95,7 +95,6 @@ def out_here_and_in_one_thread(code: str):
     return here["OUT"], json.loads(out.stdout.strip().splitlines()[-1])
 
 
-
 #: numba's outermost compiles in this process, name → seconds (printed at the end of the
 #: session: where CI's minutes go); None where numba cannot be imported (the Blender venvs)
 _COMPILED: dict[str, float] | None = None
