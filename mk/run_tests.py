@@ -60,7 +60,7 @@ class Runner:
         with open(log, "w") as out:
             proc = subprocess.Popen(argv, cwd=ROOT, stdout=out, stderr=subprocess.STDOUT,
                                     env={**os.environ, **(env or {})})
-            # wait4: this part's CPU (its process tree), which two parts side by side share
+            # wait4: the CPU seconds of this part's process tree (the wall time is shared)
             _, status, usage = os.wait4(proc.pid, 0)
             proc.returncode = rc = os.waitstatus_to_exitcode(status)
         seconds = time.perf_counter() - t0
