@@ -16,7 +16,8 @@ parts in this order, each the next one it can run:
 
 Every part runs even when one before it failed (a part that needs the repository is failed
 when the repository could not be built); each part's output is printed whole when it ends,
-with a ``[time]`` line (its wall and CPU seconds), then a summary; the exit status is 1 when any part failed.
+with a ``[time]`` line (its wall and CPU seconds), then a summary; the exit status is 1 when
+any part failed.
 
     python mk/run_tests.py --lines 4.2 4.5 5.2 --repo build/test-repo
 """
