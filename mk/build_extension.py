@@ -166,6 +166,7 @@ def build_kernel_cache(stage_dir: Path, pythons: dict[str, str]) -> None:
     work = stage_dir.parent / "kernel-cache"
     shutil.rmtree(work, ignore_errors=True)
     paths = {version: _numba_for(version, stage_dir) for version in pythons}
+    shipped_cache = _shipped_cache()
     procs = []
     for version, exe in pythons.items():
         env = dict(os.environ, NUMBA_CACHE_DIR=str(work), NUMBA_CPU_NAME=GENERIC_CPU,
@@ -180,7 +181,7 @@ def build_kernel_cache(stage_dir: Path, pythons: dict[str, str]) -> None:
         print(f"kernel cache: compiling for {GENERIC_CPU} with Python {version} ({exe})",
               flush=True)
         # the sums as the kernels compiled in this process give them (warmup.fingerprint)
-        fingerprint = work / f"fingerprint-py{version.replace('.', '')}.txt"
+        fingerprint = work / shipped_cache.fingerprint_file(version)
         procs.append((version, subprocess.Popen(
             [exe, "-c", code, "--fingerprint", str(fingerprint)], env=env)))
     for version, proc in procs:
@@ -199,7 +200,7 @@ def ship_kernel_cache(work: Path, stage_dir: Path) -> None:
         if (work / name).is_dir():
             shutil.copytree(work / name, shipped / source.relative_to(stage_dir),
                             dirs_exist_ok=True)
-    for fingerprint in work.glob("fingerprint-*.txt"):
+    for fingerprint in work.glob(_shipped_cache().fingerprint_file("*")):
         shutil.copy(fingerprint, shipped / fingerprint.name)
     scipy_kernels = [p.relative_to(shipped) for p in sorted(shipped.rglob("*.nbc"))
                      if _shipped_cache().calls_scipy(p.read_bytes())]

@@ -4,7 +4,6 @@ import json
 import os
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -95,41 +94,27 @@ def out_here_and_in_one_thread(code: str):
     return here["OUT"], json.loads(out.stdout.strip().splitlines()[-1])
 
 
-#: numba's outermost compiles in this process, name → seconds (printed at the end of the
-#: session: where CI's minutes go); None where numba cannot be imported (the Blender venvs)
-_COMPILED: dict[str, float] | None = None
+#: numba's compiles in this process (printed at the end of the session: where CI's minutes go);
+#: None where numba cannot be imported (the Blender venvs: it comes with the extension)
+_COMPILES = None
 
 
 def pytest_configure(config):
-    global _COMPILED
+    global _COMPILES
     try:
         from numba.core import event
-    except ImportError:  # the Blender venvs: numba comes with the extension, later
+
+        from moebius_addon.core.compilation.notice import CompileWatch
+    except ImportError:
         return
-    _COMPILED = {}
-
-    class Compiles(event.Listener):
-        depth, t0 = 0, 0.0
-
-        def on_start(self, ev) -> None:
-            if self.depth == 0:
-                self.t0 = time.perf_counter()
-            self.depth += 1
-
-        def on_end(self, ev) -> None:
-            self.depth -= 1
-            if self.depth == 0:
-                f = ev.data["dispatcher"].py_func
-                name = f"{f.__module__.rsplit('.', 1)[-1]}.{f.__qualname__}"
-                _COMPILED[name] = _COMPILED.get(name, 0.0) + time.perf_counter() - self.t0
-
-    event.register("numba:compile", Compiles())
+    _COMPILES = CompileWatch()
+    event.register("numba:compile", _COMPILES)
 
 
 def pytest_terminal_summary(terminalreporter):
-    if _COMPILED is None:
+    if _COMPILES is None:
         return
-    top = sorted(_COMPILED.items(), key=lambda kv: -kv[1])[:8]
+    top = sorted(_COMPILES.by_kernel.items(), key=lambda kv: -kv[1])[:8]
     terminalreporter.write_line(
-        f"numba compiled {len(_COMPILED)} kernels in this process in "
-        f"{sum(_COMPILED.values()):.0f} s" + "".join(f"; {k} {v:.1f} s" for k, v in top))
+        f"numba compiled {_COMPILES.kernels} kernels in this process in "
+        f"{_COMPILES.seconds:.0f} s" + "".join(f"; {k} {v:.1f} s" for k, v in top))

@@ -156,8 +156,8 @@ def test_same_bits_compiled_and_from_the_cache(tmp_path):
     # same sums from those kernels loaded from the cache, none compiled. Without that record,
     # two processes on empty caches: the first compiles every kernel (minutes), the second loads.
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
-    version = f"{sys.version_info[0]}{sys.version_info[1]}"
-    recorded = _shipped_cache.SHIPPED / f"fingerprint-py{version}.txt"
+    version = f"{sys.version_info[0]}.{sys.version_info[1]}"
+    recorded = _shipped_cache.SHIPPED / _shipped_cache.fingerprint_file(version)
     if recorded.exists() and _shipped_cache.host_runs_generic():
         assert _fingerprint(env) == (recorded.read_text().strip(), 0)
         return

@@ -159,6 +159,9 @@ class Session:
                     self.blender.wait(10)
                 except subprocess.TimeoutExpired:
                     os.killpg(self.blender.pid, signal.SIGKILL)
+        self.stop_xvfb()
+
+    def stop_xvfb(self) -> None:
         if self.xvfb is not None and self.xvfb.poll() is None:
             self.xvfb.terminate()
             self.xvfb.wait(10)
@@ -230,8 +233,7 @@ class Session:
                     # fine): worth one more try with a new server, not a red test
                     self.log("Blender could not open the display; Xvfb and Blender once more")
                     self.restarted = True
-                    self.xvfb.terminate()
-                    self.xvfb.wait(10)
+                    self.stop_xvfb()
                     self.start_xvfb()
                     self.start_blender(*self.blender_args)
                     continue

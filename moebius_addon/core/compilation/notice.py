@@ -20,13 +20,15 @@ PREPARING = ("compiling the numerical kernels (only on the first use after insta
 
 
 class CompileWatch(event.Listener):
-    """Counts the kernels numba compiles (outermost compiles only) and their seconds; calls
-    ``say(PREPARING)`` at the first."""
+    """Counts the kernels numba compiles (outermost compiles only) and their seconds, also per
+    kernel (``by_kernel``: ``"module.qualname"`` → seconds); calls ``say(PREPARING)`` at the
+    first."""
 
     def __init__(self, say: Callable[[str], None] | None = None) -> None:
         self.say = say
         self.kernels = 0
         self.seconds = 0.0
+        self.by_kernel: dict[str, float] = {}
         self._depth = 0
         self._t0 = 0.0
 
@@ -45,8 +47,12 @@ class CompileWatch(event.Listener):
     def on_end(self, ev) -> None:
         self._depth -= 1
         if self._depth == 0:
+            seconds = time.perf_counter() - self._t0
             self.kernels += 1
-            self.seconds += time.perf_counter() - self._t0
+            self.seconds += seconds
+            f = ev.data["dispatcher"].py_func
+            name = f"{f.__module__.rsplit('.', 1)[-1]}.{f.__qualname__}"
+            self.by_kernel[name] = self.by_kernel.get(name, 0.0) + seconds
 
     def summary(self) -> str:
         """``"compiled 12 kernels in 30.1 s"`` (empty if nothing was compiled)."""

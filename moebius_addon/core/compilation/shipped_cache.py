@@ -60,6 +60,12 @@ def host_runs_generic() -> bool:
 PACKAGE_FILE = "package.txt"
 
 
+def fingerprint_file(python: str) -> str:
+    """The file in :data:`SHIPPED` with the build's ``warmup.fingerprint()`` for Python
+    ``python`` (``"3.11"``: ``fingerprint-py311.txt``)."""
+    return f"fingerprint-py{python.replace('.', '')}.txt"
+
+
 class _Renaming(pickle.Unpickler):
     """Unpickles a cache entry made where the package had another name (the build's staging
     package): numba stores the module of each kernel by name (its globals are rebuilt from it,
