@@ -160,7 +160,7 @@ def test_a_tangent_point_run_from_the_defaults_gets_its_own_theta(scene, mb, cor
     assert s.theta == 0.0
     assert mb.relax_settings(s)["theta"] is None
     run = mb.ObjectRelaxation(knot, **mb.relax_settings(s))
-    assert run.run.engine.theta == core.energies.ENERGIES["tangent_point"].default_theta == 0.4
+    assert run.run.engine.theta == core.energies.ENERGIES["tangent_point"].default_theta == 0.5
     s.energy = "moebius"
     run = mb.ObjectRelaxation(knot, **mb.relax_settings(s))
     assert run.run.engine.theta == core.energies.ENERGIES["moebius"].default_theta == 0.175

@@ -203,12 +203,12 @@ def test_public_evaluators_take_open_curves_on_the_tree(rng):
 def test_tangent_point_tree_close_to_exact(name, ab, rng):
     # the tangent-point energy on the tree with open components: the kernel of closed ones
     # (neighbours along a cable left out, not the first and last edge), no arc-length part,
-    # pairs that may share a cable at θ · OPEN_THETA. Measured at the default θ (0.4) on these
-    # layouts: energy 7.4e-6 to 1.7e-3 (the larger for (3, 6), edge against cluster), gradient
-    # 2.9e-3 to 2.5e-2, and 5.3e-2 for (2, 4) on the one bent cable (nearly straight, so
-    # nearly critical: its gradient is a small sum of large terms; the first-order far field
-    # at its 0.25 erred 1.7e-2 there, at 0.4 3.7e-2); a small θ that leaves no far pair gives
-    # the exact sums (the split leaves out or doubles no pair at the open ends)
+    # pairs that may share a cable at θ · OPEN_THETA. Measured at the default θ (0.5) on these
+    # layouts: energy 1.5e-5 to 2.6e-3 (the larger for (3, 6), edge against cluster), gradient
+    # 4.2e-3 to 3.2e-2, and 8.8e-2 for (2, 4) on the one bent cable (nearly straight, so
+    # nearly critical: its gradient is a small sum of large terms; at θ 0.4 5.3e-2); a small θ
+    # that leaves no far pair gives the exact sums (the split leaves out or doubles no pair at
+    # the open ends)
     from moebius_addon.core.energies.tangent_point_dense import tp_energy_gradient_x
     from moebius_addon.core.tree.tangent_point import TangentPointFrame
 
@@ -219,7 +219,7 @@ def test_tangent_point_tree_close_to_exact(name, ab, rng):
     assert frame.far_pairs > 1000 and frame.arc is None
     E1, G1 = frame.energy_gradient(X)
     assert abs(E1 - E0) / E0 < 3e-3
-    assert _rel(G1, G0) < (8e-2 if name == "cable" and ab[0] == 2.0 else 3e-2)
+    assert _rel(G1, G0) < (0.12 if name == "cable" and ab[0] == 2.0 else 4e-2)
     if name != "cable":  # one long cable keeps far pairs down to tiny θ
         frame = TangentPointFrame(X, layout, *ab, theta=0.005)
         assert frame.far_pairs == 0

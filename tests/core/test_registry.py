@@ -70,7 +70,7 @@ def test_every_energy_has_a_whole_record():
             assert name in warmup.PATHS
     # the defaults live once: the tree's θ per energy, read by the tree modules
     assert moebius_tree.THETA == ENERGIES["moebius"].default_theta == 0.175
-    assert tangent_point_tree.THETA == ENERGIES["tangent_point"].default_theta == 0.4
+    assert tangent_point_tree.THETA == ENERGIES["tangent_point"].default_theta == 0.5
     assert set(ENERGY_OPTIONS) == {"alpha", "beta", "stiffness"}
 
 

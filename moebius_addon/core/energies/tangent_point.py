@@ -46,11 +46,11 @@ DEFAULT_BETA = 4.5
 #: gave a finite energy of 5.8e19 on the start and NaN in the run).
 MAX_BETA = 40.0
 #: Default admissibility of the tangent-point tree (with leaves of ``tree.tangent_point.
-#: LEAF_SIZE`` edges). Its far field for α = 2 is of second order on both sides: at 0.4 the
-#: energy erred at most 3.3e-4 and the gradient 7.6e-3 over varied curves (knots, links, a
-#: round ring, open cables; 5 000 and 20 000 edges), and its E+g took less time than the
-#: first-order field's at 0.25 (docs/lab/tangent-point.md, "Second order on both sides").
-THETA = 0.4
+#: LEAF_SIZE`` edges), Repulsor's default too. Its far field for α = 2 is of second order on
+#: both sides: at 0.5 the energy erred at most 6.5e-4 over varied curves (knots, links, a round
+#: ring, open cables; 1 000 to 20 000 edges), under the 1e-3 that docs/api.md gives, and its E+g
+#: took 0.8 of the time at 0.4 from 10⁴ edges on (docs/lab/tangent-point.md, "The default θ 0.5").
+THETA = 0.5
 
 # what :func:`pair` computes (a constant argument at every call site)
 KIND_2_4 = 0  # α = 2, β = 4: no pow

@@ -453,9 +453,11 @@ class Frame:
         self._own = (X.copy(), edges, clusters)
         nc = clusters[-1]
         m = tree.size
-        # each list holds about 2.8–3.9 m / theta pairs (measured from 5 000 to 100 000 edges),
-        # and never more than every pair of nodes (a tiny theta asked for petabytes here)
-        cap = max(256, int(min(8 * m / self.theta, m * (m + 1) / 2) / _SPLIT_CHUNKS))
+        # a chunk's list held up to 8.5 m / (theta · chunks) pairs (FHW, trefoil and ring, 600 to
+        # 40 000 edges, θ 0.25–0.5): room for 12, since a chunk that runs out has every chunk
+        # split again (at 2 400 edges, θ 0.5, twice the time); untouched room costs no pages.
+        # Never more than every pair of nodes (a tiny theta asked for petabytes here)
+        cap = max(256, int(min(12 * m / self.theta, m * (m + 1) / 2) / _SPLIT_CHUNKS))
         far, near = _split(tree.left, tree.right, bmin, bmax, nc, self.theta**2,
                            open_masks(layout, tree), _SPLIT_CHUNKS,
                            64 * _SPLIT_CHUNKS, cap)
