@@ -131,19 +131,24 @@ def _build(mid, leaf_size):
             k = _leaves(b - a, leaf_size)
             if k <= 1:
                 continue
-            # longest side of the midpoints' box
+            # longest side of the midpoints' box (the first of equal sides), one pass over the
+            # edges: a gather of a row, not three of one coordinate (the build 0.83–0.85 of
+            # the time, 2 400 to 10⁵ edges)
+            mn0 = mn1 = mn2 = np.inf
+            mx0 = mx1 = mx2 = -np.inf
+            for q in range(a, b):
+                p = perm[q]
+                v0, v1, v2 = mid[p, 0], mid[p, 1], mid[p, 2]
+                mn0, mx0 = min(mn0, v0), max(mx0, v0)
+                mn1, mx1 = min(mn1, v1), max(mx1, v1)
+                mn2, mx2 = min(mn2, v2), max(mx2, v2)
             axis = 0
-            ext = -1.0
-            for d in range(3):
-                mn = np.inf
-                mx = -np.inf
-                for q in range(a, b):
-                    v = mid[perm[q], d]
-                    mn = min(mn, v)
-                    mx = max(mx, v)
-                if mx - mn > ext:
-                    ext = mx - mn
-                    axis = d
+            ext = mx0 - mn0
+            if mx1 - mn1 > ext:
+                ext = mx1 - mn1
+                axis = 1
+            if mx2 - mn2 > ext:
+                axis = 2
             for q in range(a, b):
                 key[q] = mid[perm[q], axis]
             kl = (k + 1) // 2
