@@ -288,3 +288,23 @@ def test_trial_energy_keeps_the_iterates_split_nearby(rng):
     E, G = engine.energy_gradient(beyond)
     Ef, Gf = engine.energy_choice.frame(beyond, layout, engine.theta).energy_gradient(beyond)
     assert E == Ef and np.array_equal(G, Gf)
+
+
+def test_split_that_runs_out_of_room_gives_the_same_lists():
+    # a chunk whose buffer fills has every chunk split again with twice the room (rare since
+    # the room is 12 m/θ): from a room of 1 pair the same far and near lists as with room to
+    # spare
+    from moebius_addon.core.tree import bvh
+
+    P = trefoil(2400) + 0.002 * np.random.default_rng(5).standard_normal((2400, 3))
+    X, layout = as_layout(P)
+    frame = bh.Frame(X, layout, theta=0.5, keep_near=True)
+    tree = frame.tree
+    bmin, bmax = bvh.segment_boxes(tree, X, layout)
+    nc = frame._clusters(frame._edges(X))[-1]
+    masks = bh.open_masks(layout, tree)
+    lists = [bh._split(tree.left, tree.right, bmin, bmax, nc, 0.25, masks, 16, 64 * 16, cap)
+             for cap in (1, 10**5)]
+    assert lists[0][1].shape[0] == frame.near_pairs > 1000
+    for small, roomy in zip(*lists, strict=True):
+        assert small.shape[0] > 1000 and np.array_equal(small, roomy)
