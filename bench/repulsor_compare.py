@@ -26,7 +26,11 @@ steady_clock; ours: time.perf_counter, after a warm-up on a small curve so that 
 is timed) and reports its peak resident memory (VmHWM of /proc/self/status: getrusage's
 ru_maxrss would carry the Python parent's peak across the exec). Both sides run with the
 same thread count T: Repulsor's ``thread_count`` and ``OPENBLAS_NUM_THREADS=T``; ours
-``NUMBA_NUM_THREADS=T`` and ``OPENBLAS_NUM_THREADS=T``.
+``NUMBA_NUM_THREADS=T`` and ``OPENBLAS_NUM_THREADS=T``. After the rounds of a size and thread
+count: a ``host`` line, the share of the VM's CPU time other guests of the host took while they
+ran (``steal`` of /proc/stat; on a shared VM it moved Repulsor's E+g at 2 400 edges from 7.8 to
+42 ms in one afternoon), and ``rounds`` lines, Repulsor's time ÷ ours round by round and their
+median.
 
 Energy. Repulsor's ``TangentPointEnergy0(q, p)`` for curves sums, over ordered pairs of distinct
 edges, ``l_I l_J |P_I (m_J − m_I)|^q / |m_J − m_I|^p`` with ``P_I`` the projection onto the
@@ -313,6 +317,36 @@ def show(row: dict) -> None:
                                                   if k not in ("side", "mode")]), flush=True)
 
 
+def cpu_ticks() -> tuple[int, int] | None:
+    """(steal, all) clock ticks of every CPU from /proc/stat's ``cpu`` line (None elsewhere):
+    the share other guests of the host took from this VM, which moves the seconds of a run."""
+    try:
+        with open("/proc/stat") as f:
+            ticks = [int(v) for v in f.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return None
+    return ticks[7], sum(ticks)
+
+
+def host_line(before, after, n: int, threads: int) -> dict | None:
+    """The stolen share of the VM's CPU time between two :func:`cpu_ticks`."""
+    if before is None or after is None or after[1] <= before[1]:
+        return None
+    hz = os.sysconf("SC_CLK_TCK")
+    return {"side": "host", "mode": "steal", "edges": n, "threads": threads,
+            "steal_seconds": (after[0] - before[0]) / hz,
+            "steal_share": (after[0] - before[0]) / (after[1] - before[1])}
+
+
+def per_round(rows: list[dict], mode: str, n: int, threads: int) -> list[float]:
+    """Repulsor's time ÷ ours round by round (the processes of a round ran one after another,
+    so they saw much the same host)."""
+    def times(side):
+        return [r["seconds"] for r in rows if r["side"] == side and r["mode"] == mode
+                and r["edges"] == n and r["threads"] == threads]
+    return [a / b for a, b in zip(times("repulsor"), times("ours"), strict=False)]
+
+
 def summary(rows: list[dict], side: str, mode: str, n: int, threads: int, key="seconds"):
     vals = [r[key] for r in rows if r["side"] == side and r["mode"] == mode
             and r["edges"] == n and r["threads"] == threads]
@@ -407,6 +441,7 @@ def main() -> None:
             rows.append(row)
         for t in args.threads:
             env = env_for(t)
+            ticks = cpu_ticks()
             for _ in range(args.reps):
                 for mode in ("eg", "iter"):
                     if have_driver:
@@ -430,6 +465,12 @@ def main() -> None:
                              str(args.repulsor_theta)], env)
                 measure(me + ["--worker", "error", "--raw-curve", str(path), "--threads-of-worker",
                               str(t)] + extra, env)
+            host = host_line(ticks, cpu_ticks(), n, t)
+            if host:
+                rows.append(host)
+                print(f"host edges={n} threads={t} steal_seconds={host['steal_seconds']:.1f} "
+                      f"steal_share={host['steal_share']:.3f} (of all the VM's CPU time while "
+                      "these rounds ran)", flush=True)
             best = {}
             for side in ("repulsor", "ours"):
                 for mode in ("eg", "iter", "eg_moebius", "iter_moebius"):
@@ -448,6 +489,12 @@ def main() -> None:
                     print(f"summary side={side} mode={mode} edges={n} threads={t} "
                           f"build_best={parts[0]['best']:.4f} kernel_best={parts[1]['best']:.4f} "
                           f"k={parts[1]['k']}", flush=True)
+            for mode in ("eg", "iter"):
+                r = per_round(rows, mode, n, t)
+                if r:
+                    print(f"rounds mode={mode} edges={n} threads={t} repulsor/ours "
+                          f"{' '.join(f'{x:.2f}' for x in r)} median={statistics.median(r):.2f}",
+                          flush=True)
             # iteration ÷ E+g of the same energy, best of each ("iteration ≤ 6 E+g")
             for side, it, eg in (("repulsor", "iter", "eg"), ("ours", "iter", "eg"),
                                  ("ours", "iter_moebius", "eg_moebius")):
