@@ -48,8 +48,9 @@ MAX_BETA = 40.0
 #: Default admissibility of the tangent-point tree (with leaves of ``tree.tangent_point.
 #: LEAF_SIZE`` edges), Repulsor's default too. Its far field for α = 2 is of second order on
 #: both sides: at 0.5 the energy erred at most 6.5e-4 over varied curves (knots, links, a round
-#: ring, open cables; 1 000 to 20 000 edges), under the 1e-3 that docs/api.md gives, and its E+g
-#: took 0.8 of the time at 0.4 from 10⁴ edges on (docs/lab/tangent-point.md, "The default θ 0.5").
+#: ring, open cables; 500 to 20 000 edges), under the 1e-3 that docs/api.md gives, and its E+g
+#: took 0.84–0.89 of the time at 0.4 from 10⁴ edges on (docs/lab/tangent-point.md, "The default
+#: θ 0.5").
 THETA = 0.5
 
 # what :func:`pair` computes (a constant argument at every call site)
