@@ -22,6 +22,10 @@ correction of rank 12 per component (the spring removed, the barycenter term add
 barycenter rows and their multipliers bordered on). The correction is supported on its
 component and the band is block diagonal by component, so its capacitance matrix is a 12 × 12
 block per component: memory and work stay O(N) for links too.
+
+A long block (:data:`SPLIT_FROM`) is factored and solved as two halves side by side, joined by
+a separator of a few rows eliminated last (:func:`_split_band`), so that a curve of one piece
+has two cores for its band solves.
 """
 
 from __future__ import annotations
@@ -49,6 +53,11 @@ _BLOCKS = 64
 COMPACT_FROM = 200_000
 # Vertices per piece of the low-rank correction's parallel sums (:func:`_correction`).
 _CHUNK = 4096
+#: A block of the band (a component, or components merged by :func:`block_cuts`) of this
+#: many vertices or more is factored and solved as two halves side by side, joined by a
+#: separator of a few rows (:func:`_split_band`): a curve of one piece used one core for its
+#: band solves. By size alone, so the same bits for any thread count.
+SPLIT_FROM = 20_000
 
 
 class EdgeParts(NamedTuple):
@@ -228,6 +237,13 @@ def _solve_range(U, L, uw, lw, uo, lo_, piv, x, lo, n):
     ``lo … n − 1`` (its rows of U ending at ``uo``, its multipliers from ``lo_`` on), ``x``
     holding just those (``x[k − lo]``), in place. The operations of the solve on the band but
     for the products with the zeros past a row's last nonzero: the same values."""
+    _forward_range(L, lw, lo_, piv, x, lo, n)
+    _back_range(U, uw, uo, x, lo, n)
+
+
+@nb.njit(cache=True, inline="always")
+def _forward_range(L, lw, lo_, piv, x, lo, n):
+    """The row exchanges and multipliers of :func:`_solve_range` (``L⁻¹ P``)."""
     for k in range(lo, n):
         p = piv[k]
         if p != k:
@@ -242,6 +258,11 @@ def _solve_range(U, L, uw, lw, uo, lo_, piv, x, lo, n):
             for t in range(np.uint64(w)):
                 x[a + t] -= L[b + t] * xk
         lo_ += w
+
+
+@nb.njit(cache=True, inline="always")
+def _back_range(U, uw, uo, x, lo, n):
+    """The back substitution of :func:`_solve_range` (``U⁻¹``)."""
     # back substitution: row k's products with the columns k + 2 … in eight running sums
     # (column k + 2 + 8 i + c always in sum c), added pairwise, and the column k + 1, solved just
     # before, subtracted last. One running sum is a chain of dependent additions whose latency
@@ -305,18 +326,21 @@ def _band_solve(F, b):
 
 
 @nb.njit(cache=True, parallel=True)
-def _solve_fields(F, D, pos, G, lam, cuts, work):
+def _solve_fields(F, D, vert, G, lam, cuts, part, rev, work, sep):
     """Band solves for right-hand sides given as fields ``G`` (m, N, 3) and edge values
     ``lam`` (m, N) (or (0, N): none), scaled by ``D`` on both sides, with the packed factors
     ``F`` (:func:`pack_factors`, then the pivots); the solutions' fields and edge multipliers
     (``G`` of shape (m, 0, 3): zero fields, without their memory). In parallel over the
     right-hand sides and the blocks of the band (``cuts``, :func:`block_cuts`: whole
-    components, whose vertices are the rows' ``cuts / 4``): each block's unknowns are solved
-    alone, the same bits for any thread count. ``work`` (m, 4N): room for the unknowns, every
-    entry written before it is read (right-hand side ``q``, block ``b`` in ``work[q, cuts[b] :
-    cuts[b + 1]]``)."""
+    components, whose vertices are the places ``cuts / 4`` of ``vert``, the vertex at each
+    place): each block's unknowns are solved alone, the same bits for any thread count.
+    A split block's three parts (``part`` ≥ 0: its split, ``rev`` ≥ 0: the reversed half,
+    row ``i`` at ``rev − i``) are joined by their separator (``sep``,
+    :meth:`BandedSaddle._join_blocks`) between the two sweeps. ``work`` (m, 4N): room for
+    the unknowns, every entry written before it is read (right-hand side ``q``, block ``b``
+    in ``work[q, cuts[b] : cuts[b + 1]]``)."""
     U, L, uw, lw, uoff, loff, piv = F
-    m, n = G.shape[0], pos.shape[0]
+    m, n = G.shape[0], vert.shape[0]
     zero = G.shape[1] == 0
     X = np.empty((m, n, 3))
     Lm = np.empty((m, n))
@@ -326,18 +350,171 @@ def _solve_fields(F, D, pos, G, lam, cuts, work):
         b = t - q * nblocks
         lo, hi = cuts[b], cuts[b + 1]
         x = work[q, lo:hi]
-        for v in range(lo // 4, hi // 4):  # a component's vertices are its rows' places
-            i = 4 * pos[v]
-            for d in range(3):
-                x[i + d - lo] = (0.0 if zero else G[q, v, d]) * D[i + d]
-            x[i + 3 - lo] = lam[q, v] * D[i + 3] if lam.shape[0] > 0 else 0.0
-        _solve_range(U, L, uw, lw, uoff[b + 1], loff[b], piv, x, lo, hi)
-        for v in range(lo // 4, hi // 4):
-            i = 4 * pos[v]
-            for d in range(3):
-                X[q, v, d] = x[i + d - lo] * D[i + d]
-            Lm[q, v] = x[i + 3 - lo] * D[i + 3]
+        r = rev[b]
+        for p in range(lo // 4, hi // 4):
+            v = vert[p]
+            for d in range(4):
+                i = 4 * p + d
+                if d < 3:
+                    y = (0.0 if zero else G[q, v, d]) * D[i]
+                else:
+                    y = lam[q, v] * D[i] if lam.shape[0] > 0 else 0.0
+                x[(i if r < 0 else r - i) - lo] = y
+        _forward_range(L, lw, loff[b], piv, x, lo, hi)
+        if part[b] < 0:
+            _back_range(U, uw, uoff[b + 1], x, lo, hi)
+            _unload(X, Lm, q, x, D, vert, lo, hi, r)
+    nsplit = sep[0].shape[0]
+    if nsplit == 0:
+        return X, Lm
+    for t in nb.prange(m * nsplit):
+        q = t // nsplit
+        _join(work[q], sep, t - q * nsplit)
+    for t in nb.prange(m * nblocks):
+        q = t // nblocks
+        b = t - q * nblocks
+        if part[b] >= 0:
+            lo, hi = cuts[b], cuts[b + 1]
+            x = work[q, lo:hi]
+            _back_range(U, uw, uoff[b + 1], x, lo, hi)
+            _unload(X, Lm, q, x, D, vert, lo, hi, rev[b])
     return X, Lm
+
+
+@nb.njit(cache=True, inline="always")
+def _unload(X, Lm, q, x, D, vert, lo, hi, r):
+    """The solved unknowns of a block (``x``, rows ``lo … hi − 1``, reversed from ``r`` ≥ 0)
+    back to fields and edge values, unscaled."""
+    for p in range(lo // 4, hi // 4):
+        v = vert[p]
+        for d in range(4):
+            i = 4 * p + d
+            y = x[(i if r < 0 else r - i) - lo] * D[i]
+            if d < 3:
+                X[q, v, d] = y
+            else:
+                Lm[q, v] = y
+
+
+@nb.njit(cache=True)
+def _join(x, sep, k):
+    """Split ``k``'s separator between the sweeps (``x`` after the forward sweeps, the rows'
+    own places): its unknowns ``σ = S̃⁻¹ (f_S − G_A y_A − G_B y_B)`` from the last rows of the
+    two halves, then those rows less ``H σ``, ready for the back substitution (the names of
+    :func:`_split_band`)."""
+    splits, Sinv, GA, HA, GB, HB = sep
+    c, e, a, b = splits[k, 0], splits[k, 1], splits[k, 2], splits[k, 3]
+    s = e - c
+    w = GA.shape[2]
+    f = np.empty(s)
+    for i in range(s):
+        y = x[c + i]
+        for t in range(w):
+            y -= GA[k, i, t] * x[a + t] + GB[k, i, t] * x[b + t]
+        f[i] = y
+    for i in range(s):
+        y = 0.0
+        for j in range(s):
+            y += Sinv[k, i, j] * f[j]
+        x[c + i] = y
+    for t in range(w):
+        ya = yb = 0.0
+        for j in range(s):
+            ya += HA[k, t, j] * x[c + j]
+            yb += HB[k, t, j] * x[c + j]
+        x[a + t] -= ya
+        x[b + t] -= yb
+
+
+@nb.njit(cache=True)
+def _split_band(ab, kl, c, e, hi, w):
+    """Cut the block of the band (``kl`` = ``ku``) that ends at row ``hi`` at its rows
+    ``c … e − 1`` (the separator ``S``, more than ``kl`` rows, so that no entry joins the half
+    before, ``A``, to the half after, ``B``), in place: the separator's rows become the
+    identity (a block of their own), the entries that join it to the halves are taken out,
+    and ``B`` is reversed (row and column ``i`` at ``e + hi − 1 − i``, a band again), so that
+    both halves meet the separator in their last ``w`` = 2 ``kl`` rows, where the elimination
+    ends: what the separator asks of a factored half is there alone (nested dissection of a
+    chain). Returns ``S`` (s, s) and the couplings over those windows, ``F_A``, ``F_B``
+    (separator rows × window columns) and ``E_A``, ``E_B`` (window rows × separator columns),
+    the windows' places counted from their first row."""
+    s = e - c
+    kk = 2 * kl
+    S = np.zeros((s, s))
+    FA = np.zeros((s, w))
+    EA = np.zeros((w, s))
+    FB = np.zeros((s, w))
+    EB = np.zeros((w, s))
+    for i in range(s):
+        r = c + i
+        for t in range(kk + 1):
+            j = r + t - kl
+            y = ab[r, t]
+            ab[r, t] = 0.0
+            if c <= j < e:
+                S[i, j - c] = y
+            elif c - w <= j < c:
+                FA[i, j - c + w] = y
+            elif e <= j < e + w:
+                FB[i, e + w - 1 - j] = y  # column j of B at e + hi − 1 − j, window hi − w …
+        ab[r, kl] = 1.0
+    for r in range(c - kl, c):
+        for t in range(kk + 1):
+            j = r + t - kl
+            if j >= c:
+                EA[r - c + w, j - c] = ab[r, t]
+                ab[r, t] = 0.0
+    for r in range(e, e + kl):
+        for t in range(kk + 1):
+            j = r + t - kl
+            if j < e:
+                EB[e + w - 1 - r, j - c] = ab[r, t]
+                ab[r, t] = 0.0
+    i, j = e, hi - 1
+    while i < j:
+        for t in range(kk + 1):
+            y = ab[i, t]
+            ab[i, t] = ab[j, kk - t]
+            ab[j, kk - t] = y
+        i += 1
+        j -= 1
+    if i == j:
+        for t in range(kl):
+            y = ab[i, t]
+            ab[i, t] = ab[i, kk - t]
+            ab[i, kk - t] = y
+    return S, FA, EA, FB, EB
+
+
+@nb.njit(cache=True)
+def _window(ab, mult, piv, kl, a, b, F, E):
+    """For the factored half ending at row ``b`` (:func:`band_lu_blocks`, ``ab`` holding U)
+    and its couplings over the window ``a … b − 1`` (:func:`_split_band`): ``G = F U⁻¹`` and
+    ``H = L⁻¹ P E``, exact on the window alone (F's columns and E's rows lie within ``kl``
+    of its end, and neither sweep carries them further than ``kl`` back)."""
+    w = b - a
+    s = E.shape[1]
+    H = E.copy()
+    for k in range(a, b):
+        p = piv[k]
+        if p != k:
+            for j in range(s):
+                y = H[k - a, j]
+                H[k - a, j] = H[p - a, j]
+                H[p - a, j] = y
+        for r in range(k + 1, min(b, k + kl + 1)):
+            f = mult[k, r - k - 1]
+            if f != 0.0:
+                for j in range(s):
+                    H[r - a, j] -= f * H[k - a, j]
+    G = np.empty((s, w))
+    for j in range(w):
+        for q in range(s):
+            y = F[q, j]
+            for i in range(max(0, j - 2 * kl), j):
+                y -= G[q, i] * ab[a + i, j - i]
+            G[q, j] = y / ab[a + j, 0]
+    return G, H
 
 
 @nb.njit(cache=True)
@@ -640,11 +817,14 @@ class BandedSaddle:
             self.D = _fill(rows, cols, vals, pos, anchors, self.mu, T, ln, lay.nxt, has_row,
                            fixed, self.kl, self.ku, ab)
         # blocks of whole components, some 64 at most (none for one component)
-        self.cuts = block_cuts(ab, self.kl, self.ku, np.asarray(lay.starts[:-1], np.int64),
-                               max(4 * lay.n // _BLOCKS, 1))
+        cuts = block_cuts(ab, self.kl, self.ku, np.asarray(lay.starts[:-1], np.int64),
+                          max(4 * lay.n // _BLOCKS, 1))
+        plain = bool(has_row.all()) and not fixed.any()
+        raw = self._split_blocks(ab, cuts, plain)
         piv, mult, bad = band_lu_blocks(ab, self.kl, self.ku, self.cuts)
         if bad >= 0:
             raise np.linalg.LinAlgError(f"singular band at unknown {bad}")
+        self._join_blocks(ab, mult, piv, raw)
         self.ab = ab
         U, *rest = pack_factors(ab, mult, self.kl, self.ku, self.cuts)
         if lay.n >= COMPACT_FROM:
@@ -656,6 +836,58 @@ class BandedSaddle:
             U, self.ab = ab, None
         self.factors = (U, *rest, piv)
         return diag
+
+    def _split_blocks(self, ab, cuts, plain: bool):
+        """Cut every block of :data:`SPLIT_FROM` vertices or more in two halves and a
+        separator (:func:`_split_band`, in place on the filled band ``ab``): sets ``cuts``
+        (the halves and the separator blocks of their own), ``part`` (per block its split or
+        −1), ``rev`` (the reversed halves' ``e + hi − 1``, else −1) and ``vert``; returns per
+        split ``(c, e, hi, S, F_A, E_A, F_B, E_B)``. Only bands of closed components with
+        every row (``plain``): an eliminated unknown's row could leave a half without a
+        multiplier's vertex."""
+        kl = self.kl
+        vert = np.empty(self.pos.shape[0], np.int64)
+        vert[self.pos] = np.arange(self.pos.shape[0])
+        self.vert = vert
+        s = 4 * ((kl + 4) // 4)  # whole vertices, more than kl rows
+        w = 2 * kl
+        new, part, rev, raw = [0], [], [], []
+        for b in range(cuts.shape[0] - 1):
+            lo, hi = int(cuts[b]), int(cuts[b + 1])
+            if not (plain and kl == self.ku and hi - lo >= 4 * SPLIT_FROM):
+                new.append(hi)
+                part.append(-1)
+                rev.append(-1)
+                continue
+            c = lo + 4 * ((hi - lo) // 8)
+            e = c + s
+            raw.append((c, e, hi, *_split_band(ab, kl, c, e, hi, w)))
+            new += [c, e, hi]
+            part += [len(raw) - 1] * 3
+            rev += [-1, -1, e + hi - 1]
+        self.cuts = np.array(new, np.int64)
+        self.part = np.array(part, np.int64)
+        self.rev = np.array(rev, np.int64)
+        return raw
+
+    def _join_blocks(self, ab, mult, piv, raw) -> None:
+        """What each split's separator needs between the sweeps (:func:`_join`), from the
+        factored halves: ``(splits, S̃⁻¹, G_A, H_A, G_B, H_B)`` with ``S̃ = S − G_A H_A −
+        G_B H_B`` the separator's Schur complement (s × s, inverted by numpy: a few rows)."""
+        kl = self.kl
+        w = 2 * kl
+        s = 4 * ((kl + 4) // 4)
+        k = len(raw)
+        splits = np.empty((k, 4), np.int64)
+        Sinv = np.empty((k, s, s))
+        GA, GB = np.empty((k, s, w)), np.empty((k, s, w))
+        HA, HB = np.empty((k, w, s)), np.empty((k, w, s))
+        for t, (c, e, hi, S, FA, EA, FB, EB) in enumerate(raw):
+            GA[t], HA[t] = _window(ab, mult, piv, kl, c - w, c, FA, EA)
+            GB[t], HB[t] = _window(ab, mult, piv, kl, hi - w, hi, FB, EB)
+            Sinv[t] = np.linalg.inv(S - GA[t] @ HA[t] - GB[t] @ HB[t])
+            splits[t] = (c, e, c - w, hi - w)
+        self.sep = (splits, Sinv, GA, HA, GB, HB)
 
     def release(self) -> None:
         """Let go of everything but the band's memory, which the next iterate's solver takes
@@ -682,7 +914,8 @@ class BandedSaddle:
             work = getattr(self, "_work", None)
             if work is None:
                 work = self._work = np.empty((1, rows))
-        return _solve_fields(self.factors, self.D, self.pos, G, lam, self.cuts, work)
+        return _solve_fields(self.factors, self.D, self.vert, G, lam, self.cuts, self.part,
+                             self.rev, work, self.sep)
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(u, λ)`` of ``[[G, Cᵀ], [C, 0]] [u; λ] = [g; r]`` (λ: edge rows, then three
