@@ -241,7 +241,7 @@ def _solve_range(U, L, uw, lw, uo, lo_, piv, x, lo, n):
     _back_range(U, uw, uo, x, lo, n)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _forward_range(L, lw, lo_, piv, x, lo, n):
     """The row exchanges and multipliers of :func:`_solve_range` (``L⁻¹ P``)."""
     for k in range(lo, n):
@@ -260,7 +260,7 @@ def _forward_range(L, lw, lo_, piv, x, lo, n):
         lo_ += w
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _back_range(U, uw, uo, x, lo, n):
     """The back substitution of :func:`_solve_range` (``U⁻¹``)."""
     # back substitution: row k's products with the columns k + 2 … in eight running sums
@@ -381,7 +381,7 @@ def _solve_fields(F, D, vert, G, lam, cuts, part, rev, work, sep):
     return X, Lm
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _unload(X, Lm, q, x, D, vert, lo, hi, r):
     """The solved unknowns of a block (``x``, rows ``lo … hi − 1``, reversed from ``r`` ≥ 0)
     back to fields and edge values, unscaled."""
@@ -470,20 +470,20 @@ def _split_band(ab, kl, c, e, hi, w):
             if j < e:
                 EB[e + w - 1 - r, j - c] = ab[r, t]
                 ab[r, t] = 0.0
-    i, j = e, hi - 1
-    while i < j:
+    _reverse_rows(ab, e, hi, kk)
+    return S, FA, EA, FB, EB
+
+
+@nb.njit(cache=True, parallel=True)
+def _reverse_rows(ab, e, hi, kk):
+    """Rows ``e … hi − 1`` of the band (``kk + 1`` wide) in reverse order, each row's entries
+    too: the band of the reversed unknowns (:func:`_split_band`; ``hi − e`` even)."""
+    for k in nb.prange((hi - e) // 2):
+        i, j = e + k, hi - 1 - k
         for t in range(kk + 1):
             y = ab[i, t]
             ab[i, t] = ab[j, kk - t]
             ab[j, kk - t] = y
-        i += 1
-        j -= 1
-    if i == j:
-        for t in range(kl):
-            y = ab[i, t]
-            ab[i, t] = ab[i, kk - t]
-            ab[i, kk - t] = y
-    return S, FA, EA, FB, EB
 
 
 @nb.njit(cache=True)
