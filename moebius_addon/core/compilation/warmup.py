@@ -22,7 +22,7 @@ from ..energies import ENERGIES
 from ..geometry.layout import layout_from_sizes
 from ..geometry.polygon import check_polygon, contact_ratio, resample
 from ..geometry.push_apart import separate
-from ..metrics import hs_solve
+from ..metrics import banded, hs_solve
 from ..runs.engine import energy, energy_gradient, moebius_energy
 from ..runs.methods import make_run
 from ..topology import knots
@@ -69,6 +69,13 @@ def _tree() -> None:
     # engine.SINGLE_WEIGHTS_FROM (2·10⁵) vertices on
     X = knots.named("3_1", 400)
     hs_tree.HsOperator(X, layout_from_sizes([400], False), single=True).product(X)
+    # from banded.SPLIT_FROM (2·10⁴) vertices a component's band in two halves: its cut and
+    # its separator's set-up (an identity band of 80 rows, cut at 32)
+    ab = np.zeros((80, 23))
+    ab[:, 11] = 1.0
+    S, FA, EA, FB, EB = banded._split_band(ab, 11, 32, 44, 80, 22)
+    piv, mult, _ = banded.band_lu_blocks(ab, 11, 11, np.array([0, 32, 44, 80], np.int64))
+    banded._window(ab, mult, piv, 11, 10, 32, FA, EA)
 
 
 def _energy_path(record) -> Callable[[], None]:
