@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import argparse
 import gc
+import os
 import time
 
 import numpy as np
+from repulsor_compare import cpu_ticks  # bench/ is the script's folder
 
 from moebius_addon import core
 from moebius_addon.core.geometry.constraints import jacobian, make_constraints
@@ -30,11 +32,8 @@ WHOLE = 10**12  # SPLIT_FROM beyond any curve: every block whole
 
 def steal_seconds() -> float:
     """CPU seconds other guests took from this VM so far (0 where /proc/stat has none)."""
-    try:
-        with open("/proc/stat") as f:
-            return int(f.readline().split()[8]) / 100
-    except (OSError, IndexError, ValueError):
-        return 0.0
+    ticks = cpu_ticks()
+    return 0.0 if ticks is None else ticks[0] / os.sysconf("SC_CLK_TCK")
 
 
 def best(f, k: int) -> float:

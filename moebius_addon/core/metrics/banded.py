@@ -426,6 +426,12 @@ def _join(x, sep, k):
         x[b + t] -= yb
 
 
+def _separator_shape(kl: int) -> tuple[int, int]:
+    """``(s, w)`` of a split band of half-bandwidth ``kl``: the separator's rows (whole
+    vertices, more than ``kl``) and the halves' windows next to it (``2 kl`` rows)."""
+    return 4 * ((kl + 4) // 4), 2 * kl
+
+
 @nb.njit(cache=True)
 def _split_band(ab, kl, c, e, hi, w):
     """Cut the block of the band (``kl`` = ``ku``) that ends at row ``hi`` at its rows
@@ -793,6 +799,8 @@ class BandedSaddle:
         lay = self.layout
         pos = zigzag_positions(lay)
         self.pos = pos
+        self.vert = np.empty_like(pos)  # the vertex at each place (the solves' loop order)
+        self.vert[pos] = np.arange(lay.n)
         edges = parts if isinstance(parts, EdgeParts) else None
         rows, cols, vals = (None, None, None) if edges else parts[:3]
         width = 0 if edges else int(np.max(np.abs(pos[rows] - pos[cols]), initial=0))
@@ -841,16 +849,12 @@ class BandedSaddle:
         """Cut every block of :data:`SPLIT_FROM` vertices or more in two halves and a
         separator (:func:`_split_band`, in place on the filled band ``ab``): sets ``cuts``
         (the halves and the separator blocks of their own), ``part`` (per block its split or
-        −1), ``rev`` (the reversed halves' ``e + hi − 1``, else −1) and ``vert``; returns per
+        −1) and ``rev`` (the reversed halves' ``e + hi − 1``, else −1); returns per
         split ``(c, e, hi, S, F_A, E_A, F_B, E_B)``. Only bands of closed components with
         every row (``plain``): an eliminated unknown's row could leave a half without a
         multiplier's vertex."""
         kl = self.kl
-        vert = np.empty(self.pos.shape[0], np.int64)
-        vert[self.pos] = np.arange(self.pos.shape[0])
-        self.vert = vert
-        s = 4 * ((kl + 4) // 4)  # whole vertices, more than kl rows
-        w = 2 * kl
+        s, w = _separator_shape(kl)
         new, part, rev, raw = [0], [], [], []
         for b in range(cuts.shape[0] - 1):
             lo, hi = int(cuts[b]), int(cuts[b + 1])
@@ -875,8 +879,7 @@ class BandedSaddle:
         factored halves: ``(splits, S̃⁻¹, G_A, H_A, G_B, H_B)`` with ``S̃ = S − G_A H_A −
         G_B H_B`` the separator's Schur complement (s × s, inverted by numpy: a few rows)."""
         kl = self.kl
-        w = 2 * kl
-        s = 4 * ((kl + 4) // 4)
+        s, w = _separator_shape(kl)
         k = len(raw)
         splits = np.empty((k, 4), np.int64)
         Sinv = np.empty((k, s, s))
