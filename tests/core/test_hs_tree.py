@@ -140,6 +140,54 @@ def test_arcs_of_the_hierarchy():
                 assert tree.hi[left] in lay.starts
 
 
+def _one_walk(left, right, bmin, bmax, nc, s0, s1, clen, closed, theta2):
+    """The split as one depth-first walk from (root, root) in plain Python
+    (:func:`bvh.dual_traversal`'s order: the last pair pushed is taken first)."""
+    from moebius_addon.core.tree import bvh
+
+    diam2 = bvh.node_diam2(bmin, bmax)
+    ctx = (bmin, bmax, diam2, nc, s0, s1, clen, closed, theta2)
+    far, near, stack = [], [], [(0, 0)]
+    while stack:
+        a, b = stack.pop()
+        if hs_tree._split_test(a, b, ctx, None) == bvh.ACCEPT:
+            far.append((a, b))
+        elif left[a] < 0 and left[b] < 0:
+            near.append((a, b))
+        else:
+            tmp, top = bvh.push_split(np.empty((4, 2), np.int64), 0, a, b, left, right, diam2)
+            stack += [tuple(p) for p in tmp[:top]]
+    return np.array(far).reshape(-1, 2), np.array(near).reshape(-1, 2)
+
+
+@pytest.mark.parametrize("layout", ["fhw", "link", "cables"])
+def test_parallel_split_gives_the_one_walks_lists(layout):
+    # the walks from a frontier of pairs, dealt to chunks that run out of room and go on
+    # (rows for 64 pairs at the start), gathered: the lists of one walk, pair for pair
+    from moebius_addon.core.tree import bvh
+
+    if layout == "cables":
+        t = np.linspace(0, 1, 31)
+        P = [np.c_[0.03 * (c % 7) + 0.01 * np.sin(7 * t + c), 0.03 * (c // 7) + 0 * t, t]
+             for c in range(40)]
+        X, lay = as_layout(P, closed=False)
+    else:
+        X, lay = _unit(core.knots.freedman_unknot(3000) if layout == "fhw"
+                       else core.resample(_link(900), [1200, 900, 700]))
+    tree = hs_tree.arc_tree(lay)
+    ln, mid, arc, clen = hs_tree._edge_data(X, lay.nxt, lay.starts)
+    nc, _, _, s0, s1 = hs_tree._node_data(ln, mid, arc, lay.starts, tree.lo, tree.hi,
+                                          tree.left, tree.right)
+    bmin, bmax = bvh.segment_boxes(tree, X, lay)
+    closed = np.ones(lay.k, np.bool_) if lay.closed is None else lay.closed
+    args = (tree.left, tree.right, bmin, bmax, nc, s0, s1, clen, closed, 0.25)
+    far, near = _one_walk(*args)
+    assert far.shape[0] > 1000 and near.shape[0] > 1000
+    for chunks, tasks in ((1, 1), (1, 64), (32, 1024), (7, 50)):
+        f, n = hs_tree._split(*args, chunks, tasks)
+        assert np.array_equal(f, far) and np.array_equal(n, near), (chunks, tasks)
+
+
 @pytest.mark.parametrize("name", list(CURVES))
 @pytest.mark.parametrize("metric", ["hs", "hs_pure"])
 def test_operator_is_the_approximated_matrix(name, metric, rng):
