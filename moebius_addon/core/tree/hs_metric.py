@@ -322,15 +322,20 @@ def _split_round(tasks, nxt_t, left, right, diam2, ctx, fbuf, nf, nbuf, nn, f0, 
     return full_f, full_n
 
 
-def _split(left, right, bmin, bmax, nc, s0, s1, clen, closed, theta2, nchunks, want):
+def _split(left, right, bmin, bmax, nc, s0, s1, clen, closed, theta2, nchunks=None,
+           want=None):
     """Dual traversal from (root, root) (:func:`bvh.dual_traversal`): unordered far pairs of
     admissible clusters and near pairs of leaves (self pairs included), in the order of the one
     depth-first walk whatever the thread count. The walks from the pairs of
     :func:`_split_tasks` are dealt to ``nchunks`` chunks in turn and run in parallel (one
     chunk: one after the other, no parallel loop), each chunk's pairs into its own rows; a
     chunk whose rows run out goes on from the walk it was in, with four times the room; the
-    lists are then gathered walk by walk. (Python between the kernels: as one kernel it
+    lists are then gathered walk by walk. ``nchunks``, ``want``: by default from the tree's
+    size (:data:`_SPLIT_PARALLEL_FROM`). (Python between the kernels: as one kernel it
     compiled for 7 s more.)"""
+    if nchunks is None:
+        par = left.shape[0] >= _SPLIT_PARALLEL_FROM
+        nchunks, want = (_SPLIT_CHUNKS, _SPLIT_TASKS) if par else (1, _SERIAL_TASKS)
     diam2 = bvh.node_diam2(bmin, bmax)
     ctx = (bmin, bmax, diam2, nc, s0, s1, clen, closed, theta2)
     tasks = _split_tasks(left, right, diam2, ctx, want)
@@ -357,8 +362,6 @@ def _split(left, right, bmin, bmax, nc, s0, s1, clen, closed, theta2, nchunks, w
             fbuf = _grown(fbuf, nf)
         if np.any(full_n):
             nbuf = _grown(nbuf, nn)
-    if nchunks == 1:  # one chunk's rows are in walk order already
-        return fbuf[0, :nf[0]].copy(), nbuf[0, :nn[0]].copy()
     return _gathered(fbuf, f0, fc, nchunks), _gathered(nbuf, n0, ncnt, nchunks)
 
 
@@ -657,10 +660,8 @@ class HsOperator:
                                       tree.right)
         bmin, bmax = bvh.segment_boxes(tree, X, lay)
         closed = np.ones(lay.k, np.bool_) if lay.closed is None else lay.closed
-        par = tree.size >= _SPLIT_PARALLEL_FROM
         far, near = _split(tree.left, tree.right, bmin, bmax, nc, s0, s1, clen, closed,
-                           float(theta) ** 2, _SPLIT_CHUNKS if par else 1,
-                           _SPLIT_TASKS if par else _SERIAL_TASKS)
+                           float(theta) ** 2)
         m = tree.size
         self.far_pairs, self.near_pairs = far.shape[0], near.shape[0]
         self.foff, self.fpart = _by_target(far, m)
