@@ -997,15 +997,22 @@ def _correction(y, yb, beta, F, Z, Zlam, starts, brow, cap, chunks, u, lam_e, la
     part = np.empty((nch, 6))
     for h in nb.prange(nch):
         b0 = b1 = b2 = f0 = f1 = f2 = 0.0
-        for v in range(chunks[h, 0], chunks[h, 1]):
-            y0, y1, y2 = y[v, 0], y[v, 1], y[v, 2]
-            b = beta[v]
-            b0 += b * y0
-            b1 += b * y1
-            b2 += b * y2
-            f0 += F[0, v, 0] * y0 + F[0, v, 1] * y1 + F[0, v, 2] * y2
-            f1 += F[1, v, 0] * y0 + F[1, v, 1] * y1 + F[1, v, 2] * y2
-            f2 += F[2, v, 0] * y0 + F[2, v, 1] * y1 + F[2, v, 2] * y2
+        if brow[chunks[h, 2]] >= 0:
+            for v in range(chunks[h, 0], chunks[h, 1]):
+                y0, y1, y2 = y[v, 0], y[v, 1], y[v, 2]
+                b = beta[v]
+                b0 += b * y0
+                b1 += b * y1
+                b2 += b * y2
+                f0 += F[0, v, 0] * y0 + F[0, v, 1] * y1 + F[0, v, 2] * y2
+                f1 += F[1, v, 0] * y0 + F[1, v, 1] * y1 + F[1, v, 2] * y2
+                f2 += F[2, v, 0] * y0 + F[2, v, 1] * y1 + F[2, v, 2] * y2
+        else:  # pinned: the barycenter term's columns alone
+            for v in range(chunks[h, 0], chunks[h, 1]):
+                b = beta[v]
+                b0 += b * y[v, 0]
+                b1 += b * y[v, 1]
+                b2 += b * y[v, 2]
         part[h, 0], part[h, 1], part[h, 2] = b0, b1, b2
         part[h, 3], part[h, 4], part[h, 5] = f0, f1, f2
     k = starts.shape[0] - 1
@@ -1041,14 +1048,15 @@ def _correction(y, yb, beta, F, Z, Zlam, starts, brow, cap, chunks, u, lam_e, la
     for h in nb.prange(nch):
         c = chunks[h, 2]
         w = W[c]
+        a0, a1 = (0, 9) if brow[c] >= 0 else (3, 6)  # W's other columns are 0 when pinned
         for v in range(chunks[h, 0], chunks[h, 1]):
             for d in range(3):
                 acc = 0.0
-                for a in range(9):
+                for a in range(a0, a1):
                     acc += w[a] * Z[a, v, d]
                 u[v, d] -= acc
             acc = 0.0
-            for a in range(9):
+            for a in range(a0, a1):
                 acc += w[a] * Zlam[a, v]
             lam_e[v] -= acc
 

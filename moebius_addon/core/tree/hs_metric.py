@@ -515,23 +515,25 @@ def _push_to_edges(acc, ln, lo, hi, left, right, out):
 
 @nb.njit(cache=True, parallel=True)
 def _edge_fields(U, nxt, ln):
-    """``(D U, M U)`` per edge: ``(U[nxt] − U) / l`` and ``(U + U[nxt]) / 2``, as (N, 3) each."""
+    """``(D U, M U)`` per edge: ``(U[nxt] − U) / l`` and ``(U + U[nxt]) / 2`` as the rows 0–2
+    and 3–5 of one (6, N) array (a coordinate's values contiguous: the near product's loads
+    vectorize, 1.4–1.5× faster than from (N, 3) fields)."""
     n = U.shape[0]
-    F = np.empty((n, 3))
-    G = np.empty((n, 3))
+    FG = np.empty((6, n))
     for ii in nb.prange(n):
         i = np.int64(ii)
         j = nxt[i]
         for d in range(3):
             # an open component's dummy edge (j = i, length 0) has no difference
-            F[i, d] = (U[j, d] - U[i, d]) / ln[i] if j != i else 0.0
-            G[i, d] = 0.5 * (U[i, d] + U[j, d])
-    return F, G
+            FG[d, i] = (U[j, d] - U[i, d]) / ln[i] if j != i else 0.0
+            FG[3 + d, i] = 0.5 * (U[i, d] + U[j, d])
+    return FG
 
 
 @nb.njit(cache=True, parallel=True, fastmath={"reassoc", "contract", "nsz", "arcp"})
-def _near_product(F, G, w, v, lo, hi, leaves, noff, npart, rowoff, Y):
-    """``Y[q, :3] = Σ w_qr F[r]``, ``Y[q, 3:] = Σ v_qr G[r]`` over the stored near rows."""
+def _near_product(FG, w, v, lo, hi, leaves, noff, npart, rowoff, Y):
+    """``Y[q, :3] = Σ w_qr F[r]``, ``Y[q, 3:] = Σ v_qr G[r]`` over the stored near rows
+    (``FG``: :func:`_edge_fields`)."""
     for kk in nb.prange(leaves.shape[0]):
         a = leaves[np.int64(kk)]
         width = 0
@@ -546,19 +548,19 @@ def _near_product(F, G, w, v, lo, hi, leaves, noff, npart, rowoff, Y):
                 for r in range(np.uint64(lo[b]), np.uint64(hi[b])):  # unsigned: no wraparound
                     wq = w[np.uint64(pos)]
                     vq = v[np.uint64(pos)]
-                    f0 += wq * F[r, 0]
-                    f1 += wq * F[r, 1]
-                    f2 += wq * F[r, 2]
-                    g0 += vq * G[r, 0]
-                    g1 += vq * G[r, 1]
-                    g2 += vq * G[r, 2]
+                    f0 += wq * FG[0, r]
+                    f1 += wq * FG[1, r]
+                    f2 += wq * FG[2, r]
+                    g0 += vq * FG[3, r]
+                    g1 += vq * FG[4, r]
+                    g2 += vq * FG[5, r]
                     pos += 1
             Y[q, 0], Y[q, 1], Y[q, 2] = f0, f1, f2
             Y[q, 3], Y[q, 4], Y[q, 5] = g0, g1, g2
 
 
 @nb.njit(cache=True, parallel=True)
-def _assemble(U, F, G, Y, w1, v1, ln, prv, comp, starts, beta, mass):
+def _assemble(U, FG, Y, w1, v1, ln, prv, comp, starts, beta, mass):
     """``2 Dᵀ(W̃1 ∘ F − Y_F) + 2 Mᵀ(Ṽ1 ∘ G − Y_G)`` per vertex, the barycenter term
     ``β (βᵀU)`` per component and ``mass`` times the P1 mass matrix applied to ``U``."""
     n = U.shape[0]
@@ -574,20 +576,20 @@ def _assemble(U, F, G, Y, w1, v1, ln, prv, comp, starts, beta, mass):
         q = prv[p]
         c = comp[p]
         for d in range(3):
-            hp = 2.0 * (w1[p] * F[p, d] - Y[p, d]) / ln[p] if ln[p] > 0.0 else 0.0
-            hq = 2.0 * (w1[q] * F[q, d] - Y[q, d]) / ln[q] if ln[q] > 0.0 else 0.0
-            gp = 2.0 * (v1[p] * G[p, d] - Y[p, 3 + d])
-            gq = 2.0 * (v1[q] * G[q, d] - Y[q, 3 + d])
+            hp = 2.0 * (w1[p] * FG[d, p] - Y[p, d]) / ln[p] if ln[p] > 0.0 else 0.0
+            hq = 2.0 * (w1[q] * FG[d, q] - Y[q, d]) / ln[q] if ln[q] > 0.0 else 0.0
+            gp = 2.0 * (v1[p] * FG[3 + d, p] - Y[p, 3 + d])
+            gq = 2.0 * (v1[q] * FG[3 + d, q] - Y[q, 3 + d])
             o = hq - hp + 0.5 * (gp + gq) + beta[p] * bu[c, d]
             if mass != 0.0:  # edges p and q: l/3 at this vertex, l/6 at the other end
-                o += mass * (ln[p] * (U[p, d] / 3 + F[p, d] * ln[p] / 6 + U[p, d] / 6)
-                             + ln[q] * (U[p, d] / 3 + (U[p, d] - F[q, d] * ln[q]) / 6))
+                o += mass * (ln[p] * (U[p, d] / 3 + FG[d, p] * ln[p] / 6 + U[p, d] / 6)
+                             + ln[q] * (U[p, d] / 3 + (U[p, d] - FG[d, q] * ln[q]) / 6))
             out[p, d] = o
     return out
 
 
 @nb.njit(cache=True)
-def _cluster_sums(F, G, ln, lo, hi, left, right):
+def _cluster_sums(FG, ln, lo, hi, left, right):
     """Per node ``(Σ l F, Σ l G)`` over its edges (6 columns), bottom-up."""
     m = lo.shape[0]
     S = np.zeros((m, 6))
@@ -595,8 +597,8 @@ def _cluster_sums(F, G, ln, lo, hi, left, right):
         if left[node] < 0:
             for q in range(lo[node], hi[node]):
                 for d in range(3):
-                    S[node, d] += ln[q] * F[q, d]
-                    S[node, 3 + d] += ln[q] * G[q, d]
+                    S[node, d] += ln[q] * FG[d, q]
+                    S[node, 3 + d] += ln[q] * FG[3 + d, q]
         else:
             for d in range(6):
                 S[node, d] = S[left[node], d] + S[right[node], d]
@@ -713,14 +715,14 @@ class HsOperator:
         """``Ã U`` for a field ``U`` (N, 3)."""
         lay, ln, tree = self.layout, self.ln, self.tree
         U = np.ascontiguousarray(U, dtype=np.float64)
-        F, G = _edge_fields(U, lay.nxt, ln)
+        FG = _edge_fields(U, lay.nxt, ln)
         Y = np.empty((lay.n, 6))
-        _near_product(F, G, self.w, self.v, tree.lo, tree.hi, self.leaves, self.noff,
+        _near_product(FG, self.w, self.v, tree.lo, tree.hi, self.leaves, self.noff,
                       self.npart, self.rowoff, Y)
-        S = _cluster_sums(F, G, ln, tree.lo, tree.hi, tree.left, tree.right)
+        S = _cluster_sums(FG, ln, tree.lo, tree.hi, tree.left, tree.right)
         acc = _far_product(S, self.foff, self.fpart, self.fw, self.fv)
         _push_to_edges(acc, ln, tree.lo, tree.hi, tree.left, tree.right, Y)
-        return _assemble(U, F, G, Y, self.w1, self.v1, ln, lay.prv, lay.comp, lay.starts,
+        return _assemble(U, FG, Y, self.w1, self.v1, ln, lay.prv, lay.comp, lay.starts,
                          self.beta, self._mass)
 
     def diagonal(self) -> np.ndarray:
