@@ -400,7 +400,9 @@ def _near_weights(ln, mid, arc, clen, closed, nxt, starts, comp, lo, hi, leaves,
     """Exact weights of every near pair, stored per target edge as one row over the edges of
     its leaf's partner leaves (in partner order), their row sums, and the row sums of ``v``
     over the folded pairs (other components, or ``ρ² ≥ cross2 · |d|²``). ``expo``:
-    :func:`.metrics.kernel_exponent` (None at order 3/2, pruned at compile time)."""
+    :func:`.metrics.kernel_exponent` (None at order 3/2, pruned at compile time). A partner
+    leaf of another component (a leaf is an arc of one) takes a loop without the arc length's
+    tests: the same bits, and a crowd of strands has mostly such pairs."""
     for kk in nb.prange(leaves.shape[0]):
         a = leaves[np.int64(kk)]
         width = 0
@@ -414,8 +416,27 @@ def _near_weights(ln, mid, arc, clen, closed, nxt, starts, comp, lo, hi, leaves,
             sw = 0.0
             sv = 0.0
             sx = 0.0
+            real_q = nxt[q] != q  # an open component's dummy edge (length 0) is no edge
             for p in range(noff[a], noff[a + 1]):
                 b = npart[p]
+                if comp[lo[b]] != cq:  # a leaf of another component: no arc length, no gap
+                    for r in range(lo[b], hi[b]):
+                        wq = 0.0
+                        vq = 0.0
+                        if real_q and nxt[r] != r:
+                            dx = mid[q, 0] - mid[r, 0]
+                            dy = mid[q, 1] - mid[r, 1]
+                            dz = mid[q, 2] - mid[r, 2]
+                            r2 = dx * dx + dy * dy + dz * dz
+                            wq, inv = hs_weight(ln[q], ln[r], r2, expo)
+                            vq = low * wq * inv
+                        w[pos] = wq
+                        v[pos] = vq
+                        sw += wq
+                        sv += vq
+                        sx += vq
+                        pos += 1
+                    continue
                 for r in range(lo[b], hi[b]):
                     wq = 0.0
                     vq = 0.0
