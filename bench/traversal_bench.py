@@ -17,7 +17,8 @@ of the medians (this checkout / the earlier one). The paths:
   one product with it;
 * ``contact``: the first contact along a step (the flow's step bound: along the gradient,
   scaled to move the fastest vertex 0.1 edge lengths at τ = 1; up to τ = 10⁴, with a
-  contact); ``no contact``: up to τ = 1 at once (``staged=False``), none found;
+  contact); ``no contact``: up to τ = 1 at once (``staged=False`` in revisions that searched
+  shorter horizons first), none found;
 * ``closest``: the closest pairs of vertices and of edges.
 """
 
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import inspect
 import os
 import platform
 import subprocess
@@ -65,6 +67,9 @@ def paths(pkg: str, X: np.ndarray) -> dict:
     U = G * (0.1 * h / np.abs(G).max())
     eps = 0.5 * h
     op = hs.HsOperator(X, lay)
+    # revisions before one search per call searched shorter horizons first unless told
+    once = ({"staged": False}
+            if "staged" in inspect.signature(contact.contact_time_tree).parameters else {})
     V = np.sin(np.arange(X.size, dtype=float)).reshape(X.shape)
     return {
         "frame": lambda: moebius.Frame(X, lay),
@@ -73,7 +78,7 @@ def paths(pkg: str, X: np.ndarray) -> dict:
         "hs build": lambda: hs.HsOperator(X, lay),
         "hs product": lambda: op.product(V),
         "contact": lambda: contact.contact_time_tree(X, U, lay, 1e4, eps),
-        "no contact": lambda: contact.contact_time_tree(X, U, lay, 1.0, eps, staged=False),
+        "no contact": lambda: contact.contact_time_tree(X, U, lay, 1.0, eps, **once),
         "closest": lambda: contact.closest_pairs_tree(X, lay),
     }
 

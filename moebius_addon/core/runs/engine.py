@@ -213,26 +213,21 @@ class DenseEngine:
         self.radius = float(radius)
         self.near = near
 
-    def contact_time(self, X: np.ndarray, U: np.ndarray, tau_max: float, eps: float,
-                     staged: bool = True) -> float:
+    def contact_time(self, X: np.ndarray, U: np.ndarray, tau_max: float, eps: float) -> float:
         """Smallest ``τ ≤ tau_max`` at which ``X − τU`` comes within ``eps`` of touching
-        itself (edges not adjacent) or an obstacle, or ``tau_max`` when it does not.
-        ``staged`` as in :func:`.tree_contact.contact_time_tree` (the same value). With a
+        itself (edges not adjacent) or an obstacle, or ``tau_max`` when it does not. With a
         thickness (:meth:`set_thickness`), within ``max(eps, 2 × radius)`` of itself (pairs
         nearer than ``near`` along a strand left out) or ``max(eps, radius)`` of an obstacle."""
         t = contact_time_x(X, U, self.layout, tau_max, max(eps, 2.0 * self.radius),
-                           staged=staged, near=self.near)
+                           near=self.near)
         if self.obstacles is not None and t > 0.0:
             t = self.obstacles.contact_time(X, U, self.layout.nxt, t, max(eps, self.radius))
         return t
 
     def path_is_free(self, X: np.ndarray, Q: np.ndarray, eps: float) -> bool:
         """Whether the straight path from ``X`` to a trial ``Q`` keeps ``eps`` from contact
-        (:meth:`contact_time` up to the whole step). The step was bounded by a contact time
-        along its direction before, so a contact is rare here: the hierarchy searches the
-        whole path at once rather than in stages (FHW at 100 000 edges: one search of
-        17-32 ms where the stages took three)."""
-        return self.contact_time(X, X - Q, 1.0, eps, staged=False) >= 1.0
+        (:meth:`contact_time` up to the whole step)."""
+        return self.contact_time(X, X - Q, 1.0, eps) >= 1.0
 
     # -- metric and saddle-point solves at the current iterate ---------------------------------
 
