@@ -194,6 +194,10 @@ def _better(d2, i, j, best, bi, bj):
 @nb.njit(cache=True, parallel=True)
 def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmin, bmax,
                     min_gap, nchunks, want, edges):
+    """Per chunk its closest pair of vertices (``min_gap`` apart along a component) and, with
+    ``edges``, of edges. As in :func:`_contact_search` a chunk prunes with the least of all
+    chunks' bests so far, read while they write (a stale one prunes less; a box pair is
+    dropped only when strictly farther, so ties still reach :func:`_least`): the same pairs."""
     diam2 = bvh.node_diam2(bmin, bmax)
     tasks = _frontier(left, right, bmin, bmax, diam2, False, want, bmin, bmax, 0.0, 0.0)
     big = np.iinfo(np.int64).max
@@ -202,6 +206,9 @@ def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmi
     ebest = np.full(nchunks, np.inf)
     eidx = np.full((nchunks, 2), big, np.int64)
     epar = np.zeros((nchunks, 2))
+    # the chunks' bests as the others read them (−∞: the edges are not searched)
+    vshare = np.full(nchunks, np.inf)
+    eshare = np.full(nchunks, np.inf if edges else -np.inf)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
         vb, vi0, vj0 = np.inf, big, big
@@ -209,6 +216,14 @@ def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmi
         eb, ei0, ej0, es, et = np.inf if edges else -np.inf, big, big, 0.0, 0.0
         stack = np.empty((128, 2), np.int64)
         for t in range(ch, tasks.shape[0], nchunks):
+            # the other chunks' bests so far, without their pairs: a pair of this chunk at
+            # the same distance still counts (its indices beat ``big``)
+            sv = vshare.min()
+            if sv < vb:
+                vb, vi0, vj0 = sv, big, big
+            se = eshare.min()
+            if se < eb:
+                eb, ei0, ej0 = se, big, big
             stack[0, 0] = tasks[t, 0]
             stack[0, 1] = tasks[t, 1]
             top = 1
@@ -246,6 +261,8 @@ def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmi
                                 )
                                 if _better(d2, i, j, eb, ei0, ej0):
                                     eb, ei0, ej0, es, et = d2, i, j, s, u
+                    vshare[ch] = vb
+                    eshare[ch] = eb
                 else:
                     stack, top = bvh.push_split(stack, top, a, b, left, right, diam2)
         vbest[ch], vidx[ch, 0], vidx[ch, 1] = vb, vi0, vj0
