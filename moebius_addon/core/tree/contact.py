@@ -206,9 +206,6 @@ def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmi
     ebest = np.full(nchunks, np.inf)
     eidx = np.full((nchunks, 2), big, np.int64)
     epar = np.zeros((nchunks, 2))
-    # the chunks' bests as the others read them (−∞: the edges are not searched)
-    vshare = np.full(nchunks, np.inf)
-    eshare = np.full(nchunks, np.inf if edges else -np.inf)
     for cc in nb.prange(nchunks):
         ch = np.int64(cc)
         vb, vi0, vj0 = np.inf, big, big
@@ -218,10 +215,10 @@ def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmi
         for t in range(ch, tasks.shape[0], nchunks):
             # the other chunks' bests so far, without their pairs: a pair of this chunk at
             # the same distance still counts (its indices beat ``big``)
-            sv = vshare.min()
+            sv = vbest.min()
             if sv < vb:
                 vb, vi0, vj0 = sv, big, big
-            se = eshare.min()
+            se = ebest.min()  # without the edges every eb is −∞: nothing taken
             if se < eb:
                 eb, ei0, ej0 = se, big, big
             stack[0, 0] = tasks[t, 0]
@@ -261,8 +258,8 @@ def _closest_search(X, nxt, starts, comp, closed, perm, lo, hi, left, right, bmi
                                 )
                                 if _better(d2, i, j, eb, ei0, ej0):
                                     eb, ei0, ej0, es, et = d2, i, j, s, u
-                    vshare[ch] = vb
-                    eshare[ch] = eb
+                    vbest[ch] = vb  # published for the other chunks (their pairs at the end)
+                    ebest[ch] = eb
                 else:
                     stack, top = bvh.push_split(stack, top, a, b, left, right, diam2)
         vbest[ch], vidx[ch, 0], vidx[ch, 1] = vb, vi0, vj0

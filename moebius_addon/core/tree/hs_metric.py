@@ -394,15 +394,25 @@ def _gathered(buf, start, count, nchunks):
 # weights
 
 
+@nb.njit(cache=True, inline="always")
+def _pair_weight(ln, mid, q, r, expo):
+    """:func:`hs_weight` of the edges ``q`` and ``r``: ``(w, 1/|d|²)``."""
+    dx = mid[q, 0] - mid[r, 0]
+    dy = mid[q, 1] - mid[r, 1]
+    dz = mid[q, 2] - mid[r, 2]
+    return hs_weight(ln[q], ln[r], dx * dx + dy * dy + dz * dz, expo)
+
+
 @nb.njit(cache=True, parallel=True)
 def _near_weights(ln, mid, arc, clen, closed, nxt, starts, comp, lo, hi, leaves, noff, npart,
                   rowoff, low, expo, cross2, w, v, w1, v1, x1):
     """Exact weights of every near pair, stored per target edge as one row over the edges of
     its leaf's partner leaves (in partner order), their row sums, and the row sums of ``v``
     over the folded pairs (other components, or ``ρ² ≥ cross2 · |d|²``). ``expo``:
-    :func:`.metrics.kernel_exponent` (None at order 3/2, pruned at compile time). A partner
-    leaf of another component (a leaf is an arc of one) takes a loop without the arc length's
-    tests: the same bits, and a crowd of strands has mostly such pairs."""
+    :func:`.metrics.kernel_exponent` (None at order 3/2, pruned at compile time). A leaf is an
+    arc of one component (:func:`_arc_tree`), so a partner leaf's pairs are all of one kind:
+    another component's take a loop without the arc length's tests (a crowd of strands has
+    mostly such pairs)."""
     for kk in nb.prange(leaves.shape[0]):
         a = leaves[np.int64(kk)]
         width = 0
@@ -419,16 +429,12 @@ def _near_weights(ln, mid, arc, clen, closed, nxt, starts, comp, lo, hi, leaves,
             real_q = nxt[q] != q  # an open component's dummy edge (length 0) is no edge
             for p in range(noff[a], noff[a + 1]):
                 b = npart[p]
-                if comp[lo[b]] != cq:  # a leaf of another component: no arc length, no gap
+                if comp[lo[b]] != cq:  # another component: every pair folded, no arc length
                     for r in range(lo[b], hi[b]):
                         wq = 0.0
                         vq = 0.0
                         if real_q and nxt[r] != r:
-                            dx = mid[q, 0] - mid[r, 0]
-                            dy = mid[q, 1] - mid[r, 1]
-                            dz = mid[q, 2] - mid[r, 2]
-                            r2 = dx * dx + dy * dy + dz * dz
-                            wq, inv = hs_weight(ln[q], ln[r], r2, expo)
+                            wq, inv = _pair_weight(ln, mid, q, r, expo)
                             vq = low * wq * inv
                         w[pos] = wq
                         v[pos] = vq
@@ -440,29 +446,19 @@ def _near_weights(ln, mid, arc, clen, closed, nxt, starts, comp, lo, hi, leaves,
                 for r in range(lo[b], hi[b]):
                     wq = 0.0
                     vq = 0.0
-                    same = comp[r] == cq
-                    if not closed[cq] and same:  # along an open polyline: no way round
+                    if not closed[cq]:  # along an open polyline: no way round
                         gap = abs(r - q)
                     else:
-                        # (r − q) mod sq without a division: both on one component
-                        gap = (r - q if r >= q else r - q + sq) if same else 2
+                        # (r − q) mod sq without a division
+                        gap = r - q if r >= q else r - q + sq
                         if gap == sq - 1:
                             gap = 1
-                    # an open component's dummy edge (length 0) is no edge
-                    if gap >= 2 and nxt[q] != q and nxt[r] != r:
-                        dx = mid[q, 0] - mid[r, 0]
-                        dy = mid[q, 1] - mid[r, 1]
-                        dz = mid[q, 2] - mid[r, 2]
-                        r2 = dx * dx + dy * dy + dz * dz
-                        wq, inv = hs_weight(ln[q], ln[r], r2, expo)
-                        if same:
-                            fwd = abs(arc[r] - arc[q])
-                            rho = min(fwd, clen[cq] - fwd) if closed[cq] else fwd
-                            vq = low * wq * (inv - 1.0 / (rho * rho))
-                            if rho * rho * inv >= cross2:
-                                sx += vq
-                        else:
-                            vq = low * wq * inv
+                    if gap >= 2 and real_q and nxt[r] != r:
+                        wq, inv = _pair_weight(ln, mid, q, r, expo)
+                        fwd = abs(arc[r] - arc[q])
+                        rho = min(fwd, clen[cq] - fwd) if closed[cq] else fwd
+                        vq = low * wq * (inv - 1.0 / (rho * rho))
+                        if rho * rho * inv >= cross2:
                             sx += vq
                     w[pos] = wq
                     v[pos] = vq
