@@ -240,6 +240,60 @@ def test_split_band_solves_what_the_whole_band_solves(metric, monkeypatch):
             assert np.linalg.norm(l1 - l0) <= 1e-9 * np.linalg.norm(l0)
 
 
+
+def _dense_band(parts, n):
+    """The banded part of ``parts`` (triplets, or :class:`banded.EdgeParts`) as a dense matrix
+    over vertices, without the barycenter term."""
+    A = np.zeros((n, n))
+    if isinstance(parts, banded.EdgeParts):
+        v = np.arange(n)
+        w = (v + 1) % n  # one closed component
+        np.add.at(A, (v, v), parts.p)
+        np.add.at(A, (w, w), parts.p)
+        np.add.at(A, (v, w), parts.q)
+        np.add.at(A, (w, v), parts.q)
+    else:
+        np.add.at(A, (parts[0], parts[1]), parts[2])
+    return A
+
+
+@pytest.mark.parametrize("name", ["trefoil", "fhw", "noneq"])
+def test_barycenter_term_left_out_of_a_preconditioner(name):
+    """``barycenter_term=False`` solves the saddle-point system of the band's metric without
+    ``B`` (against a dense solve of it), with six columns: the same fields as with ``B``
+    for any ``C u = r``, the same multipliers for ``r = 0``."""
+    X, lay, con, jac = _system(name)
+    n, m = lay.n, con.size
+    C = np.array([jac.rmatvec(np.eye(m)[i]).ravel() for i in range(m)])
+    rng = np.random.default_rng(6)
+    g = rng.standard_normal((n, 3))
+    r = 1e-3 * rng.standard_normal(m)
+    op = hs_metric.HsOperator(X, lay, "hs")
+    for parts in (metrics.banded_parts("h1", X, lay), op.preconditioner_edges()):
+        K = np.zeros((3 * n + m, 3 * n + m))
+        K[:3 * n, :3 * n] = np.kron(_dense_band(parts, n), np.eye(3))
+        K[:3 * n, 3 * n:] = C.T
+        K[3 * n:, :3 * n] = C
+        without = banded.BandedSaddle(parts, jac, product=False, barycenter_term=False)
+        assert without.Z.shape[0] == 6
+        with_b = banded.BandedSaddle(parts, jac, product=False)
+        for rr in (r, np.zeros(m)):
+            x = np.linalg.solve(K, np.concatenate([g.ravel(), rr]))
+            u, lam = without._solve(g, rr)
+            assert np.linalg.norm(u.ravel() - x[:3 * n]) <= 1e-8 * np.linalg.norm(x[:3 * n])
+            assert np.linalg.norm(lam - x[3 * n:]) <= 1e-7 * np.linalg.norm(x[3 * n:])
+        ub, lamb = with_b._solve(g, np.zeros(m))
+        assert np.linalg.norm(u - ub) <= 1e-9 * np.linalg.norm(ub)
+        assert np.linalg.norm(lam - lamb) <= 1e-7 * np.linalg.norm(lamb)
+        # with C u = r ≠ 0 too the fields agree (B's range, multiples of β, lies in Cᵀ's),
+        # and only the barycenter rows' multipliers move
+        (u1, lam1), (u2, lam2) = without._solve(g, r), with_b._solve(g, r)
+        assert np.linalg.norm(u1 - u2) <= 1e-8 * np.linalg.norm(u2)
+        assert np.linalg.norm(lam1[n:] - lam2[n:]) > 1e-6 * np.linalg.norm(lam2[n:])
+    with pytest.raises(ValueError, match="preconditioner"):
+        banded.BandedSaddle(metrics.banded_parts("h1", X, lay), jac, barycenter_term=False)
+
+
 SPLIT_FLOW = """
 from moebius_addon import core
 from moebius_addon.core.metrics import banded

@@ -21,7 +21,9 @@ component, and the exact system is recovered by the Sherman–Morrison–Woodbur
 correction of rank 12 per component (the spring removed, the barycenter term added, the
 barycenter rows and their multipliers bordered on). The correction is supported on its
 component and the band is block diagonal by component, so its capacitance matrix is a 12 × 12
-block per component: memory and work stay O(N) for links too.
+block per component: memory and work stay O(N) for links too. ``B``'s range (multiples of
+``β``, proportional to the barycenter rows' vertex weights) lies in ``Cᵀ``'s, so it moves the
+multipliers only: a preconditioner leaves it out (rank 9, six band solves per iterate).
 
 A long block (:data:`SPLIT_FROM`) is factored and solved as two halves side by side, joined by
 a separator of a few rows eliminated last (:func:`_split_band`), so that a curve of one piece
@@ -727,13 +729,20 @@ class BandedSaddle:
     not be used afterwards); ``product=False``: only the factors are kept (:meth:`_solve`,
     :meth:`solve_many`, :meth:`pseudo_inverse`), not the metric's triplets that
     :meth:`metric_product` and the refinement of :meth:`solve` need: a preconditioner's use
-    (the hs solver's, whose triplets were 0.29 GB at 10⁶ vertices).
+    (the hs solver's, whose triplets were 0.29 GB at 10⁶ vertices). ``barycenter_term=False``
+    (with ``product=False``): the band's metric without ``B``, a correction of rank 9 per
+    component and six band solves per iterate instead of nine: the same fields ``u`` for any
+    right-hand side, the same multipliers where ``r = 0`` (``B``'s range lies in ``Cᵀ``'s;
+    module text); with ``B`` only for a metric whose products include it.
     """
 
     def __init__(self, parts, jac: Jacobian, recycle: BandedSaddle | None = None,
-                 product: bool = True):
+                 product: bool = True, barycenter_term: bool = True):
         if isinstance(parts, EdgeParts) and (product or jac.con.layout.has_open):
             raise ValueError("edge parts are for a preconditioner of closed components "
+                             "(product=False)")
+        if product and not barycenter_term:
+            raise ValueError("the barycenter term can be left out of a preconditioner only "
                              "(product=False)")
         con = jac.con
         if not (con.edge_lengths and con.barycenter) or con.pinned is not None:
@@ -747,7 +756,8 @@ class BandedSaddle:
         self._factor(parts, np.asarray(lay.starts[:-1], np.int64), T, 1.0 / inv_l,
                      np.ones(n, np.bool_), np.zeros(n, np.bool_), recycle)
         recycle = None  # its band is overwritten now: it must not be used again
-        U = self._columns(parts[-1], jac.barycenter_fields(), np.arange(lay.k, dtype=np.int64))
+        U = self._columns(parts[-1] if barycenter_term else None, jac.barycenter_fields(),
+                          np.arange(lay.k, dtype=np.int64))
         for c in range(lay.k):
             self.cap[c] = _capacitance(self._gram(U, c), self.mu[c])
 
@@ -757,21 +767,27 @@ class BandedSaddle:
         number of them): spring at each component's first vertex (3), barycenter term (3),
         barycenter rows (3; ``F`` their rows as fields, of the components ``c`` with
         ``brow[c]`` ≥ 0 in order), and their band
-        solves ``Z``, ``Zlam``. Only what :func:`_correction` reads of the columns is kept:
-        ``beta`` and the barycenter rows' fields (a third of the columns' memory); returns
-        the columns (9, N, 3) for the capacitances (:meth:`_gram`)."""
+        solves ``Z``, ``Zlam``; ``beta`` None: no barycenter term, its three columns zero and
+        not solved (``Z`` holds the others, ``zcol`` their places among the nine). Only what
+        :func:`_correction` reads of the columns is kept: ``beta`` and the barycenter rows'
+        fields (a third of the columns' memory); returns the columns (9, N, 3) for the
+        capacitances (:meth:`_gram`)."""
         lay = self.layout
         n = lay.n
         U = np.zeros((9, n, 3))
         for d in range(3):
             U[d, lay.starts[:-1][brow >= 0], d] = 1.0
-            U[3 + d, :, d] = beta
+            if beta is not None:
+                U[3 + d, :, d] = beta
         for c in np.flatnonzero(brow >= 0):
             s = slice(lay.starts[c], lay.starts[c + 1])
             for d in range(3):
                 U[6 + d, s] += F[3 * brow[c] + d, s]
-        self.Z, self.Zlam = self._band_inverse(U)
-        self.beta, self.F = np.ascontiguousarray(beta, float), U[6:].copy()
+        self.zcol = np.arange(9, dtype=np.int64) if beta is not None else np.array(
+            [0, 1, 2, 6, 7, 8], np.int64)
+        self.Z, self.Zlam = self._band_inverse(U if beta is not None else U[self.zcol])
+        self.beta = np.ascontiguousarray(beta if beta is not None else np.zeros(0), float)
+        self.F = U[6:].copy()
         self.brow = brow
         self.cap = np.zeros((lay.k, 12, 12))
         # the pieces of the components for :func:`_correction`: at most _CHUNK vertices each
@@ -785,7 +801,11 @@ class BandedSaddle:
     def _gram(self, U: np.ndarray, c: int) -> np.ndarray:
         """``Uᵀ A⁻¹ U`` (9, 9) of component ``c``'s columns ``U`` (:meth:`_columns`)."""
         s = slice(int(self.layout.starts[c]), int(self.layout.starts[c + 1]))
-        return U[:, s].reshape(9, -1) @ self.Z[:, s].reshape(9, -1).T
+        W = np.zeros((9, 9))
+        q = self.zcol.size
+        W[np.ix_(self.zcol, self.zcol)] = (U[self.zcol, s].reshape(q, -1)
+                                           @ self.Z[:, s].reshape(q, -1).T)
+        return W
 
     def _factor(self, parts, anchors, T, ln, has_row, fixed, recycle):
         """The band of the iterate from ``parts``, the metric's triplets ``(rows, cols, vals,
@@ -944,8 +964,8 @@ class BandedSaddle:
     def _correct(self, y, yb, u, lam_e, lam_b) -> None:
         """The low-rank correction of a band solve ``y`` (barycenter rows' right-hand sides
         ``yb``) onto ``u``, ``lam_e``, ``lam_b``, in place (:func:`_correction`)."""
-        _correction(y, yb, self.beta, self.F, self.Z, self.Zlam, self.layout.starts,
-                    self.brow, self.cap, self.chunks, u, lam_e, lam_b)
+        _correction(y, yb, self.beta, self.F, self.Z, self.Zlam, self.zcol,
+                    self.layout.starts, self.brow, self.cap, self.chunks, u, lam_e, lam_b)
 
     def solve_many(self, G: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_solve` (no refinement) for many right-hand sides at once: fields ``G``
@@ -981,13 +1001,14 @@ class BandedSaddle:
 
 
 @nb.njit(cache=True, parallel=True)
-def _correction(y, yb, beta, F, Z, Zlam, starts, brow, cap, chunks, u, lam_e, lam_b):
+def _correction(y, yb, beta, F, Z, Zlam, zcol, starts, brow, cap, chunks, u, lam_e, lam_b):
     """The low-rank correction of :meth:`BandedSaddle._solve` for the band solve ``y`` (N, 3)
     (``yb``: the barycenter rows' right-hand sides), in place on ``u`` (may be ``y``),
     ``lam_e`` and ``lam_b`` (may be ``yb``: a row is read before it is written). A component
     with barycenter rows (row ``brow[c]`` of ``yb``) takes the nine columns and its 12 × 12
     capacitance, one with a pin (``brow[c]`` −1) the barycenter term's three and a 3 × 3 one
-    (``cap[c, :3, :3]``). The columns' products with
+    (``cap[c, :3, :3]``); ``beta`` empty: no barycenter term, ``Z``'s six columns at the
+    places ``zcol`` of the nine. The columns' products with
     ``y`` from their structure: the springs read ``y`` at the component's first vertex, the
     barycenter term ``β`` per coordinate, the barycenter rows their fields ``F`` (3, N, 3).
     The pieces of ``chunks`` (first, end, component) in parallel, their sums added in order:
@@ -995,15 +1016,17 @@ def _correction(y, yb, beta, F, Z, Zlam, starts, brow, cap, chunks, u, lam_e, la
     by BLAS before: three times the bytes, and OpenBLAS's threads woke at every solve.)"""
     nch = chunks.shape[0]
     part = np.empty((nch, 6))
+    has_b = beta.shape[0] > 0
     for h in nb.prange(nch):
         b0 = b1 = b2 = f0 = f1 = f2 = 0.0
         if brow[chunks[h, 2]] >= 0:
             for v in range(chunks[h, 0], chunks[h, 1]):
                 y0, y1, y2 = y[v, 0], y[v, 1], y[v, 2]
-                b = beta[v]
-                b0 += b * y0
-                b1 += b * y1
-                b2 += b * y2
+                if has_b:
+                    b = beta[v]
+                    b0 += b * y0
+                    b1 += b * y1
+                    b2 += b * y2
                 f0 += F[0, v, 0] * y0 + F[0, v, 1] * y1 + F[0, v, 2] * y2
                 f1 += F[1, v, 0] * y0 + F[1, v, 1] * y1 + F[1, v, 2] * y2
                 f2 += F[2, v, 0] * y0 + F[2, v, 1] * y1 + F[2, v, 2] * y2
@@ -1045,19 +1068,21 @@ def _correction(y, yb, beta, F, Z, Zlam, starts, brow, cap, chunks, u, lam_e, la
                 for j in range(3):
                     acc += cap[c, i, j] * t[3 + j]
                 W[c, 3 + i] = acc
+    q = zcol.shape[0]
     for h in nb.prange(nch):
         c = chunks[h, 2]
         w = W[c]
-        a0, a1 = (0, 9) if brow[c] >= 0 else (3, 6)  # W's other columns are 0 when pinned
+        # W's other columns are 0 when pinned (never without the barycenter term: q is 9)
+        a0, a1 = (0, q) if brow[c] >= 0 else (3, 6)
         for v in range(chunks[h, 0], chunks[h, 1]):
             for d in range(3):
                 acc = 0.0
                 for a in range(a0, a1):
-                    acc += w[a] * Z[a, v, d]
+                    acc += w[zcol[a]] * Z[a, v, d]
                 u[v, d] -= acc
             acc = 0.0
             for a in range(a0, a1):
-                acc += w[a] * Zlam[a, v]
+                acc += w[zcol[a]] * Zlam[a, v]
             lam_e[v] -= acc
 
 

@@ -10,7 +10,8 @@ update) preconditioned by
   plus, on the diagonal, the lower-order weights of folded pairs (strands that come close
   again along the curve, and other components), which carry the strong coupling of strands
   close in space (without them the iterates' errors moved such strands against each other and
-  the collision bound stalled the flow);
+  the collision bound stalled the flow); without the barycenter term, which moves only the
+  multipliers (:class:`.banded.BandedSaddle`, ``barycenter_term``);
 * from ``MULTILEVEL_FROM`` vertices on, plus the coarser levels of :class:`Multilevel` (the
   curve quartered again and again, each level's own banded ``H``; additive, BPX): what the
   banded ``H`` misses most on smooth curves are the low modes, at every scale below its own.
@@ -296,8 +297,8 @@ class Multilevel:
     def __init__(self, X: np.ndarray, layout: Layout, metric: str, jac: Jacobian,
                  order: float = PAPER_ORDER, fine: BandedSaddle | None = None):
         self.jac = jac
-        self.fine = (BandedSaddle(_parts(X, layout, metric, order), jac, product=False)
-                     if fine is None else fine)
+        self.fine = (BandedSaddle(_parts(X, layout, metric, order), jac, product=False,
+                                  barycenter_term=False) if fine is None else fine)
         halvings = []
         Xl, lay = X, layout
         while lay.n > COARSEST:
@@ -333,7 +334,8 @@ class Multilevel:
                 self.solves[d] = (fac.solve, jc.con.size)
             else:
                 self.solves[d] = (BandedSaddle(_parts(Xl, lay, metric, order), jc,
-                                               product=False)._solve, jc.con.size)
+                                               product=False, barycenter_term=False)._solve,
+                                  jc.con.size)
 
     @property
     def levels(self) -> int:
@@ -418,7 +420,8 @@ class HsSaddle:
             self.coarse = None
             return
         if jac.con.pinned is None:
-            self.K = BandedSaddle(op.preconditioner_edges(), jac, old, product=False)
+            self.K = BandedSaddle(op.preconditioner_edges(), jac, old, product=False,
+                                  barycenter_term=False)
         else:  # the constraint preconditioner with pins: bordered (the iterates stay 0 there)
             self.K = BorderedPins(BandedSaddle(op.preconditioner_parts(),
                                                unpinned_jacobian(jac), old), jac)
@@ -476,8 +479,12 @@ class HsSaddle:
         the first rows to the relative tolerance (λ from the last preconditioner solve)."""
         rtol = self.rtol if rtol is None else rtol
         n = g.shape[0]
-        x = self.K._solve(None, r)[0] if np.any(r) else np.zeros((n, 3))
-        res = self.op.product(x) - g
+        if np.any(r):
+            x = self.K._solve(None, r)[0]
+            res = self.op.product(x) - g
+        else:  # x = 0: no product (one of ten at 10⁶ vertices, 0.14 s)
+            x = np.zeros((n, 3))
+            res = -np.asarray(g, dtype=np.float64)
         z, mu = self._precondition(res)
         # the residual keeps only what the constraints cannot absorb, its Cᵀμ part moved into
         # the multipliers λ (Gould, Hribar & Nocedal's residual update; the same iterates in
