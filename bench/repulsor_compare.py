@@ -5,6 +5,8 @@
     python bench/repulsor_compare.py --sizes 100000 --reps 2
     python bench/repulsor_compare.py --million              # adds 10^6 edges (slow)
     python bench/repulsor_compare.py --moebius              # also our Möbius E+g and iteration
+    python bench/repulsor_compare.py --moebius --later 2    # and 2 more Möbius iterations in its
+                                                            # process (a step history, as in a run)
     python bench/repulsor_compare.py --parts                # also E+g in two parts: the trees
                                                             # built, the sums on built trees
     python bench/repulsor_compare.py --parts --again 4      # and 4 more trees and sums in the
@@ -53,7 +55,10 @@ energy, gradient and solve. With ``--moebius`` also our Möbius energy's E+g (``
 and the same iteration of our Möbius-energy flow (``iter_moebius``, to compare with
 Repulsor's tangent-point iteration); ``ratio`` lines give each side's iteration ÷ E+g of the
 same energy (best of each). Our iteration lines give the Krylov iterations of each hs solve
-(``krylov=``).
+(``krylov=``). ``--later K``: the Möbius run goes on for K more iterations
+(``iter_moebius_later`` lines, each iteration's seconds from the history): the first iteration
+has no step of its own to start from (its first trial is the run's ``initial_step``), the later
+ones start from the step before, as every iteration of a run but the first.
 
 Repulsor is never a dependency of the add-on and nothing of it is in this repository: the driver
 binary (``--driver``) is a small C++ program of ours that calls Repulsor's API
@@ -131,10 +136,12 @@ def _ours_eg(core, P: np.ndarray, engine: str, theta: float | None,
     return energy, E, np.asarray(G)
 
 
-def _ours_relax(core, P: np.ndarray, theta: float | None, energy: str = "tangent_point"):
-    """(energy name, result) of one iteration of the tangent-point (or Möbius) flow on the
-    tree."""
-    return energy, core.relax(P, max_iter=1, engine="tree", theta=theta, **_energy(energy))
+def _ours_relax(core, P: np.ndarray, theta: float | None, energy: str = "tangent_point",
+                iterations: int = 1):
+    """(energy name, result) of one iteration (or more) of the tangent-point (or Möbius) flow
+    on the tree."""
+    return energy, core.relax(P, max_iter=iterations, engine="tree", theta=theta,
+                              **_energy(energy))
 
 
 def forget_warm_up() -> float:
@@ -204,9 +211,11 @@ def worker(args) -> None:
                   f"seconds={t2 - t0:.6f} build_seconds={t1 - t0:.6f} "
                   f"kernel_seconds={t2 - t1:.6f}", flush=True)
     elif args.worker in ("iter", "iter_moebius"):
+        later = args.later if args.worker == "iter_moebius" else 0
         t0 = time.perf_counter()
         name, r = _ours_relax(core, P, theta,
-                              "moebius" if args.worker == "iter_moebius" else "tangent_point")
+                              "moebius" if args.worker == "iter_moebius" else "tangent_point",
+                              1 + later)
         wall = time.perf_counter() - t0
         sec = r.history["seconds"]
         its = r.stats.get("krylov_iterations")
@@ -215,6 +224,10 @@ def worker(args) -> None:
               f"krylov={','.join(map(str, its)) if its else '-'} "
               f"energy={r.history['energy'][0]:.12e} energy_new={r.history['energy'][1]:.12e} "
               f"step={r.history['step'][1]:.6e}", flush=True)
+        for i in range(2, len(sec)):
+            print(f"ours iter_moebius_later edges={n} threads={args.threads} index={i} "
+                  f"seconds={sec[i] - sec[i - 1]:.6f} energy={r.history['energy'][i]:.12e} "
+                  f"step={r.history['step'][i]:.6e}", flush=True)
     elif args.worker == "error":
         name, E0, G0 = _ours_eg(core, P, "exact", theta)
         t0 = time.perf_counter()
@@ -380,6 +393,8 @@ def main() -> None:
     ap.add_argument("--json", default=str(ROOT / "out" / "repulsor_compare.json"))
     ap.add_argument("--moebius", action="store_true",
                     help="also time our Möbius E+g and one iteration of its flow")
+    ap.add_argument("--later", type=int, default=0,
+                    help="with --moebius: K more iterations of our Möbius run, each timed")
     ap.add_argument("--parts", action="store_true",
                     help="also time our E+g in two parts: frame built, sums on it")
     ap.add_argument("--again", type=int, default=0,
@@ -424,6 +439,7 @@ def main() -> None:
     me = [sys.executable, str(Path(__file__).resolve())]
     extra = (["--theta", str(args.theta)] if args.theta is not None else []) + \
         (["--core-from", args.core_from] if args.core_from else [])
+    later = ["--later", str(args.later)] if args.later else []
 
     def measure(cmd, env):
         for r in run(cmd, env):
@@ -458,7 +474,8 @@ def main() -> None:
                 if args.moebius:
                     for mode in ("eg_moebius", "iter_moebius"):
                         measure(me + ["--worker", mode, "--raw-curve", str(path),
-                                      "--threads-of-worker", str(t)] + extra, env)
+                                      "--threads-of-worker", str(t)] + extra
+                                + (later if mode == "iter_moebius" else []), env)
             if n <= EXACT_UP_TO:  # both sides' all-pairs sums (Repulsor's: 300 s at 10^5)
                 if have_driver:
                     measure([str(driver), str(path), "error", str(t), "--theta",
@@ -473,7 +490,7 @@ def main() -> None:
                       "these rounds ran)", flush=True)
             best = {}
             for side in ("repulsor", "ours"):
-                for mode in ("eg", "iter", "eg_moebius", "iter_moebius"):
+                for mode in ("eg", "iter", "eg_moebius", "iter_moebius", "iter_moebius_later"):
                     s = summary(rows, side, mode, n, t)
                     if s:
                         best[side, mode] = s["best"]
@@ -497,7 +514,8 @@ def main() -> None:
                           flush=True)
             # iteration ÷ E+g of the same energy, best of each ("iteration ≤ 6 E+g")
             for side, it, eg in (("repulsor", "iter", "eg"), ("ours", "iter", "eg"),
-                                 ("ours", "iter_moebius", "eg_moebius")):
+                                 ("ours", "iter_moebius", "eg_moebius"),
+                                 ("ours", "iter_moebius_later", "eg_moebius")):
                 if (side, it) in best and (side, eg) in best:
                     print(f"ratio side={side} {it}/{eg} edges={n} threads={t} "
                           f"{best[side, it] / best[side, eg]:.2f}", flush=True)

@@ -153,9 +153,9 @@ def _matvec(U, nxt, comp, k, T, ln, b, M, scale, erow, brow, size):
 
 
 @nb.njit(cache=True)
-def _rmatvec(lam, nxt, comp, T, ln, b, M, scale, erow, brow):
+def _rmatvec(lam, nxt, comp, T, ln, b, M, scale, erow, brow, U):
     n = T.shape[0]
-    U = np.zeros((n, 3))
+    U[:] = 0.0
     for i in range(n):
         # coefficient of t_I in edge I's contribution
         s = lam[erow[i]] / ln[i] if erow[i] >= 0 else 0.0
@@ -170,7 +170,6 @@ def _rmatvec(lam, nxt, comp, T, ln, b, M, scale, erow, brow):
             v = s * T[i, d]
             U[i, d] -= v
             U[j, d] += v
-    return U
 
 
 @dataclass
@@ -191,13 +190,14 @@ class Jacobian:
                        self.T, self.ln, self.b, self.M, con.scale, con.edge_rows,
                        con.bary_rows, con.size)
 
-    def rmatvec(self, lam: np.ndarray) -> np.ndarray:
-        """``Cᵀ @ λ`` as a field of shape (N, 3)."""
+    def rmatvec(self, lam: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``Cᵀ @ λ`` as a field of shape (N, 3), in ``out`` (C-contiguous float64) if given."""
         con = self.con
         lay = con.layout
-        return _rmatvec(np.ascontiguousarray(lam, dtype=np.float64), lay.nxt, lay.comp,
-                        self.T, self.ln, self.b, self.M, con.scale, con.edge_rows,
-                        con.bary_rows)
+        out = np.empty((lay.n, 3)) if out is None else out
+        _rmatvec(np.ascontiguousarray(lam, dtype=np.float64), lay.nxt, lay.comp, self.T,
+                 self.ln, self.b, self.M, con.scale, con.edge_rows, con.bary_rows, out)
+        return out
 
     def edge_fields(self) -> tuple[np.ndarray, np.ndarray]:
         """Unit tangents and ``1/l`` of every edge (those with a row: ``con.edge_index``) for

@@ -456,6 +456,7 @@ class HsSaddle:
         if self.exact_backprojection:
             return False
         self.op = self.coarse = None
+        self.__dict__.pop("_room_array", None)
         return True
 
     @property
@@ -463,12 +464,21 @@ class HsSaddle:
         """Whether :meth:`shed` left the operator (:meth:`solve` can be called)."""
         return self.op is not None
 
+    def _room(self) -> np.ndarray:
+        """An (N, 3) array for the loop's temporary products with ``Cᵀ``, the same at every
+        call (fresh, it came as new pages from the kernel every time at 10⁶ vertices)."""
+        room = self.__dict__.get("_room_array")
+        if room is None:
+            room = self._room_array = np.empty((self.jac.con.layout.n, 3))
+        return room
+
     def _precondition(self, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(z, μ)``: the constraint preconditioner's ``H z + Cᵀμ = R``, ``C z = 0``, plus the
         coarse level's correction."""
         z, mu = self.K._solve(R, np.zeros(self.jac.con.size))
         if isinstance(self.coarse, Multilevel):
-            z += self.coarse(R - self.jac.rmatvec(mu))
+            w = self._room()
+            z += self.coarse(np.subtract(R, self.jac.rmatvec(mu, out=w), out=w))
         elif self.coarse is not None:
             z += self.coarse(R)
         return z, mu
@@ -504,9 +514,9 @@ class HsSaddle:
         stop = rtol * rtol * rz
         p = -z
         its = 0
-        work = np.empty_like(p)
+        work, work_ap = np.empty_like(p), np.empty_like(p)
         while rz > stop and its < self.max_iter:
-            Ap = self.op.product(p)
+            Ap = self.op.product(p, out=work_ap)
             pAp = float(np.einsum("ij,ij->", p, Ap))
             if not pAp > 0.0:
                 break
@@ -516,7 +526,7 @@ class HsSaddle:
             Ap = z = None  # (memory: the preconditioner's solves are the solve's peak)
             z, mu = self._precondition(res)
             lam -= mu
-            res -= self.jac.rmatvec(mu)
+            res -= self.jac.rmatvec(mu, out=self._room())
             rz_new = float(np.einsum("ij,ij->", res, z))
             if not rz_new > 0.0:  # converged to rounding, or the preconditioner broke down
                 break

@@ -531,12 +531,11 @@ def _push_to_edges(acc, ln, lo, hi, left, right, out):
 
 
 @nb.njit(cache=True, parallel=True)
-def _edge_fields(U, nxt, ln):
+def _edge_fields(U, nxt, ln, FG):
     """``(D U, M U)`` per edge: ``(U[nxt] − U) / l`` and ``(U + U[nxt]) / 2`` as the rows 0–2
-    and 3–5 of one (6, N) array (a coordinate's values contiguous: the near product's loads
-    vectorize, 1.4–1.5× faster than from (N, 3) fields)."""
+    and 3–5 of one (6, N) array ``FG``, written (a coordinate's values contiguous: the near
+    product's loads vectorize, 1.4–1.5× faster than from (N, 3) fields)."""
     n = U.shape[0]
-    FG = np.empty((6, n))
     for ii in nb.prange(n):
         i = np.int64(ii)
         j = nxt[i]
@@ -544,7 +543,6 @@ def _edge_fields(U, nxt, ln):
             # an open component's dummy edge (j = i, length 0) has no difference
             FG[d, i] = (U[j, d] - U[i, d]) / ln[i] if j != i else 0.0
             FG[3 + d, i] = 0.5 * (U[i, d] + U[j, d])
-    return FG
 
 
 @nb.njit(cache=True, parallel=True, fastmath={"reassoc", "contract", "nsz", "arcp"})
@@ -577,9 +575,10 @@ def _near_product(FG, w, v, lo, hi, leaves, noff, npart, rowoff, Y):
 
 
 @nb.njit(cache=True, parallel=True)
-def _assemble(U, FG, Y, w1, v1, ln, prv, comp, starts, beta, mass):
+def _assemble(U, FG, Y, w1, v1, ln, prv, comp, starts, beta, mass, out):
     """``2 Dᵀ(W̃1 ∘ F − Y_F) + 2 Mᵀ(Ṽ1 ∘ G − Y_G)`` per vertex, the barycenter term
-    ``β (βᵀU)`` per component and ``mass`` times the P1 mass matrix applied to ``U``."""
+    ``β (βᵀU)`` per component and ``mass`` times the P1 mass matrix applied to ``U``, written
+    to ``out`` (N, 3)."""
     n = U.shape[0]
     k = starts.shape[0] - 1
     bu = np.zeros((k, 3))
@@ -587,7 +586,6 @@ def _assemble(U, FG, Y, w1, v1, ln, prv, comp, starts, beta, mass):
         for i in range(starts[c], starts[c + 1]):
             for d in range(3):
                 bu[c, d] += beta[i] * U[i, d]
-    out = np.empty((n, 3))
     for pp in nb.prange(n):
         p = np.int64(pp)
         q = prv[p]
@@ -602,7 +600,6 @@ def _assemble(U, FG, Y, w1, v1, ln, prv, comp, starts, beta, mass):
                 o += mass * (ln[p] * (U[p, d] / 3 + FG[d, p] * ln[p] / 6 + U[p, d] / 6)
                              + ln[q] * (U[p, d] / 3 + (U[p, d] - FG[d, q] * ln[q]) / 6))
             out[p, d] = o
-    return out
 
 
 @nb.njit(cache=True)
@@ -666,6 +663,7 @@ class HsOperator:
             raise ValueError(f"{metric!r} is not computed by the tree's metric (hs, hs_pure)")
         self.layout = layout
         self.metric = metric
+        self._room = None  # the product's buffers (product)
         self.order = check_order(order)
         expo = kernel_exponent(self.order)
         self.low = 1.0 if metric == "hs" else 0.0
@@ -728,19 +726,26 @@ class HsOperator:
         """Memory held by the stored weights."""
         return int(self.w.nbytes + self.v.nbytes + self.fw.nbytes + self.fv.nbytes)
 
-    def product(self, U: np.ndarray) -> np.ndarray:
-        """``Ã U`` for a field ``U`` (N, 3)."""
+    def product(self, U: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``Ã U`` for a field ``U`` (N, 3), in ``out`` (C-contiguous float64) if given."""
         lay, ln, tree = self.layout, self.ln, self.tree
         U = np.ascontiguousarray(U, dtype=np.float64)
-        FG = _edge_fields(U, lay.nxt, ln)
-        Y = np.empty((lay.n, 6))
+        # the edge fields and near sums in the same memory at every product: fresh, their
+        # 96 MB at 10⁶ vertices came as new pages from the kernel each time
+        # (docs/lab/repulsor.md, "Fewer fresh pages")
+        if self._room is None:
+            self._room = (np.empty((6, lay.n)), np.empty((lay.n, 6)))
+        FG, Y = self._room
+        _edge_fields(U, lay.nxt, ln, FG)
         _near_product(FG, self.w, self.v, tree.lo, tree.hi, self.leaves, self.noff,
                       self.npart, self.rowoff, Y)
         S = _cluster_sums(FG, ln, tree.lo, tree.hi, tree.left, tree.right)
         acc = _far_product(S, self.foff, self.fpart, self.fw, self.fv)
         _push_to_edges(acc, ln, tree.lo, tree.hi, tree.left, tree.right, Y)
-        return _assemble(U, FG, Y, self.w1, self.v1, ln, lay.prv, lay.comp, lay.starts,
-                         self.beta, self._mass)
+        out = np.empty((lay.n, 3)) if out is None else out
+        _assemble(U, FG, Y, self.w1, self.v1, ln, lay.prv, lay.comp, lay.starts, self.beta,
+                  self._mass, out)
+        return out
 
     def diagonal(self) -> np.ndarray:
         """The diagonal of ``Ã`` (N,): ``2 Σ_{I ∋ p} W̃1_I / l_I² + ½ Σ_{I ∋ p} Ṽ1_I + β_p²``
