@@ -767,14 +767,16 @@ class BandedSaddle:
         number of them): spring at each component's first vertex (3), barycenter term (3),
         barycenter rows (3; ``F`` their rows as fields, of the components ``c`` with
         ``brow[c]`` ≥ 0 in order), and their band
-        solves ``Z``, ``Zlam``; ``beta`` None: no barycenter term, its three columns zero and
-        not solved (``Z`` holds the others, ``zcol`` their places among the nine). Only what
+        solves ``Z``, ``Zlam``; ``beta`` None: no barycenter term, its three columns left
+        out (``zcol``: the places of the columns built among the nine). Only what
         :func:`_correction` reads of the columns is kept: ``beta`` and the barycenter rows'
-        fields (a third of the columns' memory); returns the columns (9, N, 3) for the
-        capacitances (:meth:`_gram`)."""
+        fields (a third of the columns' memory); returns the columns built (6 or 9, N, 3) for
+        the capacitances (:meth:`_gram`)."""
         lay = self.layout
         n = lay.n
-        U = np.zeros((9, n, 3))
+        self.zcol = np.array([0, 1, 2, 6, 7, 8] if beta is None else range(9), np.int64)
+        U = np.zeros((self.zcol.size, n, 3))
+        f = U.shape[0] - 3  # the barycenter rows' first column
         for d in range(3):
             U[d, lay.starts[:-1][brow >= 0], d] = 1.0
             if beta is not None:
@@ -782,12 +784,10 @@ class BandedSaddle:
         for c in np.flatnonzero(brow >= 0):
             s = slice(lay.starts[c], lay.starts[c + 1])
             for d in range(3):
-                U[6 + d, s] += F[3 * brow[c] + d, s]
-        self.zcol = np.arange(9, dtype=np.int64) if beta is not None else np.array(
-            [0, 1, 2, 6, 7, 8], np.int64)
-        self.Z, self.Zlam = self._band_inverse(U if beta is not None else U[self.zcol])
-        self.beta = np.ascontiguousarray(beta if beta is not None else np.zeros(0), float)
-        self.F = U[6:].copy()
+                U[f + d, s] += F[3 * brow[c] + d, s]
+        self.Z, self.Zlam = self._band_inverse(U)
+        self.beta = np.ascontiguousarray(np.zeros(0) if beta is None else beta, float)
+        self.F = U[f:].copy()
         self.brow = brow
         self.cap = np.zeros((lay.k, 12, 12))
         # the pieces of the components for :func:`_correction`: at most _CHUNK vertices each
@@ -799,12 +799,12 @@ class BandedSaddle:
         return U
 
     def _gram(self, U: np.ndarray, c: int) -> np.ndarray:
-        """``Uᵀ A⁻¹ U`` (9, 9) of component ``c``'s columns ``U`` (:meth:`_columns`)."""
+        """``Uᵀ A⁻¹ U`` (9, 9) of component ``c``'s columns ``U`` (:meth:`_columns`), zero
+        where a column was left out."""
         s = slice(int(self.layout.starts[c]), int(self.layout.starts[c + 1]))
         W = np.zeros((9, 9))
         q = self.zcol.size
-        W[np.ix_(self.zcol, self.zcol)] = (U[self.zcol, s].reshape(q, -1)
-                                           @ self.Z[:, s].reshape(q, -1).T)
+        W[np.ix_(self.zcol, self.zcol)] = U[:, s].reshape(q, -1) @ self.Z[:, s].reshape(q, -1).T
         return W
 
     def _factor(self, parts, anchors, T, ln, has_row, fixed, recycle):

@@ -410,6 +410,7 @@ class HsSaddle:
                  coarse: int | None = None):
         self.op = op
         self.jac = jac
+        self._scratch = None  # (:meth:`_room`)
         self.rtol = rtol
         self.max_iter = max_iter
         self.exact_backprojection = exact_backprojection
@@ -455,8 +456,7 @@ class HsSaddle:
         ``exact_backprojection``, whose back-projection solves with the operator."""
         if self.exact_backprojection:
             return False
-        self.op = self.coarse = None
-        self.__dict__.pop("_room_array", None)
+        self.op = self.coarse = self._scratch = None
         return True
 
     @property
@@ -467,10 +467,9 @@ class HsSaddle:
     def _room(self) -> np.ndarray:
         """An (N, 3) array for the loop's temporary products with ``Cᵀ``, the same at every
         call (fresh, it came as new pages from the kernel every time at 10⁶ vertices)."""
-        room = self.__dict__.get("_room_array")
-        if room is None:
-            room = self._room_array = np.empty((self.jac.con.layout.n, 3))
-        return room
+        if self._scratch is None:
+            self._scratch = np.empty((self.jac.con.layout.n, 3))
+        return self._scratch
 
     def _precondition(self, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(z, μ)``: the constraint preconditioner's ``H z + Cᵀμ = R``, ``C z = 0``, plus the
