@@ -44,24 +44,24 @@ def test_which_defrag_modes_compact_at_the_fault(tmp_path, text, compacts):
 
 def test_small_pages_switch_the_advice_off_inside_and_back(switch, monkeypatch):
     monkeypatch.setattr(memory, "_COMPACTS", True)
-    with memory.small_pages(memory.SMALL_PAGES_FROM):
+    with memory.small_pages():
         assert _advice(switch) is False
-        with memory.small_pages(memory.SMALL_PAGES_FROM):
+        with memory.small_pages():
             assert _advice(switch) is False
         assert _advice(switch) is False  # the inner exit leaves the outer's setting
     assert _advice(switch) is True
-    with pytest.raises(RuntimeError), memory.small_pages(memory.SMALL_PAGES_FROM):
+    with pytest.raises(RuntimeError), memory.small_pages():
         raise RuntimeError("inside")
     assert _advice(switch) is True
     switch(False)  # a user's own setting comes back as it was
-    with memory.small_pages(memory.SMALL_PAGES_FROM):
+    with memory.small_pages():
         pass
     assert _advice(switch) is False
 
 
 def test_small_pages_leave_the_advice_where_nothing_compacts(switch, monkeypatch):
     monkeypatch.setattr(memory, "_COMPACTS", False)
-    with memory.small_pages(memory.SMALL_PAGES_FROM):
+    with memory.small_pages():
         assert _advice(switch) is True
 
 
@@ -71,14 +71,14 @@ def test_small_pages_of_overlapping_threads_restore_once_both_left(switch, monke
     seen = {}
 
     def a():
-        with memory.small_pages(memory.SMALL_PAGES_FROM):
+        with memory.small_pages():
             a_in.set()
             b_in.wait(5)
         a_out.set()
 
     def b():
         a_in.wait(5)
-        with memory.small_pages(memory.SMALL_PAGES_FROM):
+        with memory.small_pages():
             b_in.set()
             a_out.wait(5)
             seen["b after a left"] = _advice(switch)
@@ -92,16 +92,8 @@ def test_small_pages_of_overlapping_threads_restore_once_both_left(switch, monke
     assert _advice(switch) is True
 
 
-def test_small_pages_only_from_their_size_on(switch, monkeypatch):
+def test_a_run_sets_up_and_steps_on_small_pages(switch, monkeypatch):
     monkeypatch.setattr(memory, "_COMPACTS", True)
-    with memory.small_pages(memory.SMALL_PAGES_FROM - 1):
-        assert _advice(switch) is True
-
-
-@pytest.mark.parametrize("from_size, small", [(60, True), (61, False)])
-def test_a_run_sets_up_and_steps_on_small_pages(switch, monkeypatch, from_size, small):
-    monkeypatch.setattr(memory, "_COMPACTS", True)
-    monkeypatch.setattr(memory, "SMALL_PAGES_FROM", from_size)
     seen = []
     prepare = projected.Relaxation._prepare
 
@@ -114,6 +106,6 @@ def test_a_run_sets_up_and_steps_on_small_pages(switch, monkeypatch, from_size, 
     run = projected.Relaxation(P, metric="hs", engine="exact")
     assert _advice(switch) is True
     assert run.step()
-    assert len(seen) == 2 and seen == [not small] * 2  # the set-up's and the step's
+    assert seen and not any(seen)
     assert _advice(switch) is True
     assert np.all(np.isfinite(run.X))

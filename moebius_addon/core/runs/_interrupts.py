@@ -61,7 +61,7 @@ def resumable(step):
         if getattr(self, "_interrupted", False) and not self.done:
             self._resume()
         self._interrupted = True
-        with small_pages(self.layout.n):
+        with small_pages():
             more = stepped(self, *args, **kwargs)
         self._interrupted = False
         return more

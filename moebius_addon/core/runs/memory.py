@@ -95,27 +95,19 @@ def _huge_pages_compact(path: str = "/sys/kernel/mm/transparent_hugepage/defrag"
     return mode in ("always", "madvise", "defer+madvise")
 
 
-#: :func:`small_pages` from this many vertices on. FHW, two threads, with and without the
-#: advice alternated in one process: at 10⁶ the set-up took 7.9-8.1 s against 10.6-12.1 s and
-#: a later iteration 9.4-10.3 s against 9.8-10.7 s; at 10⁵ and 3·10⁵ no difference showed;
-#: the crowd of 1 000 × 30 edges was 0.17-0.45 s slower per iteration in three rounds of five
-#: (and 0.01-0.05 s faster in two).
-SMALL_PAGES_FROM = 500_000
-
 _pages = {"lock": threading.Lock(), "depth": 0, "before": None}
 
 
 @contextlib.contextmanager
-def small_pages(vertices: int):
-    """For a run of ``vertices`` from :data:`SMALL_PAGES_FROM` on: numpy's arrays made inside
-    are not advised to use transparent huge pages where the system would compact memory for
-    them at the fault (:func:`_huge_pages_compact`), and the advice is as it was afterwards
-    (the outermost of nested or concurrent uses restores it). At 10⁶ vertices a run makes
-    about 3 GB of fresh arrays per iteration, and compacting for their huge pages cost
-    seconds of system time (docs/performance.md, "A million edges"); smaller runs gained
-    nothing or lost (:data:`SMALL_PAGES_FROM`)."""
-    switch = (_numpy_huge_page_switch() if _COMPACTS and vertices >= SMALL_PAGES_FROM
-              else None)
+def small_pages():
+    """numpy's arrays made inside are not advised to use transparent huge pages, where the
+    system would compact memory for them at the fault (:func:`_huge_pages_compact`); the
+    advice as it was afterwards (the outermost of nested or concurrent uses restores it).
+
+    A run at 10⁶ vertices makes about 3 GB of fresh arrays per iteration: the faults of
+    their huge pages spent seconds of system time compacting memory, and an iteration took
+    1.5 s longer with the advice than without (docs/performance.md, "A million edges")."""
+    switch = _numpy_huge_page_switch() if _COMPACTS else None
     if switch is None:
         yield
         return

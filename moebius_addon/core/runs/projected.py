@@ -262,7 +262,7 @@ class Relaxation(Run):
                                                  edge_lengths, barycenter, self.pinned)
         self.tau = initial_step / self.growth
         self._blocked = 0  # iterations in a row whose growth was blocked (_GROWTH_PATIENCE)
-        with small_pages(self.layout.n):  # as the steps' (:func:`._interrupts.resumable`)
+        with small_pages():  # as the steps' (:func:`._interrupts.resumable`)
             self._prepare(self.X, *self.engine.energy_gradient(self.X))
         self.history = {k: [] for k in (*HISTORY_KEYS, "length")}
         self._record(0.0)
