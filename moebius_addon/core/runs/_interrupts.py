@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import functools
 
-from .memory import small_pages
-
 
 def _keyboard_interrupt(err: BaseException) -> KeyboardInterrupt | None:
     """The KeyboardInterrupt behind a SystemError raised as a kernel returned, if any."""
@@ -51,8 +49,7 @@ def as_interrupt(call):
 def resumable(step):
     """Wrap a run's ``step()``: after an interruption inside it, the next call first calls
     ``self._resume()`` (rebuild what the engine holds at the accepted iterate); a
-    ``SystemError`` that carries a ``KeyboardInterrupt`` is raised as that interrupt. The
-    step's arrays take small pages (:func:`.memory.small_pages`)."""
+    ``SystemError`` that carries a ``KeyboardInterrupt`` is raised as that interrupt."""
 
     stepped = as_interrupt(step)
 
@@ -61,8 +58,7 @@ def resumable(step):
         if getattr(self, "_interrupted", False) and not self.done:
             self._resume()
         self._interrupted = True
-        with small_pages():
-            more = stepped(self, *args, **kwargs)
+        more = stepped(self, *args, **kwargs)
         self._interrupted = False
         return more
 

@@ -35,7 +35,6 @@ from .base import (
     check_number,
 )
 from .checks import check_flag
-from .memory import small_pages
 
 # The modified Newton back-projection gives up on a trial step once |Φ| shrinks by less than
 # this factor per iteration (it converges linearly; slower means the step left its basin).
@@ -262,8 +261,7 @@ class Relaxation(Run):
                                                  edge_lengths, barycenter, self.pinned)
         self.tau = initial_step / self.growth
         self._blocked = 0  # iterations in a row whose growth was blocked (_GROWTH_PATIENCE)
-        with small_pages():  # as the steps' (:func:`._interrupts.resumable`)
-            self._prepare(self.X, *self.engine.energy_gradient(self.X))
+        self._prepare(self.X, *self.engine.energy_gradient(self.X))
         self.history = {k: [] for k in (*HISTORY_KEYS, "length")}
         self._record(0.0)
         self._check_stop(None)
