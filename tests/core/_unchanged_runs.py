@@ -1,6 +1,10 @@
 """Short runs whose every iterate must stay bit-for-bit what it was before pinned vertices
 existed: the reference ``data/unchanged_runs.json`` was written by this module's
-``main()`` on the commit before pins (run it there to regenerate; it uses nothing newer).
+``main()`` on the commit before pins (run it there to regenerate; it uses nothing newer),
+but for the two cases of the hs metric on the tree engine, written again when its constraint
+preconditioner's barycenter rows became projected (another preconditioner, so other Krylov
+iterates within their tolerance: energies within 2.1e-6, gradient norms within 8.1e-4 of
+the old histories' largest values, the iteration counts equal).
 
 Each case records, per accepted iterate, the history (energy, step, grad_norm,
 constraint_residual) as hexadecimal floats and a SHA-256 of the final vertex array.

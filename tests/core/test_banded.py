@@ -294,6 +294,61 @@ def test_barycenter_term_left_out_of_a_preconditioner(name):
         banded.BandedSaddle(metrics.banded_parts("h1", X, lay), jac, barycenter_term=False)
 
 
+@pytest.mark.parametrize("name", sorted(CURVES))
+def test_projected_barycenter_rows_solve_the_translation_free_metric(name):
+    """``projected=True`` solves the saddle-point system of ``H′``, the band's metric (its
+    spring of ``PROJECTED_SPRING`` included) with the translations of every component
+    minimized out, against a dense solve of it: fields and multipliers, for ``C u = r`` and
+    ``r = 0``; the solve is symmetric and maps into ``ker C``."""
+    X, lay, con, jac = _system(name)
+    n, m = lay.n, con.size
+    C = np.array([jac.rmatvec(np.eye(m)[i]).ravel() for i in range(m)])
+    rng = np.random.default_rng(8)
+    g = rng.standard_normal((n, 3))
+    r = 1e-3 * rng.standard_normal(m)
+    v, w = np.arange(n), lay.nxt
+    op = hs_metric.HsOperator(X, lay, "hs")
+    for parts in (metrics.banded_parts("h1", X, lay), op.preconditioner_edges()):
+        A = np.zeros((n, n))
+        if isinstance(parts, banded.EdgeParts):
+            np.add.at(A, (v, v), parts.p)
+            np.add.at(A, (w, w), parts.p)
+            np.add.at(A, (v, w), parts.q)
+            np.add.at(A, (w, v), parts.q)
+        else:
+            np.add.at(A, (parts[0], parts[1]), parts[2])
+        anchors = lay.starts[:-1]
+        A[anchors, anchors] *= 1 + banded.PROJECTED_SPRING
+        H = np.kron(A, np.eye(3))
+        T = np.zeros((3 * n, 3 * lay.k))  # the translations of every component
+        for c in range(lay.k):
+            for d in range(3):
+                T[3 * np.arange(lay.starts[c], lay.starts[c + 1]) + d, 3 * c + d] = 1.0
+        HT = H @ T
+        Hp = H - HT @ np.linalg.solve(T.T @ HT, HT.T)
+        K = np.zeros((3 * n + m, 3 * n + m))
+        K[:3 * n, :3 * n] = Hp
+        K[:3 * n, 3 * n:] = C.T
+        K[3 * n:, :3 * n] = C
+        solver = banded.BandedSaddle(parts, jac, product=False, barycenter_term=False,
+                                     projected=True)
+        assert not hasattr(solver, "Z")  # no column solves
+        for rr in (r, np.zeros(m)):
+            x = np.linalg.solve(K, np.concatenate([g.ravel(), rr]))
+            u, lam = solver._solve(g, rr)
+            assert np.linalg.norm(u.ravel() - x[:3 * n]) <= 1e-8 * np.linalg.norm(x[:3 * n])
+            assert np.linalg.norm(lam - x[3 * n:]) <= 1e-7 * np.linalg.norm(x[3 * n:])
+            assert np.abs(C @ u.ravel() - rr).max() <= 1e-12 * max(1.0, np.abs(u).max())
+        u0 = solver.pseudo_inverse(r)
+        assert np.linalg.norm(u0.ravel() - np.linalg.solve(K, np.r_[np.zeros(3 * n), r])[:3 * n]
+                              ) <= 1e-8 * np.linalg.norm(u0)
+        g2 = rng.standard_normal((n, 3))
+        z1, z2 = solver._solve(g, np.zeros(m))[0], solver._solve(g2, np.zeros(m))[0]
+        assert abs(np.vdot(z1, g2) - np.vdot(z2, g)) <= 1e-10 * abs(np.vdot(z1, g2))
+    with pytest.raises(ValueError, match="barycenter term"):
+        banded.BandedSaddle(op.preconditioner_edges(), jac, product=False, projected=True)
+
+
 SPLIT_FLOW = """
 from moebius_addon import core
 from moebius_addon.core.metrics import banded

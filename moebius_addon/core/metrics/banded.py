@@ -25,6 +25,12 @@ block per component: memory and work stay O(N) for links too. ``B``'s range (mul
 ``β``, proportional to the barycenter rows' vertex weights) lies in ``Cᵀ``'s, so it moves the
 multipliers only: a preconditioner leaves it out (rank 9, six band solves per iterate).
 
+A preconditioner may project the barycenter rows instead (``projected``): the right-hand
+side's translations taken out, the band solved with a weak spring, the solution translated onto
+the rows. That is the exact solve of the band's metric with its translations minimized out
+(its Schur complement), no correction and no column solves; the Laplacians of the hs operator
+that the band preconditions charge nothing for a translation either.
+
 A long block (:data:`SPLIT_FROM`) is factored and solved as two halves side by side, joined by
 a separator of a few rows eliminated last (:func:`_split_band`), so that a curve of one piece
 has two cores for its band solves.
@@ -55,6 +61,12 @@ _BLOCKS = 64
 COMPACT_FROM = 200_000
 # Vertices per piece of the low-rank correction's parallel sums (:func:`_correction`).
 _CHUNK = 4096
+#: The spring of a band whose barycenter rows are projected (``BandedSaddle(projected=True)``),
+#: as a fraction of the metric's diagonal at the anchor: the spring stays in that metric, and
+#: with the whole diagonal the hs flow's Krylov solves took 56 iterations where the bordered
+#: preconditioner took 47 (FHW at 20 000 edges, eight iterations of the flow); with a
+#: thousandth of it 47.
+PROJECTED_SPRING = 1e-3
 #: A block of the band (a component, or components merged by :func:`block_cuts`) of this
 #: many vertices or more is factored and solved as two halves side by side, joined by a
 #: separator of a few rows (:func:`_split_band`): a curve of one piece used one core for its
@@ -328,7 +340,7 @@ def _band_solve(F, b):
 
 
 @nb.njit(cache=True, parallel=True)
-def _solve_fields(F, D, vert, G, lam, cuts, part, rev, work, sep):
+def _solve_fields(F, D, vert, G, lam, cuts, part, rev, work, sep, shift, bw, comp):
     """Band solves for right-hand sides given as fields ``G`` (m, N, 3) and edge values
     ``lam`` (m, N) (or (0, N): none), scaled by ``D`` on both sides, with the packed factors
     ``F`` (:func:`pack_factors`, then the pivots); the solutions' fields and edge multipliers
@@ -340,10 +352,13 @@ def _solve_fields(F, D, vert, G, lam, cuts, part, rev, work, sep):
     row ``i`` at ``rev − i``) are joined by their separator (``sep``,
     :meth:`BandedSaddle._join_blocks`) between the two sweeps. ``work`` (m, 4N): room for
     the unknowns, every entry written before it is read (right-hand side ``q``, block ``b``
-    in ``work[q, cuts[b] : cuts[b + 1]]``)."""
+    in ``work[q, cuts[b] : cuts[b + 1]]``). ``shift`` (m, K, 3) (or (0, K, 3): none): the
+    fields less ``bw[v] shift[q, comp[v]]`` as they are read (the projected barycenter rows,
+    :meth:`BandedSaddle._solve_projected`)."""
     U, L, uw, lw, uoff, loff, piv = F
     m, n = G.shape[0], vert.shape[0]
     zero = G.shape[1] == 0
+    shifted = shift.shape[0] > 0 and not zero
     X = np.empty((m, n, 3))
     Lm = np.empty((m, n))
     nblocks = cuts.shape[0] - 1
@@ -358,7 +373,10 @@ def _solve_fields(F, D, vert, G, lam, cuts, part, rev, work, sep):
             for d in range(4):
                 i = 4 * p + d
                 if d < 3:
-                    y = (0.0 if zero else G[q, v, d]) * D[i]
+                    y = 0.0 if zero else G[q, v, d]
+                    if shifted:
+                        y -= bw[v] * shift[q, comp[v], d]
+                    y *= D[i]
                 else:
                     y = lam[q, v] * D[i] if lam.shape[0] > 0 else 0.0
                 x[(i if r < 0 else r - i) - lo] = y
@@ -734,10 +752,17 @@ class BandedSaddle:
     component and six band solves per iterate instead of nine: the same fields ``u`` for any
     right-hand side, the same multipliers where ``r = 0`` (``B``'s range lies in ``Cᵀ``'s;
     module text); with ``B`` only for a metric whose products include it.
+    ``projected=True`` (with ``barycenter_term=False``): the barycenter rows by projection,
+    no correction (:meth:`_solve_projected`): the exact saddle-point solve of the band's
+    metric with its translations minimized out, for which the hs operator's Laplacians do not
+    charge either; no column solves at the build, none of their fields read per solve.
     """
 
+    #: Whether the barycenter rows are projected (:meth:`_solve_projected`), not bordered.
+    projected = False
+
     def __init__(self, parts, jac: Jacobian, recycle: BandedSaddle | None = None,
-                 product: bool = True, barycenter_term: bool = True):
+                 product: bool = True, barycenter_term: bool = True, projected: bool = False):
         if isinstance(parts, EdgeParts) and (product or jac.con.layout.has_open):
             raise ValueError("edge parts are for a preconditioner of closed components "
                              "(product=False)")
@@ -748,14 +773,23 @@ class BandedSaddle:
         if not (con.edge_lengths and con.barycenter) or con.pinned is not None:
             raise ValueError("the banded saddle-point solver needs the edge-length and "
                              "barycenter constraints and no pinned vertices")
+        if projected and barycenter_term:
+            raise ValueError("projected barycenter rows are for a preconditioner without the "
+                             "barycenter term")
         lay = con.layout
         self.layout, self.jac = lay, jac
+        self.projected = projected
         self.rows, self.cols, self.vals = parts[:3] if product else (None, None, None)
         T, inv_l = jac.edge_fields()
         n = lay.n
         self._factor(parts, np.asarray(lay.starts[:-1], np.int64), T, 1.0 / inv_l,
                      np.ones(n, np.bool_), np.zeros(n, np.bool_), recycle)
         recycle = None  # its band is overwritten now: it must not be used again
+        if projected:
+            starts = np.asarray(lay.starts, np.int64)
+            self.chunks = _chunks(starts)
+            self.bsum = _component_sums(jac.b[:, None], self.chunks, lay.k)[:, 0]
+            return
         U = self._columns(parts[-1] if barycenter_term else None, jac.barycenter_fields(),
                           np.arange(lay.k, dtype=np.int64))
         for c in range(lay.k):
@@ -790,12 +824,7 @@ class BandedSaddle:
         self.F = U[f:].copy()
         self.brow = brow
         self.cap = np.zeros((lay.k, 12, 12))
-        # the pieces of the components for :func:`_correction`: at most _CHUNK vertices each
-        starts = np.asarray(lay.starts, np.int64)
-        self.chunks = np.array([(a, min(a + _CHUNK, starts[c + 1]), c)
-                                for c in range(lay.k)
-                                for a in range(int(starts[c]), int(starts[c + 1]), _CHUNK)],
-                               np.int64).reshape(-1, 3)
+        self.chunks = _chunks(np.asarray(lay.starts, np.int64))
         return U
 
     def _gram(self, U: np.ndarray, c: int) -> np.ndarray:
@@ -832,6 +861,8 @@ class BandedSaddle:
             diag = np.zeros(lay.n)
             np.add.at(diag, rows[rows == cols], vals[rows == cols])
         self.anchors, self.mu = anchors, diag[anchors]
+        if self.projected:
+            self.mu = self.mu * PROJECTED_SPRING
         shape = (4 * lay.n, self.kl + self.ku + 1)
         reuse = recycle is not None and recycle.ab is not None and recycle.ab.shape == shape
         ab = recycle.ab if reuse else np.empty(shape)
@@ -919,9 +950,10 @@ class BandedSaddle:
         about 240 MB more at the peak. The solver is unusable afterwards."""
         self.__dict__ = {"ab": self.ab}  # None when compacted (COMPACT_FROM)
 
-    def _band_inverse(self, G, lam=None):
+    def _band_inverse(self, G, lam=None, shift=None):
         """Band solve for right-hand sides given as fields ``G`` (m, N, 3) and edge values
-        ``lam`` (m, N): the core solution's fields and edge multipliers."""
+        ``lam`` (m, N): the core solution's fields and edge multipliers (``shift`` (m, K, 3):
+        the fields less ``b ⊗ shift`` per component, :func:`_solve_fields`)."""
         G = np.ascontiguousarray(G, dtype=np.float64)
         lam = np.zeros((0, G.shape[1])) if lam is None else np.ascontiguousarray(lam, float)
         m, rows = G.shape[0], self.D.shape[0]
@@ -937,8 +969,12 @@ class BandedSaddle:
             work = getattr(self, "_work", None)
             if work is None:
                 work = self._work = np.empty((1, rows))
+        if shift is None:
+            shift, bw, comp = _NO_SHIFT, np.zeros(0), np.zeros(0, np.int64)
+        else:
+            bw, comp = self.jac.b, self.layout.comp
         return _solve_fields(self.factors, self.D, self.vert, G, lam, self.cuts, self.part,
-                             self.rev, work, self.sep)
+                             self.rev, work, self.sep, shift, bw, comp)
 
     def solve(self, g: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(u, λ)`` of ``[[G, Cᵀ], [C, 0]] [u; λ] = [g; r]`` (λ: edge rows, then three
@@ -954,6 +990,8 @@ class BandedSaddle:
 
     def _solve(self, g: np.ndarray | None, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`solve` without its refinement; ``g`` None: zero."""
+        if self.projected:
+            return self._solve_projected(g, r)
         n = self.layout.n
         G = np.empty((1, 0, 3)) if g is None else g[None]
         (u,), (lam_e,) = self._band_inverse(G, r[None, :n])  # fresh arrays: corrected in place
@@ -967,9 +1005,36 @@ class BandedSaddle:
         _correction(y, yb, self.beta, self.F, self.Z, self.Zlam, self.zcol,
                     self.layout.starts, self.brow, self.cap, self.chunks, u, lam_e, lam_b)
 
+    def _solve_projected(self, g: np.ndarray | None, r: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`_solve` with projected barycenter rows (``projected``). On ``ker C_e``
+        a barycenter row is ``Σ b_v u_v`` (over ``scale``), and translations keep every edge
+        length, so: the fields' translations are taken out (``g − b Σg / Σb``, no ``Cᵀ`` of
+        an edge row has one), the band solves with the edge rows, the solution is translated
+        onto the barycenter rows, and ``Σg`` goes to their multipliers (less its part along
+        the edge rows). That is the saddle-point solve of ``H′ = min over translations of the
+        band's metric`` (spring included), symmetric, into ``ker C``."""
+        lay, jac = self.layout, self.jac
+        n, k = lay.n, lay.k
+        scale = jac.con.scale
+        if g is None:
+            G, shift, s = np.empty((1, 0, 3)), None, None
+        else:
+            s = _component_sums(g, self.chunks, k)
+            G, shift = g[None], (s / self.bsum[:, None])[None]
+        (u,), (lam_e,) = self._band_inverse(G, r[None, :n], shift)
+        r_b = np.asarray(r[n:], float).reshape(k, 3)
+        mu_b = np.zeros((k, 3)) if s is None else s * (scale / self.bsum[:, None])
+        _translate(u, lam_e, jac.b, jac.M, jac.ln, np.ascontiguousarray(r[:n], float), r_b,
+                   mu_b, self.bsum, scale, lay.comp, self.chunks, s is not None)
+        return u, np.concatenate([lam_e, mu_b.ravel()])
+
     def solve_many(self, G: np.ndarray, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`_solve` (no refinement) for many right-hand sides at once: fields ``G``
         (m, N, 3) and rows ``R`` (m, N + 3K); one parallel band solve for all of them."""
+        if self.projected:
+            sols = [self._solve(G[q], R[q]) for q in range(G.shape[0])]
+            return np.stack([u for u, _ in sols]), np.stack([lam for _, lam in sols])
         n = self.layout.n
         m = G.shape[0]
         U, Le = self._band_inverse(G, R[:, :n])
@@ -994,6 +1059,65 @@ class BandedSaddle:
             s = slice(lay.starts[c], lay.starts[c + 1])
             out[s] += np.outer(self.beta[s], self.beta[s] @ V[s])
         return out
+
+
+_NO_SHIFT = np.zeros((0, 1, 3))
+
+
+def _chunks(starts: np.ndarray) -> np.ndarray:
+    """The pieces of the components for the parallel sums (:func:`_correction`,
+    :func:`_component_sums`): ``(first, end, component)``, at most ``_CHUNK`` vertices each."""
+    return np.array([(a, min(a + _CHUNK, starts[c + 1]), c)
+                     for c in range(starts.shape[0] - 1)
+                     for a in range(int(starts[c]), int(starts[c + 1]), _CHUNK)],
+                    np.int64).reshape(-1, 3)
+
+
+@nb.njit(cache=True, parallel=True)
+def _component_sums(Y, chunks, k):
+    """``Σ_v Y[v]`` per component (K, m) over the pieces ``chunks`` in parallel, their sums
+    added in order: the same bits for any thread count."""
+    nch, m = chunks.shape[0], Y.shape[1]
+    part = np.zeros((nch, m))
+    for h in nb.prange(nch):
+        for v in range(chunks[h, 0], chunks[h, 1]):
+            for d in range(m):
+                part[h, d] += Y[v, d]
+    out = np.zeros((k, m))
+    for h in range(nch):
+        for d in range(m):
+            out[chunks[h, 2], d] += part[h, d]
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _translate(u, lam_e, b, M, ln, r_e, r_b, mu_b, bsum, scale, comp, chunks, multipliers):
+    """:meth:`BandedSaddle._solve_projected` after the band solve, in place: ``u`` translated
+    per component onto its barycenter rows ``r_b`` (each row ``(Σ b_v u_v + Σ_I M_I l_I
+    r_e,I) / scale`` with the edge rows ``r_e`` solved), and with ``multipliers`` the edge
+    multipliers less the barycenter multipliers' ``mu_b`` part along them (the rows' ``M``
+    terms, :func:`constraints._rmatvec`). Sums by pieces in order: any thread count's bits."""
+    nch, k = chunks.shape[0], bsum.shape[0]
+    part = np.zeros((nch, 3))
+    for h in nb.prange(nch):
+        for v in range(chunks[h, 0], chunks[h, 1]):
+            f = ln[v] * r_e[v]
+            for d in range(3):
+                part[h, d] += b[v] * u[v, d] + M[v, d] * f
+    c = np.zeros((k, 3))
+    for h in range(nch):
+        for d in range(3):
+            c[chunks[h, 2], d] += part[h, d]
+    for j in range(k):
+        for d in range(3):
+            c[j, d] = (r_b[j, d] * scale - c[j, d]) / bsum[j]
+    for v in nb.prange(u.shape[0]):
+        j = comp[v]
+        for d in range(3):
+            u[v, d] += c[j, d]
+        if multipliers:
+            lam_e[v] -= ln[v] * (M[v, 0] * mu_b[j, 0] + M[v, 1] * mu_b[j, 1]
+                                 + M[v, 2] * mu_b[j, 2]) / scale
 
 
 # ------------------------------------------------------------------------------------------------

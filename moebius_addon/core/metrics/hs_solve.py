@@ -11,7 +11,10 @@ update) preconditioned by
   again along the curve, and other components), which carry the strong coupling of strands
   close in space (without them the iterates' errors moved such strands against each other and
   the collision bound stalled the flow); without the barycenter term, which moves only the
-  multipliers (:class:`.banded.BandedSaddle`, ``barycenter_term``);
+  multipliers (:class:`.banded.BandedSaddle`, ``barycenter_term``), and with ``H``'s
+  translations minimized out, its barycenter rows projected (``projected``): ``Ã``'s two
+  Laplacians charge nothing for a translation (its barycenter term moves the multipliers
+  only), ``H``'s mass and folded weights do;
 * from ``MULTILEVEL_FROM`` vertices on, plus the coarser levels of :class:`Multilevel` (the
   curve quartered again and again, each level's own banded ``H``; additive, BPX): what the
   banded ``H`` misses most on smooth curves are the low modes, at every scale below its own.
@@ -298,7 +301,8 @@ class Multilevel:
                  order: float = PAPER_ORDER, fine: BandedSaddle | None = None):
         self.jac = jac
         self.fine = (BandedSaddle(_parts(X, layout, metric, order), jac, product=False,
-                                  barycenter_term=False) if fine is None else fine)
+                                  barycenter_term=False, projected=True)
+                     if fine is None else fine)
         halvings = []
         Xl, lay = X, layout
         while lay.n > COARSEST:
@@ -334,7 +338,8 @@ class Multilevel:
                 self.solves[d] = (fac.solve, jc.con.size)
             else:
                 self.solves[d] = (BandedSaddle(_parts(Xl, lay, metric, order), jc,
-                                               product=False, barycenter_term=False)._solve,
+                                               product=False, barycenter_term=False,
+                                               projected=True)._solve,
                                   jc.con.size)
 
     @property
@@ -422,7 +427,7 @@ class HsSaddle:
             return
         if jac.con.pinned is None:
             self.K = BandedSaddle(op.preconditioner_edges(), jac, old, product=False,
-                                  barycenter_term=False)
+                                  barycenter_term=False, projected=True)
         else:  # the constraint preconditioner with pins: bordered (the iterates stay 0 there)
             self.K = BorderedPins(BandedSaddle(op.preconditioner_parts(),
                                                unpinned_jacobian(jac), old), jac)
