@@ -478,13 +478,15 @@ class HsSaddle:
 
     def _precondition(self, R: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(z, μ)``: the constraint preconditioner's ``H z + Cᵀμ = R``, ``C z = 0``, plus the
-        coarse level's correction."""
+        coarse level's correction; ``R`` becomes ``R − Cᵀμ`` (the solve's residual update,
+        which is also the input of :class:`Multilevel`: one product with ``Cᵀ``, not two)."""
         z, mu = self.K._solve(R, np.zeros(self.jac.con.size))
+        coarse = self.coarse(R) if isinstance(self.coarse, CoarseLevel) else None
+        R -= self.jac.rmatvec(mu, out=self._room())
         if isinstance(self.coarse, Multilevel):
-            w = self._room()
-            z += self.coarse(np.subtract(R, self.jac.rmatvec(mu, out=w), out=w))
-        elif self.coarse is not None:
             z += self.coarse(R)
+        elif coarse is not None:
+            z += coarse
         return z, mu
 
     def solve(self, g: np.ndarray, r: np.ndarray, rtol: float | None = None
@@ -499,19 +501,19 @@ class HsSaddle:
         else:  # x = 0: no product (one of ten at 10⁶ vertices, 0.14 s)
             x = np.zeros((n, 3))
             res = -np.asarray(g, dtype=np.float64)
-        z, mu = self._precondition(res)
         # the residual keeps only what the constraints cannot absorb, its Cᵀμ part moved into
-        # the multipliers λ (Gould, Hribar & Nocedal's residual update; the same iterates in
-        # exact arithmetic, res = Ã x − g + Cᵀλ throughout): without it, a residual dominated
-        # by Cᵀλ swamped the projected part's rounding and the iterates left C u = r (2% of |u|
-        # after 125 iterations at rtol 1e-10 on a trefoil)
+        # the multipliers λ (Gould, Hribar & Nocedal's residual update, in _precondition; the
+        # same iterates in exact arithmetic, res = Ã x − g + Cᵀλ throughout): without it, a
+        # residual dominated by Cᵀλ swamped the projected part's rounding and the iterates left
+        # C u = r (2% of |u| after 125 iterations at rtol 1e-10 on a trefoil)
+        z, mu = self._precondition(res)
         lam = -mu
-        res -= self.jac.rmatvec(mu)
         rz = float(np.einsum("ij,ij->", res, z))
         if not rz > 0.0 and self.coarse is not None and np.any(res):
             # the coarse level made the preconditioner indefinite here: go on without it
             self.coarse = None
-            z, _ = self._precondition(res)
+            z, mu = self._precondition(res)
+            lam -= mu
             rz = float(np.einsum("ij,ij->", res, z))
         if not rz >= 0.0:  # NaN, or an indefinite constraint preconditioner
             raise np.linalg.LinAlgError("the hs preconditioner is not positive definite here")
@@ -530,7 +532,6 @@ class HsSaddle:
             Ap = z = None  # (memory: the preconditioner's solves are the solve's peak)
             z, mu = self._precondition(res)
             lam -= mu
-            res -= self.jac.rmatvec(mu, out=self._room())
             rz_new = float(np.einsum("ij,ij->", res, z))
             if not rz_new > 0.0:  # converged to rounding, or the preconditioner broke down
                 break
