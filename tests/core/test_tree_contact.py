@@ -163,3 +163,29 @@ def test_same_bits_for_every_thread_count():
                              capture_output=True, text=True, check=True, timeout=600)
         outs.append(json.loads(out.stdout.strip().splitlines()[-1]))
     assert outs[0] == outs[1]
+
+
+def test_an_engine_builds_the_hierarchy_once_per_polygon(monkeypatch, rng):
+    # the step's bound and its trials' paths search from the same iterate: one build, the
+    # all-pairs answers; a new polygon, or one changed in place, is built anew
+    from moebius_addon.core.runs import engine as engine_module
+    P = core.resample(core.knots.named("5_2"), 2000)
+    X, layout = as_layout(P)
+    eng = engine_module.make_engine("tree", layout, "hs")
+    builds = []
+    build = engine_module.contact_bvh.build
+    monkeypatch.setattr(engine_module.contact_bvh, "build",
+                        lambda *a, **k: builds.append(1) or build(*a, **k))
+    h = _mean_edge(P)
+    for _ in range(3):
+        U = rng.standard_normal(X.shape) * h
+        got = eng.contact_time(X, U, 50.0, 0.01 * h)
+        assert got == collision.contact_time_x(X, U, layout, 50.0, 0.01 * h, search="pairs")
+    assert len(builds) == 1
+    Y = X.copy()
+    eng.contact_time(Y, U, 50.0, 0.01 * h)
+    assert len(builds) == 1  # equal values: the same hierarchy
+    Y[7] += 0.5 * h
+    assert eng.contact_time(Y, U, 50.0, 0.01 * h) == collision.contact_time_x(
+        Y, U, layout, 50.0, 0.01 * h, search="pairs")
+    assert len(builds) == 2

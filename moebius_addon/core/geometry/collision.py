@@ -53,17 +53,18 @@ def _contact_rows(X, U, nxt, starts, comp, closed, near, tau_max, eps, nchunks):
 
 
 def contact_time_x(X, U, layout: Layout, tau_max: float, eps: float,
-                   search: str = "auto", near=None) -> float:
+                   search: str = "auto", near=None, tree=None) -> float:
     """First contact of ``X − τU`` up to ``tau_max``; ``search`` "pairs" (all pairs), "tree"
     (the hierarchy: the same value) or "auto" (the tree from ``CONTACT_TREE_FROM`` edges).
     ``near``: per component, pairs
     of its edges this many apart along it or nearer are not tested (:func:`._pairs.tested`;
     default 1, the edges that share a vertex; a thickness leaves out more, :mod:`.thickness`).
     Open components' dummy edges (._layout) are points at their last vertex, tested as such
-    (by both searches: the hierarchy's rule for the pairs it skips is the all-pairs one)."""
+    (by both searches: the hierarchy's rule for the pairs it skips is the all-pairs one).
+    ``tree``: the hierarchy of ``X``'s edges if already built (:func:`.tree.bvh.build`)."""
     near = np.ones(layout.k, np.int64) if near is None else near
     if _use_tree(search, layout.n, CONTACT_TREE_FROM):
-        return tree_contact.contact_time_tree(X, U, layout, tau_max, eps, near)
+        return tree_contact.contact_time_tree(X, U, layout, tau_max, eps, near, tree)
     return float(
         _contact_rows(X, np.ascontiguousarray(U), layout.nxt, layout.starts, layout.comp,
                       layout.closed_flags, near, float(tau_max), float(eps), 16)

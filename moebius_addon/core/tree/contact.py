@@ -170,12 +170,13 @@ def _contact_search(X, U, nxt, starts, comp, closed, near, perm, lo, hi, left, r
 
 
 def contact_time_tree(X: np.ndarray, U: np.ndarray, layout: Layout, tau_max: float,
-                      eps: float, near=None) -> float:
+                      eps: float, near=None, tree=None) -> float:
     """:func:`collision.contact_time_x` through the hierarchy (the same value; ``near`` as
-    there): one search up to ``tau_max``. (Searching shorter horizons first, which paid while
-    each chunk pruned with its own best alone, cost 2–4× this: FHW, 10⁵ edges, 36–140 ms
-    against 19–38 ms per search of a flow's step.)"""
-    tree = bvh.build(X, layout)
+    there; ``tree``: ``X``'s, built here if None): one search up to ``tau_max``. (Searching
+    shorter horizons first, which paid while each chunk pruned with its own best alone, cost
+    2–4× this: FHW, 10⁵ edges, 36–140 ms against 19–38 ms per search of a flow's step.)"""
+    if tree is None:
+        tree = bvh.build(X, layout)
     near = np.ones(layout.k, np.int64) if near is None else near
     return float(_contact_search(X, np.ascontiguousarray(U), layout.nxt, layout.starts,
                                  layout.comp, layout.closed_flags, near, *tree, float(tau_max),
