@@ -241,13 +241,14 @@ def test_split_band_solves_what_the_whole_band_solves(metric, monkeypatch):
 
 
 
-def _dense_band(parts, n):
-    """The banded part of ``parts`` (triplets, or :class:`banded.EdgeParts`) as a dense matrix
-    over vertices, without the barycenter term."""
+def _dense_band(parts, nxt):
+    """The banded part of ``parts`` (triplets, or :class:`banded.EdgeParts` of the closed
+    components whose next vertices are ``nxt``) as a dense matrix over vertices, without the
+    barycenter term."""
+    n = nxt.shape[0]
     A = np.zeros((n, n))
     if isinstance(parts, banded.EdgeParts):
-        v = np.arange(n)
-        w = (v + 1) % n  # one closed component
+        v, w = np.arange(n), nxt
         np.add.at(A, (v, v), parts.p)
         np.add.at(A, (w, w), parts.p)
         np.add.at(A, (v, w), parts.q)
@@ -257,6 +258,21 @@ def _dense_band(parts, n):
     return A
 
 
+def _constraint_rows(jac, m):
+    """``C`` as a dense (m, 3N) matrix, row by row from ``Cᵀ``."""
+    return np.array([jac.rmatvec(np.eye(m)[i]).ravel() for i in range(m)])
+
+
+def _saddle_matrix(H, C):
+    """``[[H, Cᵀ], [C, 0]]``."""
+    k, m = H.shape[0], C.shape[0]
+    K = np.zeros((k + m, k + m))
+    K[:k, :k] = H
+    K[:k, k:] = C.T
+    K[k:, :k] = C
+    return K
+
+
 @pytest.mark.parametrize("name", ["trefoil", "fhw", "noneq"])
 def test_barycenter_term_left_out_of_a_preconditioner(name):
     """``barycenter_term=False`` solves the saddle-point system of the band's metric without
@@ -264,16 +280,13 @@ def test_barycenter_term_left_out_of_a_preconditioner(name):
     for any ``C u = r``, the same multipliers for ``r = 0``."""
     X, lay, con, jac = _system(name)
     n, m = lay.n, con.size
-    C = np.array([jac.rmatvec(np.eye(m)[i]).ravel() for i in range(m)])
+    C = _constraint_rows(jac, m)
     rng = np.random.default_rng(6)
     g = rng.standard_normal((n, 3))
     r = 1e-3 * rng.standard_normal(m)
     op = hs_metric.HsOperator(X, lay, "hs")
     for parts in (metrics.banded_parts("h1", X, lay), op.preconditioner_edges()):
-        K = np.zeros((3 * n + m, 3 * n + m))
-        K[:3 * n, :3 * n] = np.kron(_dense_band(parts, n), np.eye(3))
-        K[:3 * n, 3 * n:] = C.T
-        K[3 * n:, :3 * n] = C
+        K = _saddle_matrix(np.kron(_dense_band(parts, lay.nxt), np.eye(3)), C)
         without = banded.BandedSaddle(parts, jac, product=False, barycenter_term=False)
         assert without.Z.shape[0] == 6
         with_b = banded.BandedSaddle(parts, jac, product=False)
@@ -302,21 +315,13 @@ def test_projected_barycenter_rows_solve_the_translation_free_metric(name):
     ``r = 0``; the solve is symmetric and maps into ``ker C``."""
     X, lay, con, jac = _system(name)
     n, m = lay.n, con.size
-    C = np.array([jac.rmatvec(np.eye(m)[i]).ravel() for i in range(m)])
+    C = _constraint_rows(jac, m)
     rng = np.random.default_rng(8)
     g = rng.standard_normal((n, 3))
     r = 1e-3 * rng.standard_normal(m)
-    v, w = np.arange(n), lay.nxt
     op = hs_metric.HsOperator(X, lay, "hs")
     for parts in (metrics.banded_parts("h1", X, lay), op.preconditioner_edges()):
-        A = np.zeros((n, n))
-        if isinstance(parts, banded.EdgeParts):
-            np.add.at(A, (v, v), parts.p)
-            np.add.at(A, (w, w), parts.p)
-            np.add.at(A, (v, w), parts.q)
-            np.add.at(A, (w, v), parts.q)
-        else:
-            np.add.at(A, (parts[0], parts[1]), parts[2])
+        A = _dense_band(parts, lay.nxt)
         anchors = lay.starts[:-1]
         A[anchors, anchors] *= 1 + banded.PROJECTED_SPRING
         H = np.kron(A, np.eye(3))
@@ -325,11 +330,7 @@ def test_projected_barycenter_rows_solve_the_translation_free_metric(name):
             for d in range(3):
                 T[3 * np.arange(lay.starts[c], lay.starts[c + 1]) + d, 3 * c + d] = 1.0
         HT = H @ T
-        Hp = H - HT @ np.linalg.solve(T.T @ HT, HT.T)
-        K = np.zeros((3 * n + m, 3 * n + m))
-        K[:3 * n, :3 * n] = Hp
-        K[:3 * n, 3 * n:] = C.T
-        K[3 * n:, :3 * n] = C
+        K = _saddle_matrix(H - HT @ np.linalg.solve(T.T @ HT, HT.T), C)
         solver = banded.BandedSaddle(parts, jac, product=False, barycenter_term=False,
                                      projected=True)
         assert not hasattr(solver, "Z")  # no column solves

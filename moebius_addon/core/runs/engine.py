@@ -233,7 +233,7 @@ class DenseEngine:
         if self.layout.n < CONTACT_TREE_FROM:
             return None
         kept = self._kept_contact_tree
-        if kept is not None and kept[0].shape == X.shape and np.array_equal(kept[0], X):
+        if kept is not None and np.array_equal(kept[0], X):
             return kept[1]
         tree = contact_bvh.build(X, self.layout)
         self._kept_contact_tree = (np.array(X, dtype=np.float64), tree)
